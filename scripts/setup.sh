@@ -7,8 +7,10 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*"; }
 
+# libclang-dev: bindgen in the fmi crate (the FMU importer used by the Rust FMU tests).
 APT_PACKAGES=(liblcm-dev liblcm-bin libglib2.0-dev iproute2 util-linux pkg-config
-              libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils)
+              libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils
+              libclang-dev)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
@@ -26,7 +28,8 @@ if [[ ! -x .venv/bin/python ]]; then
     "$PYTHON" -m venv .venv
 fi
 stamp=.venv/.pfnav-requirements
-want="$(cat scripts/requirements.txt harness/pyproject.toml 2>/dev/null | sha256sum | cut -d' ' -f1)"
+# Hash of everything pip installs from; a missing file hashes as empty instead of aborting.
+want="$( { cat scripts/requirements.txt; cat harness/pyproject.toml 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
 if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
     log "installing pinned Python packages"
     .venv/bin/pip install -q --disable-pip-version-check -r scripts/requirements.txt

@@ -1,0 +1,198 @@
+//! MPC solve time at horizon 10 (Clarabel, condensed QP incl. condensing), median and p99, on a
+//! trotting and a standing problem; with `--features osqp-bench` the identical QP is also solved
+//! by OSQP for comparison.
+use std::time::Instant;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use quad_controller::gait::Gait;
+use quad_controller::mpc::{ConvexMpc, MpcInput, MpcParams, MpcStatus};
+use quad_controller::{Controller, ControllerConfig, GaitKind, Leg, RobotModel, GRAVITY};
+
+struct Problem {
+    mpc: ConvexMpc,
+    x0: [f64; 13],
+    reference: Vec<[f64; 13]>,
+    schedule: Vec<[bool; 4]>,
+    offsets: Vec<[[f64; 3]; 4]>,
+}
+
+impl Problem {
+    fn new(trot: bool) -> Self {
+        let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
+        let model = RobotModel::from_urdf_file(&urdf).expect("URDF");
+        let config = ControllerConfig::default();
+        let ctrl = Controller::new(model.clone(), config.clone()).expect("controller");
+        let q = ctrl.stand_joint_positions();
+        let (inertia, com) = model.composite_inertia(&q);
+        let mpc = ConvexMpc::new(MpcParams {
+            horizon: 10,
+            dt: config.mpc_dt,
+            mass: model.total_mass(),
+            inertia_body: inertia,
+            q_weights: config.mpc_q,
+            r_weight: config.mpc_r,
+            mu: config.mu,
+            f_min: config.f_min,
+            f_max: config.f_max,
+        })
+        .expect("MPC");
+        let z = config.body_height + com[2];
+        let speed = 0.5;
+        // Slightly perturbed start so the QP has work to do.
+        let x0 = [
+            0.02,
+            -0.03,
+            0.05,
+            -0.02,
+            0.01,
+            z - 0.01,
+            0.1,
+            -0.2,
+            0.05,
+            0.4,
+            0.05,
+            0.0,
+            GRAVITY,
+        ];
+        let gait = Gait::new(GaitKind::Trot, config.gait_period);
+        let mut reference = Vec::new();
+        let mut schedule = Vec::new();
+        let mut offsets = Vec::new();
+        for k in 0..10 {
+            let t = (k + 1) as f64 * config.mpc_dt;
+            reference.push([
+                0.0,
+                0.0,
+                0.0,
+                speed * t,
+                0.0,
+                z,
+                0.0,
+                0.0,
+                0.0,
+                speed,
+                0.0,
+                0.0,
+                GRAVITY,
+            ]);
+            schedule.push(if trot {
+                gait.contacts(0.05 + k as f64 * config.mpc_dt)
+            } else {
+                [true; 4]
+            });
+            offsets.push(Leg::ALL.map(|leg| {
+                let l = leg.index();
+                let foot = model.foot_position_body(leg, [q[3 * l], q[3 * l + 1], q[3 * l + 2]]);
+                [
+                    foot[0] - com[0] - speed * t,
+                    foot[1] - com[1],
+                    foot[2] - com[2],
+                ]
+            }));
+        }
+        Problem {
+            mpc,
+            x0,
+            reference,
+            schedule,
+            offsets,
+        }
+    }
+
+    fn solve(&mut self) -> MpcStatus {
+        let input = MpcInput {
+            x0: self.x0,
+            reference: &self.reference,
+            contacts: &self.schedule,
+            foot_offsets: &self.offsets,
+            terrain_normal: [0.0, 0.0, 1.0],
+        };
+        self.mpc.solve(&input).status
+    }
+}
+
+fn percentiles(mut samples: Vec<f64>) -> (f64, f64) {
+    samples.sort_by(f64::total_cmp);
+    let at = |p: f64| samples[((samples.len() - 1) as f64 * p).round() as usize];
+    (at(0.5), at(0.99))
+}
+
+fn report(name: &str, mut solve: impl FnMut() -> bool) {
+    let mut samples = Vec::with_capacity(2000);
+    for _ in 0..2000 {
+        let start = Instant::now();
+        assert!(solve(), "{name}: solve failed");
+        samples.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let (median, p99) = percentiles(samples);
+    println!("{name}: median {median:.3} ms, p99 {p99:.3} ms (2000 solves)");
+}
+
+fn bench_mpc(c: &mut Criterion) {
+    for (label, trot) in [("trot", true), ("stand", false)] {
+        let mut problem = Problem::new(trot);
+        let vars = {
+            problem.solve();
+            problem.mpc.last_qp().n
+        };
+        println!(
+            "MPC horizon 10, {label}: {vars} force variables, {} constraints",
+            problem.mpc.last_qp().m
+        );
+        report(&format!("clarabel {label}"), || {
+            problem.solve() == MpcStatus::Solved
+        });
+        c.bench_function(&format!("mpc_clarabel_h10_{label}"), |b| {
+            b.iter(|| problem.solve())
+        });
+        #[cfg(feature = "osqp-bench")]
+        osqp_compare::run(c, label, problem.mpc.last_qp());
+    }
+}
+
+#[cfg(feature = "osqp-bench")]
+mod osqp_compare {
+    use criterion::Criterion;
+    use quad_controller::mpc::QpData;
+
+    fn problem(qp: &QpData) -> osqp::Problem {
+        let n = qp.n;
+        // p_dense is column-major and symmetric, so its columns are also its rows.
+        let dense: Vec<Vec<f64>> = qp.p_dense.chunks(n).map(<[f64]>::to_vec).collect();
+        let p = osqp::CscMatrix::from(&dense).into_upper_tri();
+        let a = osqp::CscMatrix {
+            nrows: qp.m,
+            ncols: n,
+            indptr: qp.a_colptr.clone().into(),
+            indices: qp.a_rowval.clone().into(),
+            data: qp.a_nzval.clone().into(),
+        };
+        let lower = vec![f64::NEG_INFINITY; qp.m];
+        let settings = osqp::Settings::default()
+            .verbose(false)
+            .eps_abs(1e-5)
+            .eps_rel(1e-5)
+            .polish(true);
+        osqp::Problem::new(p, &qp.q, a, &lower, &qp.b, &settings).expect("OSQP setup")
+    }
+
+    pub fn run(c: &mut Criterion, label: &str, qp: &QpData) {
+        let qp = qp.clone();
+        super::report(&format!("osqp {label} (setup + solve)"), || {
+            matches!(problem(&qp).solve(), osqp::Status::Solved(_))
+        });
+        let mut reused = problem(&qp);
+        super::report(&format!("osqp {label} (solve only, warm)"), || {
+            matches!(
+                reused.solve(),
+                osqp::Status::Solved(_) | osqp::Status::SolvedInaccurate(_)
+            )
+        });
+        c.bench_function(&format!("mpc_osqp_h10_{label}"), |b| {
+            b.iter(|| problem(&qp).solve().x().map(|x| x[0]))
+        });
+    }
+}
+
+criterion_group!(benches, bench_mpc);
+criterion_main!(benches);

@@ -1,0 +1,32 @@
+//! Quadruped controller stack: URDF model, gait state machine, convex MPC on ground reaction
+//! forces, leg torque control. Pure library: no I/O besides reading the URDF on request, no FFI,
+//! deterministic.
+//!
+//! Data flow per tick (`Controller::step`, 1 kHz): measured [`RobotState`] + planner
+//! [`Reference`] → FSM (passive / stand-up / stand / locomotion / damping) → gait schedule and
+//! Raibert footholds at terrain height → convex MPC on the single rigid body every
+//! `mpc_every_ticks` ticks (and on contact changes) → stance legs `τ = Jᵀ Rᵀ(−f) + h`, swing legs
+//! joint-space inverse dynamics + PD along the swing trajectory → torques clamped to the URDF
+//! effort limits.
+//!
+//! Deviations from `CONTROLLER_API.md` (all additive):
+//! - [`Command::desired_foot_positions`] (world frame) is reported for the harness and tests.
+//! - [`ControllerConfig`] has more fields than listed there (MPC step, gait kind, force bounds,
+//!   stand-up gains, fault thresholds); `Default` is the tuned set, JSON field names = Rust names,
+//!   unknown fields are rejected.
+//! - [`Reference::body_height`] ≤ 0 selects the configured nominal height.
+//! - Leg dynamics take gravity in the base frame: `leg_bias(leg, q, dq, gravity_base)`.
+//! - The MPC is exposed as [`mpc::ConvexMpc`] (used by the benchmark and tests); the OSQP
+//!   comparison in `benches/mpc.rs` uses the `osqp` crate 0.6 behind the `osqp-bench` feature,
+//!   because `osqp-sys` 1.0 downloads qdldl from GitHub at build time (impossible offline).
+//! - Base state velocities must be world-frame; the CoM is taken at the standing-pose composite
+//!   CoM offset from the base origin.
+pub mod api;
+pub mod controller;
+pub mod gait;
+pub mod model;
+pub mod mpc;
+
+pub use api::*;
+pub use controller::Controller;
+pub use model::RobotModel;

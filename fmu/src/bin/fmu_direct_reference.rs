@@ -1,0 +1,98 @@
+//! Runs `quad_controller::Controller` directly, without the FMU, for the same inputs a test
+//! feeds the FMU, and prints the commands as JSON. The FMU tests compare against it to 1e-12.
+//!
+//! Reads from stdin:
+//! `{"segments": [{"state": RobotState, "reference": Reference, "ticks": n}, ...]}`
+//! (serde layout of the controller types) and prints
+//! `{"total_mass": m, "stand_joint_positions": [..12], "control_dt": dt,
+//! "commands": [Command after each segment, ...]}` (an empty segment list gives the model data only).
+//! Options: `--urdf PATH` (default `robot/quadruped.urdf`), `--config PATH` (JSON
+//! `ControllerConfig`; default `ControllerConfig::default()`, the FMU's `resources/controller.json`).
+
+use std::io::Read;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use quad_controller::{
+    Command, Controller, ControllerConfig, Reference, RobotModel, RobotState, NUM_JOINTS,
+};
+use quad_controller_fmu::bundle::repo_root;
+use serde::{Deserialize, Serialize};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Segment {
+    state: RobotState,
+    reference: Reference,
+    ticks: u64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Request {
+    segments: Vec<Segment>,
+}
+
+#[derive(Serialize)]
+struct Response {
+    total_mass: f64,
+    stand_joint_positions: [f64; NUM_JOINTS],
+    control_dt: f64,
+    commands: Vec<Command>,
+}
+
+fn main() -> Result<()> {
+    let mut urdf = repo_root().join("robot").join("quadruped.urdf");
+    let mut config_path: Option<PathBuf> = None;
+    let mut args = std::env::args_os().skip(1);
+    while let Some(arg) = args.next() {
+        let mut value = || {
+            args.next()
+                .map(PathBuf::from)
+                .with_context(|| format!("{} needs a value", arg.to_string_lossy()))
+        };
+        match arg.to_str() {
+            Some("--urdf") => urdf = value()?,
+            Some("--config") => config_path = Some(value()?),
+            _ => bail!("unknown argument {:?}; usage: fmu-direct-reference [--urdf P] [--config P] < request.json", arg),
+        }
+    }
+    let config = match config_path {
+        Some(path) => {
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+        }
+        None => ControllerConfig::default(),
+    };
+    let model =
+        RobotModel::from_urdf_file(&urdf).with_context(|| format!("loading {}", urdf.display()))?;
+    let mut input = String::new();
+    std::io::stdin()
+        .read_to_string(&mut input)
+        .context("reading the request from stdin")?;
+    let request: Request = serde_json::from_str(&input).context("parsing the request")?;
+
+    let total_mass = model.total_mass();
+    let dt = config.control_dt;
+    let mut controller = Controller::new(model, config).context("building the controller")?;
+    let mut commands = Vec::with_capacity(request.segments.len());
+    for (index, segment) in request.segments.iter().enumerate() {
+        let mut last = None;
+        for tick in 0..segment.ticks {
+            let command = controller
+                .step(&segment.state, &segment.reference, dt)
+                .with_context(|| format!("segment {index}, tick {tick}"))?;
+            last = Some(command);
+        }
+        commands.push(last.with_context(|| format!("segment {index} has no ticks"))?);
+    }
+    let response = Response {
+        total_mass,
+        stand_joint_positions: controller.stand_joint_positions(),
+        control_dt: dt,
+        commands,
+    };
+    println!("{}", serde_json::to_string(&response)?);
+    Ok(())
+}

@@ -1,0 +1,1142 @@
+//! The one table of FMU variables. `modelDescription.xml`, the HTML documentation and every
+//! `fmi2Get*`/`fmi2Set*` call are driven by it; there is no second list to keep in sync.
+//!
+//! Value references are the table index (unique across types), so the `index` attribute used in
+//! `<ModelStructure>` is always `value_reference + 1`.
+
+use std::sync::OnceLock;
+
+use quad_controller::{
+    Command, ControllerConfig, FsmState, GaitKind, ModeRequest, Reference, RobotState, NUM_JOINTS,
+    NUM_LEGS,
+};
+
+use crate::FmuError;
+
+/// FMI base type of a variable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScalarType {
+    /// `fmi2Real`.
+    Real,
+    /// `fmi2Integer`.
+    Integer,
+    /// `fmi2Boolean`.
+    Boolean,
+}
+
+impl ScalarType {
+    /// Element name in `modelDescription.xml`.
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            ScalarType::Real => "Real",
+            ScalarType::Integer => "Integer",
+            ScalarType::Boolean => "Boolean",
+        }
+    }
+}
+
+/// A typed value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Value {
+    /// Real.
+    Real(f64),
+    /// Integer.
+    Integer(i32),
+    /// Boolean.
+    Boolean(bool),
+}
+
+impl Value {
+    /// Its FMI type.
+    pub fn scalar_type(self) -> ScalarType {
+        match self {
+            Value::Real(_) => ScalarType::Real,
+            Value::Integer(_) => ScalarType::Integer,
+            Value::Boolean(_) => ScalarType::Boolean,
+        }
+    }
+
+    /// The value as written in a `start` attribute (round-trips exactly for reals).
+    pub fn xml_text(self) -> String {
+        match self {
+            Value::Real(v) => format!("{v:?}"),
+            Value::Integer(v) => v.to_string(),
+            Value::Boolean(v) => v.to_string(),
+        }
+    }
+}
+
+/// FMI causality.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Causality {
+    /// Set before (fixed) or also during (tunable) the simulation.
+    Parameter,
+    /// Set by the master before every doStep.
+    Input,
+    /// Computed by doStep.
+    Output,
+}
+
+impl Causality {
+    /// Attribute value.
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            Causality::Parameter => "parameter",
+            Causality::Input => "input",
+            Causality::Output => "output",
+        }
+    }
+}
+
+/// FMI variability.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Variability {
+    /// Parameter that may only change before `fmi2ExitInitializationMode`.
+    Fixed,
+    /// Parameter that may also change between doSteps.
+    Tunable,
+    /// Changes only at communication points (all Integer/Boolean signals).
+    Discrete,
+    /// Real signal.
+    Continuous,
+}
+
+impl Variability {
+    /// Attribute value.
+    pub fn xml_name(self) -> &'static str {
+        match self {
+            Variability::Fixed => "fixed",
+            Variability::Tunable => "tunable",
+            Variability::Discrete => "discrete",
+            Variability::Continuous => "continuous",
+        }
+    }
+}
+
+/// Physical units used by the variables; each is declared in `<UnitDefinitions>`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Unit {
+    /// Metre.
+    Metre,
+    /// Second.
+    Second,
+    /// Radian.
+    Radian,
+    /// Metre per second.
+    MetrePerSecond,
+    /// Radian per second.
+    RadianPerSecond,
+    /// Newton.
+    Newton,
+    /// Newton metre.
+    NewtonMetre,
+    /// Newton metre per radian (joint stiffness).
+    NewtonMetrePerRadian,
+    /// Newton metre second per radian (joint damping).
+    NewtonMetreSecondPerRadian,
+}
+
+impl Unit {
+    /// Every unit, in declaration order.
+    pub const ALL: [Unit; 9] = [
+        Unit::Metre,
+        Unit::Second,
+        Unit::Radian,
+        Unit::MetrePerSecond,
+        Unit::RadianPerSecond,
+        Unit::Newton,
+        Unit::NewtonMetre,
+        Unit::NewtonMetrePerRadian,
+        Unit::NewtonMetreSecondPerRadian,
+    ];
+
+    /// Unit name (FMI/Modelica notation).
+    pub fn name(self) -> &'static str {
+        match self {
+            Unit::Metre => "m",
+            Unit::Second => "s",
+            Unit::Radian => "rad",
+            Unit::MetrePerSecond => "m/s",
+            Unit::RadianPerSecond => "rad/s",
+            Unit::Newton => "N",
+            Unit::NewtonMetre => "N.m",
+            Unit::NewtonMetrePerRadian => "N.m/rad",
+            Unit::NewtonMetreSecondPerRadian => "N.m.s/rad",
+        }
+    }
+
+    /// SI base-unit exponents as `(attribute, exponent)` for `<BaseUnit>`.
+    pub fn base_units(self) -> &'static [(&'static str, i32)] {
+        match self {
+            Unit::Metre => &[("m", 1)],
+            Unit::Second => &[("s", 1)],
+            Unit::Radian => &[("rad", 1)],
+            Unit::MetrePerSecond => &[("m", 1), ("s", -1)],
+            Unit::RadianPerSecond => &[("s", -1), ("rad", 1)],
+            Unit::Newton => &[("kg", 1), ("m", 1), ("s", -2)],
+            Unit::NewtonMetre => &[("kg", 1), ("m", 2), ("s", -2)],
+            Unit::NewtonMetrePerRadian => &[("kg", 1), ("m", 2), ("s", -2), ("rad", -1)],
+            Unit::NewtonMetreSecondPerRadian => &[("kg", 1), ("m", 2), ("s", -1), ("rad", -1)],
+        }
+    }
+}
+
+/// Parameters: fields of [`ControllerConfig`]; each knows how to read and write its field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Param {
+    /// `control_dt`.
+    ControlDt,
+    /// `mpc_every_ticks`.
+    MpcEveryTicks,
+    /// `mpc_horizon`.
+    MpcHorizon,
+    /// `mpc_dt`.
+    MpcDt,
+    /// `gait` (0 trot, 1 walk).
+    Gait,
+    /// `gait_period`.
+    GaitPeriod,
+    /// `swing_height`.
+    SwingHeight,
+    /// `mu`.
+    Mu,
+    /// `f_min`.
+    ForceMin,
+    /// `f_max`.
+    ForceMax,
+    /// `body_height`.
+    BodyHeight,
+    /// `mpc_q[i]`.
+    MpcQ(usize),
+    /// `mpc_r`.
+    MpcR,
+    /// `kp_swing[j]`.
+    KpSwing(usize),
+    /// `kd_swing[j]`.
+    KdSwing(usize),
+    /// `kp_stand[j]`.
+    KpStand(usize),
+    /// `kd_stand[j]`.
+    KdStand(usize),
+    /// `stand_up_duration`.
+    StandUpDuration,
+    /// `raibert_gain`.
+    RaibertGain,
+    /// `max_tilt`.
+    MaxTilt,
+    /// `joint_limit_margin`.
+    JointLimitMargin,
+    /// `damping_kd`.
+    DampingKd,
+    /// `max_terrain_pitch`.
+    MaxTerrainPitch,
+}
+
+fn gait_code(gait: GaitKind) -> i32 {
+    match gait {
+        GaitKind::Trot => 0,
+        GaitKind::Walk => 1,
+    }
+}
+
+impl Param {
+    /// Current value of the field in `config`.
+    pub fn read(self, config: &ControllerConfig) -> Value {
+        let as_int = |v: usize| Value::Integer(i32::try_from(v).unwrap_or(i32::MAX));
+        match self {
+            Param::ControlDt => Value::Real(config.control_dt),
+            Param::MpcEveryTicks => as_int(config.mpc_every_ticks),
+            Param::MpcHorizon => as_int(config.mpc_horizon),
+            Param::MpcDt => Value::Real(config.mpc_dt),
+            Param::Gait => Value::Integer(gait_code(config.gait)),
+            Param::GaitPeriod => Value::Real(config.gait_period),
+            Param::SwingHeight => Value::Real(config.swing_height),
+            Param::Mu => Value::Real(config.mu),
+            Param::ForceMin => Value::Real(config.f_min),
+            Param::ForceMax => Value::Real(config.f_max),
+            Param::BodyHeight => Value::Real(config.body_height),
+            Param::MpcQ(i) => Value::Real(config.mpc_q[i]),
+            Param::MpcR => Value::Real(config.mpc_r),
+            Param::KpSwing(j) => Value::Real(config.kp_swing[j]),
+            Param::KdSwing(j) => Value::Real(config.kd_swing[j]),
+            Param::KpStand(j) => Value::Real(config.kp_stand[j]),
+            Param::KdStand(j) => Value::Real(config.kd_stand[j]),
+            Param::StandUpDuration => Value::Real(config.stand_up_duration),
+            Param::RaibertGain => Value::Real(config.raibert_gain),
+            Param::MaxTilt => Value::Real(config.max_tilt),
+            Param::JointLimitMargin => Value::Real(config.joint_limit_margin),
+            Param::DampingKd => Value::Real(config.damping_kd),
+            Param::MaxTerrainPitch => Value::Real(config.max_terrain_pitch),
+        }
+    }
+
+    /// Writes `value` (already type- and range-checked against the table) into `config`.
+    pub fn write(self, config: &mut ControllerConfig, value: Value) {
+        match (self, value) {
+            (Param::MpcEveryTicks, Value::Integer(v)) => {
+                config.mpc_every_ticks = usize::try_from(v).unwrap_or(0)
+            }
+            (Param::MpcHorizon, Value::Integer(v)) => {
+                config.mpc_horizon = usize::try_from(v).unwrap_or(0)
+            }
+            (Param::Gait, Value::Integer(v)) => {
+                config.gait = if v == 0 {
+                    GaitKind::Trot
+                } else {
+                    GaitKind::Walk
+                }
+            }
+            (param, Value::Real(v)) => {
+                let field = match param {
+                    Param::ControlDt => &mut config.control_dt,
+                    Param::MpcDt => &mut config.mpc_dt,
+                    Param::GaitPeriod => &mut config.gait_period,
+                    Param::SwingHeight => &mut config.swing_height,
+                    Param::Mu => &mut config.mu,
+                    Param::ForceMin => &mut config.f_min,
+                    Param::ForceMax => &mut config.f_max,
+                    Param::BodyHeight => &mut config.body_height,
+                    Param::MpcQ(i) => &mut config.mpc_q[i],
+                    Param::MpcR => &mut config.mpc_r,
+                    Param::KpSwing(j) => &mut config.kp_swing[j],
+                    Param::KdSwing(j) => &mut config.kd_swing[j],
+                    Param::KpStand(j) => &mut config.kp_stand[j],
+                    Param::KdStand(j) => &mut config.kd_stand[j],
+                    Param::StandUpDuration => &mut config.stand_up_duration,
+                    Param::RaibertGain => &mut config.raibert_gain,
+                    Param::MaxTilt => &mut config.max_tilt,
+                    Param::JointLimitMargin => &mut config.joint_limit_margin,
+                    Param::DampingKd => &mut config.damping_kd,
+                    Param::MaxTerrainPitch => &mut config.max_terrain_pitch,
+                    Param::MpcEveryTicks | Param::MpcHorizon | Param::Gait => return,
+                };
+                *field = v;
+            }
+            // The table gives every parameter exactly one type; other pairs cannot be requested.
+            _ => {}
+        }
+    }
+}
+
+/// What a variable is connected to inside the FMU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    /// `RobotState::base_position[i]`.
+    BasePosition(usize),
+    /// `RobotState::base_orientation[i]` (w, x, y, z).
+    BaseOrientation(usize),
+    /// `RobotState::base_linear_velocity[i]`.
+    BaseLinearVelocity(usize),
+    /// `RobotState::base_angular_velocity[i]`.
+    BaseAngularVelocity(usize),
+    /// `RobotState::joint_positions[i]`.
+    JointPosition(usize),
+    /// `RobotState::joint_velocities[i]`.
+    JointVelocity(usize),
+    /// `Reference::x`.
+    RefX,
+    /// `Reference::y`.
+    RefY,
+    /// `Reference::terrain.height` (the reference sample's z).
+    RefZ,
+    /// `Reference::yaw`.
+    RefYaw,
+    /// `Reference::vx`.
+    RefVx,
+    /// `Reference::vy`.
+    RefVy,
+    /// `Reference::yaw_rate`.
+    RefYawRate,
+    /// `Reference::body_height`.
+    RefBodyHeight,
+    /// `Reference::terrain.slope_x`.
+    TerrainSlopeX,
+    /// `Reference::terrain.slope_y`.
+    TerrainSlopeY,
+    /// `Reference::mode`.
+    ModeRequest,
+    /// `Command::joint_torques[i]`.
+    JointTorque(usize),
+    /// `Command::contacts[leg]`.
+    Contact(usize),
+    /// `Command::fsm_state`.
+    FsmState,
+    /// `Command::desired_forces[leg][axis]`.
+    DesiredForce(usize, usize),
+    /// `Command::mpc_solve_time_s`.
+    MpcSolveTime,
+    /// `Command::mpc_solved`.
+    MpcSolved,
+    /// A field of `ControllerConfig`.
+    Parameter(Param),
+}
+
+/// One row of the table.
+#[derive(Clone, Debug)]
+pub struct Variable {
+    /// Structured FMI name, e.g. `joint.q[1]`.
+    pub name: String,
+    /// Value reference (= position in the table).
+    pub value_reference: u32,
+    /// Causality.
+    pub causality: Causality,
+    /// Variability.
+    pub variability: Variability,
+    /// Start value; its variant gives the variable's type.
+    pub start: Value,
+    /// Human description.
+    pub description: String,
+    /// Unit, if dimensional.
+    pub unit: Option<Unit>,
+    /// Inclusive lower bound checked by `fmi2Set*`.
+    pub min: Option<f64>,
+    /// Inclusive upper bound checked by `fmi2Set*`.
+    pub max: Option<f64>,
+    /// Where the value lives.
+    pub binding: Binding,
+}
+
+impl Variable {
+    /// The variable's FMI type.
+    pub fn scalar_type(&self) -> ScalarType {
+        self.start.scalar_type()
+    }
+
+    /// The 1-based `index` used in `<ModelStructure>`.
+    pub fn index(&self) -> usize {
+        self.value_reference as usize + 1
+    }
+
+    /// Whether `fmi2Set*` may write it while the simulation runs (step complete).
+    pub fn settable_while_running(&self) -> bool {
+        self.causality == Causality::Input || self.variability == Variability::Tunable
+    }
+}
+
+/// The outputs before the first doStep: no torque, no contact scheduled, FSM passive.
+pub fn initial_command() -> Command {
+    Command {
+        joint_torques: [0.0; NUM_JOINTS],
+        contacts: [false; NUM_LEGS],
+        fsm_state: FsmState::Passive,
+        desired_forces: [[0.0; 3]; NUM_LEGS],
+        desired_foot_positions: [[0.0; 3]; NUM_LEGS],
+        mpc_solve_time_s: 0.0,
+        mpc_solved: false,
+    }
+}
+
+/// The inputs of a fresh instance (also the XML `start` values): the controller crate's defaults.
+pub fn initial_inputs() -> (RobotState, Reference) {
+    (RobotState::default(), Reference::default())
+}
+
+/// The table, built once.
+pub fn table() -> &'static [Variable] {
+    static TABLE: OnceLock<Vec<Variable>> = OnceLock::new();
+    TABLE.get_or_init(build_table)
+}
+
+/// Finds a variable by name (linear; meant for tests and tools, not the hot path).
+pub fn by_name(name: &str) -> Option<&'static Variable> {
+    table().iter().find(|v| v.name == name)
+}
+
+struct TableBuilder {
+    rows: Vec<Variable>,
+}
+
+impl TableBuilder {
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &mut self,
+        name: String,
+        causality: Causality,
+        variability: Variability,
+        start: Value,
+        description: String,
+        unit: Option<Unit>,
+        range: (Option<f64>, Option<f64>),
+        binding: Binding,
+    ) {
+        let value_reference = u32::try_from(self.rows.len())
+            .expect("the variable table has far fewer than 2^32 rows");
+        self.rows.push(Variable {
+            name,
+            value_reference,
+            causality,
+            variability,
+            start,
+            description,
+            unit,
+            min: range.0,
+            max: range.1,
+            binding,
+        });
+    }
+
+    fn input(
+        &mut self,
+        name: String,
+        start: f64,
+        description: String,
+        unit: Option<Unit>,
+        binding: Binding,
+    ) {
+        self.push(
+            name,
+            Causality::Input,
+            Variability::Continuous,
+            Value::Real(start),
+            description,
+            unit,
+            (None, None),
+            binding,
+        );
+    }
+
+    fn output(
+        &mut self,
+        name: String,
+        start: Value,
+        description: String,
+        unit: Option<Unit>,
+        binding: Binding,
+    ) {
+        let variability = match start {
+            Value::Real(_) => Variability::Continuous,
+            _ => Variability::Discrete,
+        };
+        self.push(
+            name,
+            Causality::Output,
+            variability,
+            start,
+            description,
+            unit,
+            (None, None),
+            binding,
+        );
+    }
+
+    fn parameter(
+        &mut self,
+        name: String,
+        param: Param,
+        config: &ControllerConfig,
+        description: String,
+        unit: Option<Unit>,
+        range: (Option<f64>, Option<f64>),
+    ) {
+        self.push(
+            name,
+            Causality::Parameter,
+            Variability::Fixed,
+            param.read(config),
+            description,
+            unit,
+            range,
+            Binding::Parameter(param),
+        );
+    }
+}
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+const QUATERNION: [&str; 4] = ["w", "x", "y", "z"];
+const LEG_NAMES: [&str; NUM_LEGS] = ["FR", "FL", "RR", "RL"];
+const JOINT_NAMES: [&str; 3] = ["hip abduction", "hip flexion", "knee"];
+
+fn joint_label(index: usize) -> String {
+    format!("{} {}", LEG_NAMES[index / 3], JOINT_NAMES[index % 3])
+}
+
+fn build_table() -> Vec<Variable> {
+    use Unit::*;
+    let mut t = TableBuilder { rows: Vec::new() };
+    let (state, reference) = initial_inputs();
+    let command = initial_command();
+    let config = ControllerConfig::default();
+    let positive = (Some(f64::MIN_POSITIVE), None);
+    let non_negative = (Some(0.0), None);
+
+    // Inputs: measured state.
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("base.pos.{axis}"),
+            state.base_position[i],
+            format!("Base origin {axis}, world frame"),
+            Some(Metre),
+            Binding::BasePosition(i),
+        );
+    }
+    for (i, c) in QUATERNION.iter().enumerate() {
+        t.input(
+            format!("base.quat.{c}"),
+            state.base_orientation[i],
+            format!("Base orientation quaternion component {c} (rotates body to world; normalised by the controller)"),
+            None,
+            Binding::BaseOrientation(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("base.vel.{axis}"),
+            state.base_linear_velocity[i],
+            format!("Base linear velocity {axis}, world frame"),
+            Some(MetrePerSecond),
+            Binding::BaseLinearVelocity(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("base.omega.{axis}"),
+            state.base_angular_velocity[i],
+            format!("Base angular velocity {axis}, world frame"),
+            Some(RadianPerSecond),
+            Binding::BaseAngularVelocity(i),
+        );
+    }
+    for i in 0..NUM_JOINTS {
+        t.input(
+            format!("joint.q[{}]", i + 1),
+            state.joint_positions[i],
+            format!("Joint position, {}", joint_label(i)),
+            Some(Radian),
+            Binding::JointPosition(i),
+        );
+    }
+    for i in 0..NUM_JOINTS {
+        t.input(
+            format!("joint.dq[{}]", i + 1),
+            state.joint_velocities[i],
+            format!("Joint velocity, {}", joint_label(i)),
+            Some(RadianPerSecond),
+            Binding::JointVelocity(i),
+        );
+    }
+
+    // Inputs: reference from the planner.
+    let reference_inputs: [(&str, f64, &str, Option<Unit>, Binding); 10] = [
+        ("ref.x", reference.x, "Reference base x, world frame", Some(Metre), Binding::RefX),
+        ("ref.y", reference.y, "Reference base y, world frame", Some(Metre), Binding::RefY),
+        (
+            "ref.z",
+            reference.terrain.height,
+            "Terrain height at (ref.x, ref.y), world z: the plan sample's z and the height of the local terrain plane",
+            Some(Metre),
+            Binding::RefZ,
+        ),
+        ("ref.yaw", reference.yaw, "Reference yaw about +z, counter-clockwise from +x", Some(Radian), Binding::RefYaw),
+        ("ref.vx", reference.vx, "Reference velocity x, world frame", Some(MetrePerSecond), Binding::RefVx),
+        ("ref.vy", reference.vy, "Reference velocity y, world frame", Some(MetrePerSecond), Binding::RefVy),
+        ("ref.yawRate", reference.yaw_rate, "Reference yaw rate", Some(RadianPerSecond), Binding::RefYawRate),
+        (
+            "ref.bodyHeight",
+            reference.body_height,
+            "Desired base height above the terrain (<= 0 selects the parameter stand.bodyHeight)",
+            Some(Metre),
+            Binding::RefBodyHeight,
+        ),
+        (
+            "terrain.dzdx",
+            reference.terrain.slope_x,
+            "Terrain slope dz/dx of the local plane through (ref.x, ref.y, ref.z)",
+            None,
+            Binding::TerrainSlopeX,
+        ),
+        (
+            "terrain.dzdy",
+            reference.terrain.slope_y,
+            "Terrain slope dz/dy of the local plane through (ref.x, ref.y, ref.z)",
+            None,
+            Binding::TerrainSlopeY,
+        ),
+    ];
+    for (name, start, description, unit, binding) in reference_inputs {
+        t.input(
+            name.to_owned(),
+            start,
+            description.to_owned(),
+            unit,
+            binding,
+        );
+    }
+    t.push(
+        "cmd.mode".to_owned(),
+        Causality::Input,
+        Variability::Discrete,
+        Value::Integer(reference.mode.as_code()),
+        "Requested mode: 0 passive, 1 stand, 2 locomotion (the FSM stands up first and may enter damping on faults)".to_owned(),
+        None,
+        (Some(0.0), Some(2.0)),
+        Binding::ModeRequest,
+    );
+
+    // Outputs.
+    for i in 0..NUM_JOINTS {
+        t.output(
+            format!("joint.tau[{}]", i + 1),
+            Value::Real(command.joint_torques[i]),
+            format!(
+                "Joint torque command, {} (clamped to the URDF effort limit)",
+                joint_label(i)
+            ),
+            Some(NewtonMetre),
+            Binding::JointTorque(i),
+        );
+    }
+    for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
+        t.output(
+            format!("contact[{}]", leg + 1),
+            Value::Boolean(command.contacts[leg]),
+            format!("Scheduled stance of leg {leg_name}"),
+            None,
+            Binding::Contact(leg),
+        );
+    }
+    t.output(
+        "fsm.state".to_owned(),
+        Value::Integer(command.fsm_state.as_code()),
+        "Controller state: 0 passive, 1 stand-up, 2 stand, 3 locomotion, 4 damping".to_owned(),
+        None,
+        Binding::FsmState,
+    );
+    for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
+        for (axis, axis_name) in AXES.iter().enumerate() {
+            t.output(
+                format!("force[{}].{axis_name}", leg + 1),
+                Value::Real(command.desired_forces[leg][axis]),
+                format!("Desired ground reaction force on the robot at foot {leg_name}, {axis_name}, world frame"),
+                Some(Newton),
+                Binding::DesiredForce(leg, axis),
+            );
+        }
+    }
+    t.output(
+        "mpc.solveTime".to_owned(),
+        Value::Real(command.mpc_solve_time_s),
+        "Wall time of the last MPC solve (diagnostic; not deterministic)".to_owned(),
+        Some(Second),
+        Binding::MpcSolveTime,
+    );
+    t.output(
+        "mpc.solved".to_owned(),
+        Value::Boolean(command.mpc_solved),
+        "Whether the last MPC solve succeeded".to_owned(),
+        None,
+        Binding::MpcSolved,
+    );
+
+    // Parameters are all fixed: `Controller` is built from them in fmi2ExitInitializationMode
+    // (MPC matrices, standing pose, gait) and offers no way to change them afterwards.
+    let c = &config;
+    t.parameter(
+        "control.dt".into(),
+        Param::ControlDt,
+        c,
+        "Leg control tick; a doStep runs round(h / control.dt) ticks".into(),
+        Some(Second),
+        positive,
+    );
+    t.parameter(
+        "mpc.everyTicks".into(),
+        Param::MpcEveryTicks,
+        c,
+        "The MPC is solved every k-th control tick".into(),
+        None,
+        (Some(1.0), Some(1000.0)),
+    );
+    t.parameter(
+        "mpc.horizon".into(),
+        Param::MpcHorizon,
+        c,
+        "MPC horizon length in prediction steps".into(),
+        None,
+        (Some(1.0), Some(1000.0)),
+    );
+    t.parameter(
+        "mpc.dt".into(),
+        Param::MpcDt,
+        c,
+        "MPC prediction step".into(),
+        Some(Second),
+        positive,
+    );
+    t.parameter(
+        "gait.kind".into(),
+        Param::Gait,
+        c,
+        "Gait of the locomotion state: 0 trot, 1 walk".into(),
+        None,
+        (Some(0.0), Some(1.0)),
+    );
+    t.parameter(
+        "gait.period".into(),
+        Param::GaitPeriod,
+        c,
+        "Gait cycle period".into(),
+        Some(Second),
+        positive,
+    );
+    t.parameter(
+        "gait.swingHeight".into(),
+        Param::SwingHeight,
+        c,
+        "Swing-foot apex height".into(),
+        Some(Metre),
+        non_negative,
+    );
+    t.parameter(
+        "mpc.mu".into(),
+        Param::Mu,
+        c,
+        "Friction coefficient of the MPC friction pyramid".into(),
+        None,
+        positive,
+    );
+    t.parameter(
+        "mpc.fMin".into(),
+        Param::ForceMin,
+        c,
+        "Minimum normal force on a stance foot".into(),
+        Some(Newton),
+        non_negative,
+    );
+    t.parameter(
+        "mpc.fMax".into(),
+        Param::ForceMax,
+        c,
+        "Maximum normal force on a stance foot".into(),
+        Some(Newton),
+        positive,
+    );
+    t.parameter(
+        "stand.bodyHeight".into(),
+        Param::BodyHeight,
+        c,
+        "Nominal standing height above the terrain (used when ref.bodyHeight <= 0)".into(),
+        Some(Metre),
+        positive,
+    );
+    let q_names = [
+        "roll",
+        "pitch",
+        "yaw",
+        "x",
+        "y",
+        "z",
+        "omega x",
+        "omega y",
+        "omega z",
+        "vx",
+        "vy",
+        "vz",
+        "gravity state",
+    ];
+    for (i, q) in q_names.iter().enumerate() {
+        t.parameter(
+            format!("mpc.q[{}]", i + 1),
+            Param::MpcQ(i),
+            c,
+            format!("MPC state weight: {q}"),
+            None,
+            non_negative,
+        );
+    }
+    t.parameter(
+        "mpc.r".into(),
+        Param::MpcR,
+        c,
+        "MPC force weight".into(),
+        None,
+        non_negative,
+    );
+    /// (name prefix, parameter of joint j, description, unit)
+    type GainRow = (&'static str, fn(usize) -> Param, &'static str, Unit);
+    let gains: [GainRow; 4] = [
+        (
+            "swing.kp",
+            Param::KpSwing,
+            "Swing-leg joint stiffness",
+            NewtonMetrePerRadian,
+        ),
+        (
+            "swing.kd",
+            Param::KdSwing,
+            "Swing-leg joint damping",
+            NewtonMetreSecondPerRadian,
+        ),
+        (
+            "stand.kp",
+            Param::KpStand,
+            "Stand-up joint stiffness",
+            NewtonMetrePerRadian,
+        ),
+        (
+            "stand.kd",
+            Param::KdStand,
+            "Stand-up joint damping",
+            NewtonMetreSecondPerRadian,
+        ),
+    ];
+    for (prefix, param, description, unit) in gains {
+        for (j, joint) in JOINT_NAMES.iter().enumerate() {
+            t.parameter(
+                format!("{prefix}[{}]", j + 1),
+                param(j),
+                c,
+                format!("{description}, {joint}"),
+                Some(unit),
+                non_negative,
+            );
+        }
+    }
+    t.parameter(
+        "stand.upDuration".into(),
+        Param::StandUpDuration,
+        c,
+        "Duration of the stand-up motion".into(),
+        Some(Second),
+        positive,
+    );
+    t.parameter(
+        "gait.raibertGain".into(),
+        Param::RaibertGain,
+        c,
+        "Raibert foothold velocity-feedback gain".into(),
+        Some(Second),
+        non_negative,
+    );
+    t.parameter(
+        "safety.maxTilt".into(),
+        Param::MaxTilt,
+        c,
+        "Tilt above which the FSM enters damping".into(),
+        Some(Radian),
+        positive,
+    );
+    t.parameter(
+        "safety.jointLimitMargin".into(),
+        Param::JointLimitMargin,
+        c,
+        "Joint position margin beyond the URDF limits before damping".into(),
+        Some(Radian),
+        non_negative,
+    );
+    t.parameter(
+        "safety.dampingKd".into(),
+        Param::DampingKd,
+        c,
+        "Joint damping of the damping state".into(),
+        Some(NewtonMetreSecondPerRadian),
+        non_negative,
+    );
+    t.parameter(
+        "terrain.maxPitch".into(),
+        Param::MaxTerrainPitch,
+        c,
+        "Largest body pitch the terrain-following reference may ask for".into(),
+        Some(Radian),
+        non_negative,
+    );
+    t.rows
+}
+
+/// Checks that `value` may be stored in `variable` (type, finiteness, range).
+pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
+    let invalid = |reason: String| FmuError::InvalidValue {
+        name: variable.name.clone(),
+        reason,
+    };
+    let number = match value {
+        Value::Real(v) if !v.is_finite() => {
+            return Err(invalid(format!("{v} is not a finite number")));
+        }
+        Value::Real(v) => v,
+        Value::Integer(v) => f64::from(v),
+        Value::Boolean(_) => return Ok(()),
+    };
+    if let Some(min) = variable.min.filter(|&min| number < min) {
+        return Err(invalid(format!("{number} is below the minimum {min}")));
+    }
+    if let Some(max) = variable.max.filter(|&max| number > max) {
+        return Err(invalid(format!("{number} is above the maximum {max}")));
+    }
+    Ok(())
+}
+
+/// Reads an input variable from the stored inputs.
+pub fn read_input(binding: Binding, state: &RobotState, reference: &Reference) -> Option<Value> {
+    let real = match binding {
+        Binding::BasePosition(i) => state.base_position[i],
+        Binding::BaseOrientation(i) => state.base_orientation[i],
+        Binding::BaseLinearVelocity(i) => state.base_linear_velocity[i],
+        Binding::BaseAngularVelocity(i) => state.base_angular_velocity[i],
+        Binding::JointPosition(i) => state.joint_positions[i],
+        Binding::JointVelocity(i) => state.joint_velocities[i],
+        Binding::RefX => reference.x,
+        Binding::RefY => reference.y,
+        Binding::RefZ => reference.terrain.height,
+        Binding::RefYaw => reference.yaw,
+        Binding::RefVx => reference.vx,
+        Binding::RefVy => reference.vy,
+        Binding::RefYawRate => reference.yaw_rate,
+        Binding::RefBodyHeight => reference.body_height,
+        Binding::TerrainSlopeX => reference.terrain.slope_x,
+        Binding::TerrainSlopeY => reference.terrain.slope_y,
+        Binding::ModeRequest => return Some(Value::Integer(reference.mode.as_code())),
+        _ => return None,
+    };
+    Some(Value::Real(real))
+}
+
+/// Writes an input variable (value already checked with [`check_value`]).
+pub fn write_input(
+    binding: Binding,
+    value: Value,
+    state: &mut RobotState,
+    reference: &mut Reference,
+) {
+    if let (Binding::ModeRequest, Value::Integer(code)) = (binding, value) {
+        if let Some(mode) = ModeRequest::from_code(code) {
+            reference.mode = mode;
+        }
+        return;
+    }
+    let Value::Real(v) = value else { return };
+    let field = match binding {
+        Binding::BasePosition(i) => &mut state.base_position[i],
+        Binding::BaseOrientation(i) => &mut state.base_orientation[i],
+        Binding::BaseLinearVelocity(i) => &mut state.base_linear_velocity[i],
+        Binding::BaseAngularVelocity(i) => &mut state.base_angular_velocity[i],
+        Binding::JointPosition(i) => &mut state.joint_positions[i],
+        Binding::JointVelocity(i) => &mut state.joint_velocities[i],
+        Binding::RefX => &mut reference.x,
+        Binding::RefY => &mut reference.y,
+        Binding::RefZ => &mut reference.terrain.height,
+        Binding::RefYaw => &mut reference.yaw,
+        Binding::RefVx => &mut reference.vx,
+        Binding::RefVy => &mut reference.vy,
+        Binding::RefYawRate => &mut reference.yaw_rate,
+        Binding::RefBodyHeight => &mut reference.body_height,
+        Binding::TerrainSlopeX => &mut reference.terrain.slope_x,
+        Binding::TerrainSlopeY => &mut reference.terrain.slope_y,
+        _ => return,
+    };
+    *field = v;
+}
+
+/// Reads an output variable from the last command.
+pub fn read_output(binding: Binding, command: &Command) -> Option<Value> {
+    Some(match binding {
+        Binding::JointTorque(i) => Value::Real(command.joint_torques[i]),
+        Binding::Contact(leg) => Value::Boolean(command.contacts[leg]),
+        Binding::FsmState => Value::Integer(command.fsm_state.as_code()),
+        Binding::DesiredForce(leg, axis) => Value::Real(command.desired_forces[leg][axis]),
+        Binding::MpcSolveTime => Value::Real(command.mpc_solve_time_s),
+        Binding::MpcSolved => Value::Boolean(command.mpc_solved),
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+
+    #[test]
+    fn names_and_references_are_unique_and_dense() {
+        let rows = table();
+        let names: HashSet<&str> = rows.iter().map(|v| v.name.as_str()).collect();
+        assert_eq!(names.len(), rows.len());
+        for (i, v) in rows.iter().enumerate() {
+            assert_eq!(v.value_reference as usize, i);
+        }
+    }
+
+    #[test]
+    fn table_has_the_documented_signals() {
+        let count = |c: Causality| table().iter().filter(|v| v.causality == c).count();
+        // 3 pos + 4 quat + 3 vel + 3 omega + 12 q + 12 dq + 10 reference/terrain + cmd.mode
+        assert_eq!(count(Causality::Input), 48);
+        // 12 tau + 4 contact + fsm + 12 force + solve time + solved
+        assert_eq!(count(Causality::Output), 31);
+        for name in [
+            "base.quat.w",
+            "joint.q[12]",
+            "joint.dq[1]",
+            "ref.yawRate",
+            "cmd.mode",
+            "joint.tau[12]",
+            "contact[4]",
+            "force[4].z",
+            "mpc.solved",
+            "gait.period",
+            "mpc.q[13]",
+            "swing.kd[3]",
+        ] {
+            assert!(by_name(name).is_some(), "{name}");
+        }
+        assert_eq!(
+            by_name("cmd.mode").unwrap().scalar_type(),
+            ScalarType::Integer
+        );
+        assert_eq!(
+            by_name("contact[1]").unwrap().scalar_type(),
+            ScalarType::Boolean
+        );
+    }
+
+    #[test]
+    fn every_binding_round_trips_through_its_storage() {
+        let (mut state, mut reference) = initial_inputs();
+        let mut config = ControllerConfig::default();
+        for (k, v) in table().iter().enumerate() {
+            let probe = match v.start {
+                Value::Real(_) => Value::Real(0.5 + k as f64),
+                Value::Integer(_) => Value::Integer(1),
+                Value::Boolean(b) => Value::Boolean(!b),
+            };
+            match v.binding {
+                Binding::Parameter(param) => {
+                    assert_eq!(param.read(&config), v.start, "{}", v.name);
+                    param.write(&mut config, probe);
+                    assert_eq!(param.read(&config), probe, "{}", v.name);
+                }
+                b if v.causality == Causality::Input => {
+                    assert_eq!(
+                        read_input(b, &state, &reference),
+                        Some(v.start),
+                        "{}",
+                        v.name
+                    );
+                    write_input(b, probe, &mut state, &mut reference);
+                    assert_eq!(read_input(b, &state, &reference), Some(probe), "{}", v.name);
+                }
+                b => assert_eq!(
+                    read_output(b, &initial_command()),
+                    Some(v.start),
+                    "{}",
+                    v.name
+                ),
+            }
+        }
+    }
+
+    #[test]
+    fn values_are_checked() {
+        let x = by_name("base.pos.x").unwrap();
+        assert!(check_value(x, Value::Real(f64::NAN))
+            .unwrap_err()
+            .to_string()
+            .contains("base.pos.x"));
+        assert!(check_value(x, Value::Real(f64::INFINITY)).is_err());
+        assert!(check_value(x, Value::Real(-3.0)).is_ok());
+        let mode = by_name("cmd.mode").unwrap();
+        assert!(check_value(mode, Value::Integer(3)).is_err());
+        assert!(check_value(mode, Value::Integer(-1)).is_err());
+        assert!(check_value(mode, Value::Integer(2)).is_ok());
+        let dt = by_name("control.dt").unwrap();
+        assert!(check_value(dt, Value::Real(0.0)).is_err());
+    }
+}

@@ -1,0 +1,64 @@
+//! Shared helpers of the FMU integration tests: bundling the FMU from the cdylib cargo built for
+//! this test run, and a standing state for the robot.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use quad_controller::{Controller, ControllerConfig, Reference, RobotModel, RobotState};
+use quad_controller_fmu::bundle::{repo_root, shared_library_next_to, write_fmu, BundleInputs};
+
+/// The cdylib of this build (target/<profile>/deps/libquad_controller_fmu.so).
+pub fn shared_library() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    shared_library_next_to(&exe).expect("cargo builds the cdylib next to the test executable")
+}
+
+/// A `.fmu` bundled once per test process from this build's cdylib.
+pub fn fmu_path() -> &'static Path {
+    static FMU: OnceLock<PathBuf> = OnceLock::new();
+    FMU.get_or_init(|| {
+        let out = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("QuadController-{}.fmu", std::process::id()));
+        let inputs = BundleInputs {
+            shared_library: shared_library(),
+            urdf: repo_root().join("robot").join("quadruped.urdf"),
+        };
+        write_fmu(&inputs, &out).expect("bundling the test FMU");
+        out
+    })
+}
+
+/// The robot model shipped in the FMU's resources.
+pub fn model() -> RobotModel {
+    RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))
+        .expect("robot/quadruped.urdf")
+}
+
+/// A direct controller with the FMU's default parameters.
+pub fn direct_controller() -> Controller {
+    Controller::new(model(), ControllerConfig::default()).expect("default controller")
+}
+
+/// The robot standing still on flat ground at z = 0 in the controller's standing pose, yaw `yaw`.
+pub fn standing_state(x: f64, yaw: f64) -> RobotState {
+    let config = ControllerConfig::default();
+    let q = direct_controller().stand_joint_positions();
+    RobotState {
+        base_position: [x, 0.0, config.body_height],
+        base_orientation: [(yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin()],
+        joint_positions: q,
+        ..RobotState::default()
+    }
+}
+
+/// A stand request at the state's position.
+pub fn stand_reference(state: &RobotState, yaw: f64) -> Reference {
+    Reference {
+        x: state.base_position[0],
+        y: state.base_position[1],
+        yaw,
+        ..Reference::default()
+    }
+}

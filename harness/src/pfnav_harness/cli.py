@@ -1,0 +1,218 @@
+"""`pfnav-demo` / `python -m pfnav_harness`: plan over LCM, co-simulate, report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from . import paths
+from .errors import HarnessError
+from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, Plan, PlannerClient
+
+if TYPE_CHECKING:
+    from .cosim import CoSimConfig
+    from .report import RunRecord
+    from .scenario import Scenario
+
+# Kept in sync with pipeline.PAPER_SCENARIOS (not imported here: DART and matplotlib load slowly
+# and argument errors should answer at once).
+PAPER_SCENARIOS = ("mountain_pass", "pits", "c_shape")
+
+SHORT_DURATION = 8.0
+
+
+def in_private_network_namespace() -> bool:
+    """True when loopback is the only network interface (scripts/netns.sh or `unshare --net`).
+
+    Reads /proc/self/net/dev (per network namespace); /sys/class/net shows the host's interfaces
+    unless sysfs is remounted inside the namespace.
+    """
+    try:
+        lines = Path("/proc/self/net/dev").read_text().splitlines()[2:]
+    except OSError:
+        return False
+    interfaces = [line.split(":", 1)[0].strip() for line in lines if ":" in line]
+    return interfaces == ["lo"]
+
+
+def _check_lcm_url(url: str, allow_host_network: bool) -> None:
+    if url.startswith("udpm://") and not allow_host_network and not in_private_network_namespace():
+        raise HarnessError(
+            "LCM udpm:// is only used inside a private network namespace: run through `bash scripts/netns.sh ...` "
+            "(or pass --allow-host-network if you really mean the host network)"
+        )
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, default=Path("out"), help="output folder (default: out)")
+    p.add_argument("--duration", type=float, default=None, help="cap on simulated seconds per run (default: whole plan + settle)")
+    p.add_argument("--short", action="store_true", help=f"short run: at most {SHORT_DURATION:.0f} simulated seconds per run")
+    p.add_argument("--comm-step", type=float, default=0.001, help="FMU communication step, s (multiple of 1 ms; default 0.001)")
+    p.add_argument("--speed", type=float, default=0.0, help="planned walking speed, m/s (0 = the service's default)")
+    p.add_argument("--lcm-url", default=os.environ.get("LCM_DEFAULT_URL", DEFAULT_LCM_URL), help=f"LCM URL (default {DEFAULT_LCM_URL})")
+    p.add_argument("--channel-prefix", default=DEFAULT_CHANNEL_PREFIX, help=f"planner channel prefix (default {DEFAULT_CHANNEL_PREFIX})")
+    p.add_argument("--connect", action="store_true", help="use an already running pf-planner-service instead of starting one")
+    p.add_argument("--plan-timeout", type=float, default=300.0, help="seconds to wait for each plan reply (default 300)")
+    p.add_argument("--max-solve-time", type=float, default=240.0, help="solver time limit asked of the service, s (default 240)")
+    p.add_argument("--service-timeout", type=float, default=15.0, help="seconds to wait for the started service's first status (default 15)")
+    p.add_argument("--retries", type=int, default=2, help="plan request retries after a timeout (default 2)")
+    p.add_argument("--lcm-log", action="store_true", help="also write OUT/logs/SCENARIO_METHOD.lcmlog (robot state, 100 Hz) for lcm-logplayer")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pfnav-demo",
+        description="Plans with pf-planner-service over LCM and walks the plans with the controller FMU on a DART body model.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="one scenario, one method")
+    run.add_argument("--scenario", required=True, help=f"scenario name ({', '.join(PAPER_SCENARIOS)})")
+    run.add_argument("--method", default="pf", choices=METHODS, help="planning method (default pf)")
+    _add_common(run)
+    demo = sub.add_parser("demo", help="all scenarios × {P-F, A*}; writes OUT/report.md with PNGs")
+    demo.add_argument("--scenario", action="append", default=None, help="only this scenario (repeatable; default: all three)")
+    demo.add_argument("--methods", default="pf,astar", help="comma-separated methods (default pf,astar)")
+    _add_common(demo)
+    return parser
+
+
+def _config(args: argparse.Namespace) -> CoSimConfig:
+    from .cosim import CoSimConfig
+    from .metrics import FallThresholds
+
+    duration = args.duration
+    if args.short:
+        duration = min(duration, SHORT_DURATION) if duration is not None else SHORT_DURATION
+    if duration is not None and not duration > 0:
+        raise HarnessError(f"--duration must be positive, got {duration}")
+    return CoSimConfig(comm_step=args.comm_step, max_duration=duration, fall=FallThresholds())
+
+
+def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods: Sequence[str], out: Path) -> dict[str, dict[str, Plan]]:
+    binary = None if args.connect else paths.planner_service_path()
+    plans: dict[str, dict[str, Plan]] = {}
+    log = out / "logs" / "pf-planner-service.log"
+    with PlannerClient(args.lcm_url, args.channel_prefix, binary, service_log=log, startup_timeout=args.service_timeout) as client:
+        if args.connect:
+            client.wait_for_service(timeout=args.service_timeout)
+        for name, scenario in scenarios.items():
+            seq = client.publish_map(scenario.terrain)
+            plans[name] = {}
+            for method in methods:
+                print(f"planning {name} with {method} ...", file=sys.stderr, flush=True)
+                plans[name][method] = client.request_plan(
+                    scenario,
+                    method,
+                    seq,
+                    speed=args.speed,
+                    timeout=args.plan_timeout,
+                    retries=args.retries,
+                    max_solve_time=args.max_solve_time,
+                )
+    return plans
+
+
+def _summary_line(rec: RunRecord) -> str:
+    m = rec.metrics
+    return (
+        f"{m.scenario:14s} {m.method:6s} goal={'yes' if m.goal_reached else 'no ':3s} fell={'yes' if m.fell else 'no ':3s} "
+        f"rms={m.rms_error:.3f} m max={m.max_error:.3f} m final={m.final_distance_to_goal:.2f} m "
+        f"t_goal={'–' if m.time_to_goal is None else f'{m.time_to_goal:.1f} s'} "
+        f"wall/sim={rec.timing_per_sim_second['total']:.3f}"
+    )
+
+
+def execute(args: argparse.Namespace) -> int:
+    started = time.perf_counter()
+    out: Path = args.out
+    if args.command == "run":
+        names = [args.scenario]
+        methods = [args.method]
+    else:
+        names = args.scenario or list(PAPER_SCENARIOS)
+        methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+        unknown = [m for m in methods if m not in METHODS]
+        if unknown or not methods:
+            raise HarnessError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(METHODS)}")
+    if args.duration is not None and not args.duration > 0:
+        raise HarnessError(f"--duration must be positive, got {args.duration}")
+    # Fail on missing build products before any planning work.
+    fmu = paths.fmu_path()
+    urdf = paths.urdf_path()
+    pf_plan = paths.pf_plan_path()
+
+    from .metrics import TraversabilityField
+    from .pipeline import export_scenario, simulate
+    from .report import write_report
+
+    config = _config(args)
+    scenarios = {name: export_scenario(pf_plan, name, out / "scenarios") for name in names}
+    _check_lcm_url(args.lcm_url, args.allow_host_network)
+    plans = _plan_all(args, scenarios, methods, out)
+    plan_time = time.perf_counter() - started
+
+    runs: dict[str, list[RunRecord]] = {}
+    summary = []
+    for name, scenario in scenarios.items():
+        field = TraversabilityField(scenario.terrain, scenario.traversability)
+        runs[name] = []
+        for method in methods:
+            log_file = out / "logs" / f"{name}_{method}.npz"
+            outcome = simulate(scenario, plans[name][method], fmu, urdf, out / "cache", config, log_file, not args.no_progress, field)
+            rec = outcome.record(str(log_file.relative_to(out)))
+            runs[name].append(rec)
+            line = _summary_line(rec)
+            summary.append(line)
+            print(line, file=sys.stderr, flush=True)
+    total = time.perf_counter() - started
+    sim_seconds = sum(r.metrics.duration for rs in runs.values() for r in rs)
+    sim_wall = sum(r.wall_seconds for rs in runs.values() for r in rs)
+    header = [
+        f"Command: `pfnav-demo {' '.join(sys.argv[1:]) if sys.argv[1:] else args.command}`; FMU `{fmu.name}`, "
+        f"communication step {config.comm_step * 1000:.0f} ms, physics 1 kHz (DART, ODE collision).",
+        "",
+        f"Total wall time {total:.1f} s (planning incl. service start {plan_time:.1f} s); "
+        f"{sim_seconds:.1f} simulated seconds in {sim_wall:.1f} s wall = {sim_wall / max(sim_seconds, 1e-9):.3f} wall s per simulated s.",
+    ]
+    report = write_report(out, scenarios, runs, header_lines=header)
+    metrics_json = out / "metrics.json"
+    metrics_json.write_text(
+        json.dumps(
+            {
+                "runs": [
+                    {**r.metrics.as_dict(), "wall_seconds": r.wall_seconds, "timing_per_sim_second": r.timing_per_sim_second, "stop_reason": r.stop_reason}
+                    for rs in runs.values()
+                    for r in rs
+                ],
+                "total_wall_seconds": total,
+            },
+            indent=2,
+        )
+    )
+    print(f"report: {report}", file=sys.stderr)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return execute(args)
+    except HarnessError as err:
+        print(f"pfnav-demo: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("pfnav-demo: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,277 @@
+"""Co-simulation master: DART physics at 1 kHz, the controller FMU at its communication step.
+
+Per communication point: DART state → FMU inputs (state, reference at plan time, terrain plane,
+mode request) → fmi2DoStep(h) → joint torques, held (zero-order) for the physics steps of h.
+The robot first stands (mode request "stand") for `stand_time`, then the plan clock starts and
+the mode request becomes "locomotion". Every physics step is logged.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from . import fmu_runner as fr
+from .errors import SimulationError
+from .metrics import FallThresholds
+from .planner_client import Plan
+from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, ReferenceTrajectory
+from .scenario import Scenario
+from .world import NUM_JOINTS, QuadrupedWorld, quaternion_to_rpy
+
+Progress = Callable[[float], None]
+FSM_DAMPING = 4
+
+
+@dataclass
+class CoSimConfig:
+    physics_dt: float = 0.001
+    # FMU communication step; an integer multiple of physics_dt.
+    comm_step: float = 0.001
+    # Time the robot is asked to stand before the plan clock starts (stand-up + settle).
+    stand_time: float = 1.5
+    # Extra time after the plan's last sample to converge onto the goal.
+    settle_time: float = 3.0
+    # Stop early this long after a fall is detected (nothing useful happens afterwards).
+    after_fall: float = 1.0
+    friction: float = 0.8
+    # Desired base height above the terrain; ≤ 0 lets the controller use its own nominal height.
+    body_height: float = 0.0
+    plane_radius: float = 0.3
+    # Moving-average window (s) over the plan's heading and velocity feed-forward (positions untouched).
+    heading_smoothing: float = 1.0
+    fall: FallThresholds = field(default_factory=FallThresholds)
+    # Hard cap on simulated time (None: stand + plan + settle).
+    max_duration: float | None = None
+
+    def validate(self) -> None:
+        if not (self.physics_dt > 0 and math.isfinite(self.physics_dt)):
+            raise SimulationError(f"physics_dt must be positive, got {self.physics_dt}")
+        ratio = self.comm_step / self.physics_dt
+        if not (self.comm_step > 0 and abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1):
+            raise SimulationError(f"the FMU communication step ({self.comm_step}) must be a positive multiple of the physics step ({self.physics_dt})")
+        if self.stand_time < 0 or self.settle_time < 0:
+            raise SimulationError("stand_time and settle_time must be >= 0")
+
+
+@dataclass
+class Timing:
+    physics: float = 0.0
+    fmu: float = 0.0
+    total: float = 0.0
+    simulated: float = 0.0
+
+    @property
+    def overhead(self) -> float:
+        return max(self.total - self.physics - self.fmu, 0.0)
+
+    def per_sim_second(self) -> dict[str, float]:
+        s = self.simulated if self.simulated > 0 else float("nan")
+        return {
+            "physics": self.physics / s,
+            "fmu": self.fmu / s,
+            "overhead": self.overhead / s,
+            "total": self.total / s,
+        }
+
+
+@dataclass
+class RunResult:
+    scenario: str
+    method: str
+    log: dict[str, NDArray[np.float64]]
+    timing: Timing
+    stop_reason: str
+
+
+class CoSimulation:
+    """One run: one scenario, one plan, one FMU instance, one DART world."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        plan: Plan,
+        fmu_path: Path | None,
+        urdf: Path,
+        cache_dir: Path,
+        config: CoSimConfig | None = None,
+        controller: fr.ControllerFmu | None = None,
+    ) -> None:
+        """`controller` replaces the FMU at `fmu_path` (tests use a Python stand-in with the same interface)."""
+        self.config = config or CoSimConfig()
+        self.config.validate()
+        self.scenario = scenario
+        self.plan = plan
+        self.reference = ReferenceTrajectory(plan, scenario.terrain, self.config.plane_radius, self.config.heading_smoothing)
+        self.world = QuadrupedWorld(scenario.terrain, urdf, cache_dir, self.config.physics_dt, self.config.friction)
+        start_yaw = float(plan.yaw[0]) if len(plan.yaw) else scenario.start_yaw
+        self.world.place(float(plan.x[0]), float(plan.y[0]), start_yaw)
+        if controller is not None:
+            self.fmu = controller
+        elif fmu_path is not None:
+            self.fmu = fr.ControllerFmu(fmu_path)
+        else:
+            raise SimulationError("either an FMU path or a controller is needed")
+
+    def close(self) -> None:
+        self.fmu.close()
+
+    def __enter__(self) -> CoSimulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def duration(self) -> float:
+        c = self.config
+        total = c.stand_time + self.reference.duration + c.settle_time
+        return min(total, c.max_duration) if c.max_duration is not None else total
+
+    def run(self, progress: Progress | None = None) -> RunResult:
+        c = self.config
+        dt = c.physics_dt
+        ratio = round(c.comm_step / dt)
+        n_steps = max(1, round(self.duration() / dt))
+        walk_start = c.stand_time
+
+        log_t = np.zeros(n_steps)
+        log_pos = np.zeros((n_steps, 3))
+        log_quat = np.zeros((n_steps, 4))
+        log_vel = np.zeros((n_steps, 3))
+        log_omega = np.zeros((n_steps, 3))
+        log_q = np.zeros((n_steps, NUM_JOINTS))
+        log_dq = np.zeros((n_steps, NUM_JOINTS))
+        log_tau = np.zeros((n_steps, NUM_JOINTS))
+        log_ref = np.zeros((n_steps, N_COLUMNS))
+        log_forces = np.zeros((n_steps, 12))
+        log_sched = np.zeros((n_steps, 4), dtype=np.int8)
+        log_touch = np.zeros((n_steps, 4), dtype=np.int8)
+        log_fsm = np.zeros(n_steps, dtype=np.int8)
+        log_solve = np.zeros(n_steps)
+        log_mode = np.zeros(n_steps, dtype=np.int8)
+
+        fmu = self.fmu
+        world = self.world
+        inputs = fmu.real_inputs
+        state = inputs[0 : fr.N_STATE]
+        ref_in = inputs[fr.N_STATE : fr.N_STATE + fr.N_REF]
+        terrain_in = inputs[fr.N_STATE + fr.N_REF :]
+        ref_row = np.zeros(N_COLUMNS)
+        torques = np.zeros(NUM_JOINTS)
+        timing = Timing()
+        contacts_view = fmu.contacts_array
+        perf = time.perf_counter
+
+        fmu.initialize(0.0)
+        stop_reason = "completed"
+        fall_step: int | None = None
+        min_height = c.fall.min_base_height
+        progress_every = max(1, n_steps // 200)
+        t_begin = perf()
+        k = 0
+        for k in range(n_steps):
+            t = k * dt
+            world.state_vector(state)
+            if not math.isfinite(float(state.sum())):
+                stop_reason = f"physics state became non-finite at t={t:.3f} s"
+                break
+            walking = t >= walk_start
+            self.reference.sample(t - walk_start if walking else 0.0, ref_row)
+            if k % ratio == 0:
+                ref_in[0:7] = ref_row[0:7]
+                # The FMU's ref.z is the height of the local terrain plane it gets the slopes of.
+                ref_in[2] = ref_row[T_HEIGHT]
+                ref_in[7] = c.body_height
+                terrain_in[0] = ref_row[T_HEIGHT]
+                terrain_in[1] = ref_row[T_DZDX]
+                terrain_in[2] = ref_row[T_DZDY]
+                mode = fr.MODE_LOCOMOTION if walking else fr.MODE_STAND
+                t0 = perf()
+                fmu.exchange_inputs(mode)
+                fmu.do_step(t, c.comm_step)
+                fmu.read_outputs()
+                timing.fmu += perf() - t0
+                torques[:] = fmu.torques
+                if not math.isfinite(float(torques.sum())):
+                    raise SimulationError(f"the FMU returned non-finite torques at t={t:.3f} s")
+            world.apply_torques(torques)
+            t0 = perf()
+            world.step()
+            timing.physics += perf() - t0
+
+            log_t[k] = t
+            log_pos[k] = state[0:3]
+            log_quat[k] = state[3:7]
+            log_vel[k] = state[7:10]
+            log_omega[k] = state[10:13]
+            log_q[k] = state[13:25]
+            log_dq[k] = state[25:37]
+            log_tau[k] = torques
+            log_ref[k] = ref_row
+            log_forces[k] = fmu.forces
+            log_sched[k] = contacts_view
+            log_touch[k] = world.foot_contacts()
+            log_fsm[k] = fmu.fsm_state
+            log_solve[k] = fmu.solve_time
+            log_mode[k] = mode
+
+            # The controller's damping state (code 4) is its own verdict that the robot is down.
+            if walking and fall_step is None and k % 10 == 0 and (log_fsm[k] == FSM_DAMPING or self._fallen(state, min_height)):
+                fall_step = k
+            if fall_step is not None and (k - fall_step) * dt >= c.after_fall:
+                stop_reason = f"fell at t={fall_step * dt:.2f} s"
+                break
+            if progress is not None and k % progress_every == 0:
+                progress(t)
+        else:
+            k = n_steps
+        if fall_step is not None and stop_reason == "completed":
+            stop_reason = f"fell at t={fall_step * dt:.2f} s"
+        n = min(k + 1, n_steps) if stop_reason != "completed" else n_steps
+        timing.total = perf() - t_begin
+        timing.simulated = n * dt
+        if progress is not None:
+            progress(n * dt)
+
+        log = {
+            "t": log_t[:n],
+            "base_pos": log_pos[:n],
+            "base_quat": log_quat[:n],
+            "base_vel": log_vel[:n],
+            "base_omega": log_omega[:n],
+            "q": log_q[:n],
+            "dq": log_dq[:n],
+            "tau": log_tau[:n],
+            "ref": log_ref[:n],
+            "forces": log_forces[:n],
+            "contact_scheduled": log_sched[:n],
+            "contact_actual": log_touch[:n],
+            "fsm": log_fsm[:n],
+            "mpc_solve_time": log_solve[:n],
+            "mode": log_mode[:n],
+            "walk_start": np.array(walk_start),
+            "comm_step": np.array(c.comm_step),
+            "physics_dt": np.array(dt),
+            **self.plan.to_npz_dict(),
+        }
+        return RunResult(self.scenario.name, self.plan.method, log, timing, stop_reason)
+
+    def _fallen(self, state: NDArray[np.float64], min_height: float) -> bool:
+        """Cheap per-step fall check (absolute tilt and height); metrics apply the full rule later."""
+        ground = self.scenario.terrain.height_at(float(state[0]), float(state[1]))
+        if state[2] - ground < min_height:
+            return True
+        roll, pitch, _ = quaternion_to_rpy(state[3:7])
+        # Absolute tilt with margin for the slope the robot stands on (≤ ~15° on walkable routes).
+        return abs(roll) > self.config.fall.max_roll + 0.3 or abs(pitch) > self.config.fall.max_pitch + 0.3
+
+
+def save_log(result: RunResult, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, **result.log)

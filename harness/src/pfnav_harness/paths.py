@@ -1,0 +1,63 @@
+"""Where the harness finds the repository's build products; every path has an env override."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .errors import MissingArtifactError
+
+FMU_MODEL_IDENTIFIER = "QuadController"
+
+
+def repo_root() -> Path:
+    """The repository root: `PFNAV_ROOT`, else the folder above `harness/` (editable install)."""
+    env = os.environ.get("PFNAV_ROOT")
+    if env:
+        return Path(env).resolve()
+    return Path(__file__).resolve().parents[3]
+
+
+def _artifact(env_name: str, default: Path, what: str, how: str) -> Path:
+    override = os.environ.get(env_name)
+    path = Path(override) if override else default
+    if not path.is_file():
+        source = f"${env_name}" if override else "the default location"
+        raise MissingArtifactError(f"{what} not found at {path} ({source}); {how}, or set {env_name}")
+    return path
+
+
+def fmu_path() -> Path:
+    return _artifact(
+        "PFNAV_FMU",
+        repo_root() / "target" / "fmu" / f"{FMU_MODEL_IDENTIFIER}.fmu",
+        "controller FMU",
+        "build it with `bash scripts/setup.sh` (bundles target/fmu/*.fmu)",
+    )
+
+
+def planner_service_path() -> Path:
+    return _artifact(
+        "PFNAV_PLANNER_SERVICE",
+        repo_root() / "target" / "release" / "pf-planner-service",
+        "pf-planner-service binary",
+        "build it with `cargo build --release -p pf-planner-service`",
+    )
+
+
+def pf_plan_path() -> Path:
+    return _artifact(
+        "PFNAV_PF_PLAN",
+        repo_root() / "target" / "release" / "pf-plan",
+        "pf-plan binary",
+        "build it with `cargo build --release -p pf-planner`",
+    )
+
+
+def urdf_path() -> Path:
+    return _artifact(
+        "PFNAV_URDF",
+        repo_root() / "robot" / "quadruped.urdf",
+        "robot URDF",
+        "it belongs to the repository (robot/quadruped.urdf)",
+    )

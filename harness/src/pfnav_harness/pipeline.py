@@ -1,0 +1,113 @@
+"""The end-to-end steps shared by the CLI and the tests: scenario → plans → co-simulation → metrics."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from .cosim import CoSimConfig, CoSimulation, RunResult, save_log
+from .errors import MissingArtifactError, ScenarioError
+from .metrics import RunMetrics, TraversabilityField, compute_metrics
+from .planner_client import Plan
+from .report import RunRecord
+from .scenario import Scenario, load_scenario
+from .state_log import write_state_log
+
+PAPER_SCENARIOS = ("mountain_pass", "pits", "c_shape")
+
+
+def export_scenario(pf_plan: Path, name: str, out_dir: Path, timeout: float = 120.0) -> Scenario:
+    """Runs `pf-plan scenario export NAME --out DIR` and loads the result."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        proc = subprocess.run(
+            [str(pf_plan), "scenario", "export", name, "--out", str(out_dir)],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            check=False,
+        )
+    except OSError as err:
+        raise MissingArtifactError(f"cannot run {pf_plan}: {err}") from err
+    except subprocess.TimeoutExpired as err:
+        raise ScenarioError(f"`pf-plan scenario export {name}` did not finish within {timeout:.0f} s") from err
+    if proc.returncode != 0:
+        message = (proc.stderr or proc.stdout).strip().splitlines()
+        detail = message[-1] if message else f"exit code {proc.returncode}"
+        raise ScenarioError(f"scenario '{name}' could not be exported by pf-plan: {detail}")
+    json_path = out_dir / f"{name}.json"
+    if not json_path.is_file():
+        raise ScenarioError(f"pf-plan exported scenario '{name}' but {json_path} is missing")
+    return load_scenario(json_path)
+
+
+@dataclass
+class SimOutcome:
+    result: RunResult
+    metrics: RunMetrics
+    wall_seconds: float
+
+    def record(self, log_file: str | None = None) -> RunRecord:
+        return RunRecord(
+            metrics=self.metrics,
+            log=self.result.log,
+            wall_seconds=self.wall_seconds,
+            timing_per_sim_second=self.result.timing.per_sim_second(),
+            stop_reason=self.result.stop_reason,
+            log_file=log_file,
+        )
+
+
+def simulate(
+    scenario: Scenario,
+    plan: Plan,
+    fmu: Path,
+    urdf: Path,
+    cache_dir: Path,
+    config: CoSimConfig,
+    log_path: Path | None = None,
+    show_progress: bool = True,
+    field: TraversabilityField | None = None,
+    lcm_log_path: Path | None = None,
+) -> SimOutcome:
+    """Co-simulates one plan and computes its metrics (optionally saving the npz log)."""
+    start = time.perf_counter()
+    with CoSimulation(scenario, plan, fmu, urdf, cache_dir, config) as sim:
+        total = sim.duration()
+        desc = f"{scenario.name}/{plan.method}"
+        with tqdm(
+            total=round(total, 1),
+            desc=desc,
+            unit="sim s",
+            disable=not show_progress,
+            leave=True,
+            bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim s [{elapsed}<{remaining}]",
+        ) as bar:
+            last = [0.0]
+
+            def progress(t: float) -> None:
+                bar.update(round(t - last[0], 3))
+                last[0] = t
+
+            result = sim.run(progress)
+    wall = time.perf_counter() - start
+    field = field or TraversabilityField(scenario.terrain, scenario.traversability)
+    metrics = compute_metrics(
+        result.log,
+        scenario.terrain,
+        scenario.goal,
+        field,
+        scenario.name,
+        plan.method,
+        config.fall,
+        planner_cost=plan.metrics.get("cost"),
+    )
+    if log_path is not None:
+        save_log(result, log_path)
+    if lcm_log_path is not None:
+        write_state_log(result.log, lcm_log_path, cache_dir)
+    return SimOutcome(result, metrics, wall)

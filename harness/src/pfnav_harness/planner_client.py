@@ -1,0 +1,364 @@
+"""LCM client of `pf-planner-service`: publishes the terrain like a perception system, asks for plans.
+
+UDP multicast is lossy, so every request carries an id, the reply echoes it, and the client
+re-publishes the map and retries after a timeout. The service may be started here (a child
+process that is terminated on `close`) or be one that is already running on the bus.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import HarnessError, PlannerError
+from .paths import repo_root
+from .scenario import Scenario, Terrain
+
+DEFAULT_LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
+DEFAULT_CHANNEL_PREFIX = "PFNAV_"
+METHODS = ("pf", "astar", "dijkstra")
+
+
+def _import_types() -> Any:
+    """The lcm-gen generated package `pfnav` (build/lcm_python, put on sys.path by setup.sh's .pth)."""
+    try:
+        import pfnav
+    except ImportError:
+        generated = repo_root() / "build" / "lcm_python"
+        if not (generated / "pfnav").is_dir():
+            raise HarnessError("the generated LCM Python types are missing: run `bash lcm_types/gen_python.sh` (or scripts/setup.sh)") from None
+        sys.path.insert(0, str(generated))
+        import pfnav
+    return pfnav
+
+
+def _import_lcm() -> Any:
+    try:
+        import lcm
+    except ImportError as err:
+        raise HarnessError("the Python package `lcm` is missing: run scripts/setup.sh") from err
+    return lcm
+
+
+@dataclass
+class Plan:
+    """A reference trajectory from the planner, with the planner's own figures."""
+
+    method: str
+    t: NDArray[np.float64]
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    z: NDArray[np.float64]
+    yaw: NDArray[np.float64]
+    vx: NDArray[np.float64]
+    vy: NDArray[np.float64]
+    yaw_rate: NDArray[np.float64]
+    metrics: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1]) if len(self.t) else 0.0
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def validate(self) -> None:
+        if len(self.t) < 2:
+            raise PlannerError(f"{self.method} plan has {len(self.t)} samples; at least 2 are needed")
+        columns = (self.t, self.x, self.y, self.z, self.yaw, self.vx, self.vy, self.yaw_rate)
+        if any(len(c) != len(self.t) for c in columns):
+            raise PlannerError(f"{self.method} plan columns have different lengths")
+        if not all(np.all(np.isfinite(c)) for c in columns):
+            raise PlannerError(f"{self.method} plan contains NaN or infinite values")
+        if np.any(np.diff(self.t) <= 0.0):
+            raise PlannerError(f"{self.method} plan times are not strictly increasing")
+
+    def to_npz_dict(self, prefix: str = "plan_") -> dict[str, NDArray[np.float64]]:
+        return {f"{prefix}{name}": getattr(self, name) for name in ("t", "x", "y", "z", "yaw", "vx", "vy", "yaw_rate")}
+
+
+def terrain_map_message(terrain: Terrain, seq: int, utime: int | None = None) -> Any:
+    """The terrain as `pfnav.terrain_map_t` (heights row-major iy·width + ix, like the map)."""
+    pfnav = _import_types()
+    msg = pfnav.terrain_map_t()
+    msg.header.utime = int(time.time() * 1e6) if utime is None else utime
+    msg.header.seq = seq
+    msg.header.frame_id = "world"
+    msg.origin_x, msg.origin_y = terrain.origin
+    msg.resolution = terrain.resolution
+    ny, nx = terrain.shape
+    msg.width = nx
+    msg.height = ny
+    msg.num_cells = nx * ny
+    msg.heights = terrain.heights.ravel().tolist()
+    if terrain.obstacles is not None and bool(terrain.obstacles.any()):
+        msg.num_obstacle_cells = nx * ny
+        msg.obstacle_mask = [bool(v) for v in terrain.obstacles.ravel()]
+    else:
+        msg.num_obstacle_cells = 0
+        msg.obstacle_mask = []
+    return msg
+
+
+def plan_from_reply(reply: Any) -> Plan:
+    samples = reply.samples
+    method = METHODS[reply.method] if 0 <= reply.method < len(METHODS) else f"method{reply.method}"
+    m = reply.metrics
+    plan = Plan(
+        method=method,
+        t=np.array([s.t for s in samples], dtype=np.float64),
+        x=np.array([s.x for s in samples], dtype=np.float64),
+        y=np.array([s.y for s in samples], dtype=np.float64),
+        z=np.array([s.z for s in samples], dtype=np.float64),
+        yaw=np.array([s.yaw for s in samples], dtype=np.float64),
+        vx=np.array([s.vx for s in samples], dtype=np.float64),
+        vy=np.array([s.vy for s in samples], dtype=np.float64),
+        yaw_rate=np.array([s.yaw_rate for s in samples], dtype=np.float64),
+        metrics={
+            "cost": float(m.cost),
+            "length": float(m.length),
+            "duration": float(m.duration),
+            "solve_time": float(m.solve_time),
+            "objective": float(m.objective),
+            "lp_status": float(m.lp_status),
+            "reached_goal": float(bool(m.reached_goal)),
+        },
+    )
+    plan.validate()
+    return plan
+
+
+class PlannerClient:
+    """Talks to one planner service on an LCM bus; use as a context manager."""
+
+    def __init__(
+        self,
+        lcm_url: str = DEFAULT_LCM_URL,
+        channel_prefix: str = DEFAULT_CHANNEL_PREFIX,
+        service_binary: Path | None = None,
+        service_log: Path | None = None,
+        startup_timeout: float = 10.0,
+    ) -> None:
+        self._pfnav = _import_types()
+        lcm = _import_lcm()
+        self.lcm_url = lcm_url
+        self.prefix = channel_prefix
+        try:
+            self.lc = lcm.LCM(lcm_url)
+        except Exception as err:  # the lcm module raises a bare RuntimeError/IOError subclass
+            raise PlannerError(f"cannot open LCM at {lcm_url}: {err} (udpm:// needs a multicast route: run inside scripts/netns.sh)") from err
+        self._replies: dict[int, Any] = {}
+        self._status: Any = None
+        self._status_count = 0
+        self._next_request_id = int(time.time()) % 1_000_000 * 1000 + 1
+        self._map_seq = 0
+        self._published_map: Any = None
+        self._subs = [
+            self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply),
+            self.lc.subscribe(self.prefix + "SERVICE_STATUS", self._on_status),
+        ]
+        self.process: subprocess.Popen[bytes] | None = None
+        self._service_log_path = service_log
+        self._service_log: Any = None
+        if service_binary is not None:
+            self._start_service(service_binary, startup_timeout)
+
+    # --- LCM plumbing -------------------------------------------------------------------------
+    def _on_reply(self, _channel: str, data: bytes) -> None:
+        try:
+            reply = self._pfnav.plan_reply_t.decode(data)
+        except ValueError:
+            return
+        self._replies[int(reply.request_id)] = reply
+
+    def _on_status(self, _channel: str, data: bytes) -> None:
+        try:
+            self._status = self._pfnav.service_status_t.decode(data)
+        except ValueError:
+            return
+        self._status_count += 1
+
+    def _handle_for(self, seconds: float) -> None:
+        """Dispatches incoming messages for up to `seconds`."""
+        deadline = time.monotonic() + seconds
+        fd = self.lc.fileno()
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                return
+            ready, _, _ = select.select([fd], [], [], remaining)
+            if ready:
+                self.lc.handle()
+                return
+
+    # --- service process ----------------------------------------------------------------------
+    def _start_service(self, binary: Path, timeout: float) -> None:
+        args = [str(binary), "--lcm-url", self.lcm_url, "--channel-prefix", self.prefix]
+        if self._service_log_path is not None:
+            self._service_log_path.parent.mkdir(parents=True, exist_ok=True)
+            self._service_log = open(self._service_log_path, "wb")  # noqa: SIM115 (closed in close())
+            out: Any = self._service_log
+        else:
+            out = subprocess.DEVNULL
+        try:
+            self.process = subprocess.Popen(args, stdout=out, stderr=out, env={**os.environ, "RUST_LOG": os.environ.get("RUST_LOG", "info")})
+        except OSError as err:
+            raise PlannerError(f"cannot start {binary}: {err}") from err
+        deadline = time.monotonic() + timeout
+        while self._status_count == 0:
+            if self.process.poll() is not None:
+                raise PlannerError(f"pf-planner-service exited with code {self.process.returncode} at start-up{self._log_hint()}")
+            if time.monotonic() > deadline:
+                raise PlannerError(
+                    f"pf-planner-service started but published no status on {self.prefix}SERVICE_STATUS within "
+                    f"{timeout:.0f} s (is multicast routed on lo? run inside scripts/netns.sh){self._log_hint()}"
+                )
+            self._handle_for(0.1)
+
+    def _log_hint(self) -> str:
+        if self._service_log_path is None:
+            return ""
+        if self._service_log is not None:
+            self._service_log.flush()
+        try:
+            tail = self._service_log_path.read_text(errors="replace").strip().splitlines()[-5:]
+        except OSError:
+            return ""
+        return ("; service log tail:\n  " + "\n  ".join(tail)) if tail else ""
+
+    def wait_for_service(self, timeout: float) -> None:
+        """Waits for a status message from an already running service."""
+        deadline = time.monotonic() + timeout
+        while self._status_count == 0:
+            if time.monotonic() > deadline:
+                raise PlannerError(f"no planner service answers on {self.lcm_url} (no {self.prefix}SERVICE_STATUS within {timeout:.0f} s)")
+            self._handle_for(0.1)
+
+    def close(self) -> None:
+        for sub in self._subs:
+            with contextlib.suppress(Exception):  # closing: nothing useful to do on failure
+                self.lc.unsubscribe(sub)
+        self._subs = []
+        if self.process is not None and self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=5.0)
+        self.process = None
+        if self._service_log is not None:
+            self._service_log.close()
+            self._service_log = None
+
+    def __enter__(self) -> PlannerClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- requests -----------------------------------------------------------------------------
+    def publish_map(self, terrain: Terrain) -> int:
+        """Publishes the terrain on `<prefix>MAP` with a new sequence number and returns it."""
+        self._map_seq += 1
+        self._published_map = terrain_map_message(terrain, self._map_seq)
+        self.lc.publish(self.prefix + "MAP", self._published_map.encode())
+        return self._map_seq
+
+    def _republish_map(self) -> None:
+        if self._published_map is not None:
+            self.lc.publish(self.prefix + "MAP", self._published_map.encode())
+
+    def request_plan(
+        self,
+        scenario: Scenario,
+        method: str,
+        map_seq: int,
+        speed: float = 0.0,
+        directions: int = 0,
+        sample_period: float = 0.0,
+        timeout: float = 60.0,
+        retries: int = 3,
+        max_solve_time: float = 0.0,
+    ) -> Plan:
+        """Asks for a plan on the published map `map_seq`; retries on silence and on a lost map."""
+        if method not in METHODS:
+            raise PlannerError(f"unknown planning method '{method}' (choose from {', '.join(METHODS)})")
+        pfnav = self._pfnav
+        last_error = "no reply"
+        for attempt in range(retries + 1):
+            request_id = self._next_request_id
+            self._next_request_id += 1
+            req = pfnav.plan_request_t()
+            req.header.utime = int(time.time() * 1e6)
+            req.header.seq = request_id
+            req.header.frame_id = "world"
+            req.request_id = request_id
+            req.num_inline_maps = 0
+            req.inline_map = []
+            req.map_seq = map_seq
+            req.start_x, req.start_y = scenario.start
+            req.start_yaw = scenario.start_yaw
+            req.goal_x, req.goal_y = scenario.goal.center
+            req.goal_radius = scenario.goal.radius
+            req.method = METHODS.index(method)
+            req.options.directions = directions
+            req.options.speed = speed
+            req.options.sample_period = sample_period
+            req.options.max_solve_time = max_solve_time
+            self.lc.publish(self.prefix + "PLAN_REQUEST", req.encode())
+            deadline = time.monotonic() + timeout
+            while request_id not in self._replies:
+                if self.process is not None and self.process.poll() is not None:
+                    raise PlannerError(f"pf-planner-service died (exit code {self.process.returncode}){self._log_hint()}")
+                if time.monotonic() > deadline:
+                    break
+                self._handle_for(0.1)
+            reply = self._replies.pop(request_id, None)
+            if reply is None:
+                last_error = f"no reply within {timeout:.0f} s"
+                self._republish_map()
+                continue
+            if reply.status == pfnav.plan_reply_t.STATUS_OK:
+                return plan_from_reply(reply)
+            retryable = (pfnav.plan_reply_t.STATUS_BUSY, pfnav.plan_reply_t.STATUS_INVALID_MAP)
+            last_error = f"status {reply.status}: {reply.error}"
+            if reply.status not in retryable:
+                break
+            # The map may have been lost on the bus (INVALID_MAP: unknown seq) or the queue full.
+            self._republish_map()
+            time.sleep(min(2.0, 0.2 * (attempt + 1)))
+        raise PlannerError(f"the planner gave no {method} plan for '{scenario.name}' after {retries + 1} attempt(s): {last_error}")
+
+
+def plan_scenario(
+    scenario: Scenario,
+    methods: Sequence[str],
+    lcm_url: str = DEFAULT_LCM_URL,
+    channel_prefix: str = DEFAULT_CHANNEL_PREFIX,
+    service_binary: Path | None = None,
+    service_log: Path | None = None,
+    speed: float = 0.0,
+    timeout: float = 60.0,
+    retries: int = 3,
+) -> dict[str, Plan]:
+    """Publishes the scenario's map once and requests one plan per method."""
+    with PlannerClient(lcm_url, channel_prefix, service_binary, service_log) as client:
+        if service_binary is None:
+            client.wait_for_service(timeout=min(timeout, 5.0))
+        seq = client.publish_map(scenario.terrain)
+        # Give the service a moment to ingest the map before the first request references it.
+        client._handle_for(0.05)
+        return {m: client.request_plan(scenario, m, seq, speed=speed, timeout=timeout, retries=retries) for m in methods}

@@ -1,0 +1,245 @@
+"""Scenario files (written by `pf-plan scenario export`) and the terrain surface they define.
+
+The planner's map stores one height per cell centre. The physics terrain is the triangle mesh
+through those centres, each cell quad split along its (ix, iy)→(ix+1, iy+1) diagonal. `Terrain`
+evaluates exactly that piecewise-linear surface, so the heights the reference, the metrics and the
+FMU's terrain inputs use are the heights the robot's feet touch.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import ScenarioError
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class GoalRegion:
+    center: tuple[float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class TerrainPlane:
+    """z = height + dzdx·(x − x0) + dzdy·(y − y0) around the query point (x0, y0)."""
+
+    height: float
+    dzdx: float
+    dzdy: float
+
+
+class Terrain:
+    """The piecewise-linear surface through the cell-centre heights of a grid map."""
+
+    def __init__(
+        self,
+        origin: tuple[float, float],
+        resolution: float,
+        heights: FloatArray,
+        obstacles: NDArray[np.bool_] | None = None,
+    ) -> None:
+        heights = np.asarray(heights, dtype=np.float64)
+        if heights.ndim != 2 or heights.shape[0] < 2 or heights.shape[1] < 2:
+            raise ScenarioError(f"terrain needs a 2-D height grid of at least 2x2 cells, got shape {heights.shape}")
+        if not np.all(np.isfinite(heights)):
+            raise ScenarioError("terrain heights contain NaN or infinite values")
+        if not (math.isfinite(resolution) and resolution > 0.0):
+            raise ScenarioError(f"terrain resolution must be a positive number, got {resolution}")
+        if not all(math.isfinite(v) for v in origin):
+            raise ScenarioError(f"terrain origin must be finite, got {origin}")
+        if obstacles is not None and obstacles.shape != heights.shape:
+            raise ScenarioError(f"obstacle mask shape {obstacles.shape} differs from heights shape {heights.shape}")
+        self.origin = (float(origin[0]), float(origin[1]))
+        self.resolution = float(resolution)
+        self.heights = heights
+        self.obstacles = None if obstacles is None else np.asarray(obstacles, dtype=bool)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(rows along y, columns along x)."""
+        return (int(self.heights.shape[0]), int(self.heights.shape[1]))
+
+    def bounds(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """Map rectangle (lower-left, upper-right) in world coordinates."""
+        ny, nx = self.shape
+        return self.origin, (self.origin[0] + nx * self.resolution, self.origin[1] + ny * self.resolution)
+
+    def vertices(self) -> FloatArray:
+        """Mesh vertices (one per cell centre), row-major like the map, shape (ny·nx, 3)."""
+        ny, nx = self.shape
+        xs = self.origin[0] + (np.arange(nx) + 0.5) * self.resolution
+        ys = self.origin[1] + (np.arange(ny) + 0.5) * self.resolution
+        gx, gy = np.meshgrid(xs, ys)
+        return np.stack([gx.ravel(), gy.ravel(), self.heights.ravel()], axis=1)
+
+    def triangles(self) -> NDArray[np.int64]:
+        """Vertex indices of the triangles, counter-clockwise seen from +z (ODE needs that)."""
+        ny, nx = self.shape
+        iy, ix = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
+        a = (iy * nx + ix).ravel()
+        b = a + 1
+        c = a + nx + 1
+        d = a + nx
+        lower = np.stack([a, b, c], axis=1)
+        upper = np.stack([a, c, d], axis=1)
+        return np.concatenate([lower, upper], axis=0).astype(np.int64)
+
+    def _locate(self, x: FloatArray, y: FloatArray) -> tuple[NDArray[np.int64], NDArray[np.int64], FloatArray, FloatArray]:
+        ny, nx = self.shape
+        fx = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.resolution - 0.5
+        fy = (np.asarray(y, dtype=np.float64) - self.origin[1]) / self.resolution - 0.5
+        # Beyond the outermost centres the mesh ends: clamp onto its border.
+        fx = np.clip(fx, 0.0, nx - 1.0)
+        fy = np.clip(fy, 0.0, ny - 1.0)
+        ix = np.minimum(np.floor(fx).astype(np.int64), nx - 2)
+        iy = np.minimum(np.floor(fy).astype(np.int64), ny - 2)
+        return ix, iy, fx - ix, fy - iy
+
+    def height_and_gradient(self, x: FloatArray | float, y: FloatArray | float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Surface height and its gradient (dz/dx, dz/dy) at points (vectorised)."""
+        ix, iy, u, v = self._locate(np.asarray(x), np.asarray(y))
+        h = self.heights
+        za = h[iy, ix]
+        zb = h[iy, ix + 1]
+        zc = h[iy + 1, ix + 1]
+        zd = h[iy + 1, ix]
+        lower = u >= v
+        dzdu = np.where(lower, zb - za, zc - zd)
+        dzdv = np.where(lower, zc - zb, zd - za)
+        z = za + u * dzdu + v * dzdv
+        return z, dzdu / self.resolution, dzdv / self.resolution
+
+    def height(self, x: FloatArray | float, y: FloatArray | float) -> FloatArray:
+        return self.height_and_gradient(x, y)[0]
+
+    def height_at(self, x: float, y: float) -> float:
+        return float(self.height(x, y))
+
+    def plane(self, x: float, y: float, radius: float = 0.3, samples: int = 7) -> TerrainPlane:
+        """Least-squares plane of the surface over a square window around (x, y).
+
+        The controller treats the ground under the robot as one plane; fitting it over about the
+        footprint smooths the cell-to-cell kinks of the mesh instead of taking one triangle's slope.
+        """
+        offsets = np.linspace(-radius, radius, samples)
+        dx, dy = np.meshgrid(offsets, offsets)
+        dx = dx.ravel()
+        dy = dy.ravel()
+        z = self.height(x + dx, y + dy)
+        design = np.stack([np.ones_like(dx), dx, dy], axis=1)
+        coef, *_ = np.linalg.lstsq(design, z, rcond=None)
+        return TerrainPlane(height=float(coef[0]), dzdx=float(coef[1]), dzdy=float(coef[2]))
+
+    def is_obstacle(self, x: float, y: float) -> bool:
+        if self.obstacles is None:
+            return False
+        ny, nx = self.shape
+        ix = math.floor((x - self.origin[0]) / self.resolution)
+        iy = math.floor((y - self.origin[1]) / self.resolution)
+        if not (0 <= ix < nx and 0 <= iy < ny):
+            return False
+        return bool(self.obstacles[iy, ix])
+
+
+@dataclass
+class Scenario:
+    name: str
+    terrain: Terrain
+    start: tuple[float, float]
+    start_yaw: float
+    goal: GoalRegion
+    seed: int | None = None
+    traversability: dict[str, Any] = field(default_factory=dict)
+    source: Path | None = None
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        return self.terrain.origin
+
+    @property
+    def resolution(self) -> float:
+        return self.terrain.resolution
+
+
+def _require(meta: dict[str, Any], key: str, path: Path) -> Any:
+    if key not in meta:
+        raise ScenarioError(f"{path}: missing field '{key}'")
+    return meta[key]
+
+
+def _pair(value: Any, what: str, path: Path) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in value)
+    except (TypeError, ValueError) as err:
+        raise ScenarioError(f"{path}: '{what}' must be a pair of numbers, got {value!r}") from err
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise ScenarioError(f"{path}: '{what}' must be finite, got {value!r}")
+    return (a, b)
+
+
+def load_scenario(json_path: Path) -> Scenario:
+    """Reads `NAME.json` and the `.npy` arrays it names (format: see COMMON conventions / pf-plan)."""
+    json_path = Path(json_path)
+    try:
+        meta = json.loads(json_path.read_text())
+    except FileNotFoundError as err:
+        raise ScenarioError(f"scenario file {json_path} does not exist") from err
+    except (OSError, json.JSONDecodeError) as err:
+        raise ScenarioError(f"cannot read scenario file {json_path}: {err}") from err
+    if not isinstance(meta, dict):
+        raise ScenarioError(f"{json_path}: expected a JSON object")
+
+    folder = json_path.parent
+    heights_file = folder / str(_require(meta, "heights", json_path))
+    try:
+        heights = np.load(heights_file, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise ScenarioError(f"cannot read heights {heights_file}: {err}") from err
+    width = int(_require(meta, "width", json_path))
+    height = int(_require(meta, "height", json_path))
+    if heights.shape != (height, width):
+        raise ScenarioError(f"{heights_file}: shape {heights.shape} but the sidecar says (height, width) = ({height}, {width})")
+
+    obstacles = None
+    if meta.get("obstacles"):
+        obstacles_file = folder / str(meta["obstacles"])
+        try:
+            obstacles = np.load(obstacles_file, allow_pickle=False).astype(bool)
+        except (OSError, ValueError) as err:
+            raise ScenarioError(f"cannot read obstacles {obstacles_file}: {err}") from err
+
+    terrain = Terrain(
+        _pair(_require(meta, "origin", json_path), "origin", json_path),
+        float(_require(meta, "resolution", json_path)),
+        heights.astype(np.float64),
+        obstacles,
+    )
+    goal_meta = _require(meta, "goal", json_path)
+    if not isinstance(goal_meta, dict):
+        raise ScenarioError(f"{json_path}: 'goal' must be an object with 'center' and 'radius'")
+    goal = GoalRegion(
+        center=_pair(_require(goal_meta, "center", json_path), "goal.center", json_path),
+        radius=float(_require(goal_meta, "radius", json_path)),
+    )
+    if not (math.isfinite(goal.radius) and goal.radius > 0.0):
+        raise ScenarioError(f"{json_path}: goal radius must be positive, got {goal.radius}")
+    seed = meta.get("seed")
+    return Scenario(
+        name=str(meta.get("name", json_path.stem)),
+        terrain=terrain,
+        start=_pair(_require(meta, "start", json_path), "start", json_path),
+        start_yaw=float(meta.get("start_yaw", 0.0)),
+        goal=goal,
+        seed=None if seed is None else int(seed),
+        traversability=dict(meta.get("traversability") or {}),
+        source=json_path,
+    )

@@ -1,0 +1,291 @@
+"""The DART physics world: the scenario's terrain as a triangle mesh and the quadruped URDF on it.
+
+dartpy 6.20 facts this module relies on (see shared notes): the PyPI wheel has no HeightmapShape
+binding, so the terrain is an OBJ mesh in a one-link URDF with a fixed root; ODE is the only
+detector that keeps spheres on meshes; FreeJoint velocities are world-frame; `setForces` is
+cleared by every `world.step()`, so torques are written every physics step.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import dartpy as dart
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import SimulationError
+from .scenario import Terrain
+
+LEGS = ("FR", "FL", "RR", "RL")
+JOINT_KINDS = ("hip_abd", "hip_flex", "knee")
+JOINT_NAMES = tuple(f"{leg}_{kind}_joint" for leg in LEGS for kind in JOINT_KINDS)
+FOOT_NAMES = tuple(f"{leg}_foot" for leg in LEGS)
+NUM_JOINTS = 12
+
+# A crouched stance (abduction 0, hip 0.8 rad, knee −1.6 rad) puts each foot under its hip; the
+# robot is placed in it so that the controller's stand-up starts from a physical configuration.
+DEFAULT_STANCE = np.tile(np.array([0.0, 0.8, -1.6]), 4)
+
+
+@dataclass
+class RobotState:
+    """Base and joint state in the conventions of the FMU inputs (world frame, quaternion w,x,y,z)."""
+
+    position: NDArray[np.float64]
+    quaternion: NDArray[np.float64]
+    linear_velocity: NDArray[np.float64]
+    angular_velocity: NDArray[np.float64]
+    joint_positions: NDArray[np.float64]
+    joint_velocities: NDArray[np.float64]
+
+
+def rotation_to_quaternion(rot: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Unit quaternion (w, x, y, z) of a rotation matrix, w ≥ 0 (Shepperd's method)."""
+    m = np.asarray(rot, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0.0:
+        s = math.sqrt(trace + 1.0) * 2.0
+        q = np.array([0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s])
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2.0
+        q = np.array([(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s])
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2.0
+        q = np.array([(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s])
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2.0
+        q = np.array([(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s])
+    if q[0] < 0.0:
+        q = -q
+    return q / np.linalg.norm(q)
+
+
+def quaternion_to_rpy(q: NDArray[np.float64]) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (ZYX convention) of a quaternion (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in q)
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def write_terrain_obj(terrain: Terrain, path: Path) -> None:
+    """Writes the terrain mesh as Wavefront OBJ (1-based indices, counter-clockwise from +z)."""
+    vertices = terrain.vertices()
+    faces = terrain.triangles() + 1
+    lines = ["# pfnav terrain mesh through the map's cell-centre heights"]
+    lines.extend(f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices)
+    lines.extend(f"f {a} {b} {c}" for a, b, c in faces)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _terrain_digest(terrain: Terrain) -> str:
+    h = hashlib.sha256()
+    h.update(np.asarray(terrain.origin, dtype=np.float64).tobytes())
+    h.update(np.float64(terrain.resolution).tobytes())
+    h.update(np.asarray(terrain.shape, dtype=np.int64).tobytes())
+    h.update(terrain.heights.tobytes())
+    return h.hexdigest()[:16]
+
+
+def _set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
+    for i in range(skeleton.getNumBodyNodes()):
+        body = skeleton.getBodyNode(i)
+        for node in body.getShapeNodes():
+            if node.getCollisionAspect() is None:
+                continue
+            aspect = node.getDynamicsAspect()
+            if aspect is None:
+                aspect = node.createDynamicsAspect()
+            aspect.setFrictionCoeff(mu)
+            aspect.setRestitutionCoeff(0.0)
+
+
+def load_terrain_skeleton(terrain: Terrain, cache_dir: Path, friction: float) -> dart.dynamics.Skeleton:
+    """The terrain as a fixed one-link skeleton whose collision shape is the map's triangle mesh."""
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    stem = f"terrain_{_terrain_digest(terrain)}"
+    obj = cache_dir / f"{stem}.obj"
+    urdf = cache_dir / f"{stem}.urdf"
+    if not obj.is_file():
+        write_terrain_obj(terrain, obj)
+    urdf.write_text(
+        '<?xml version="1.0"?>\n<robot name="terrain"><link name="terrain">'
+        f'<collision><geometry><mesh filename="{obj.name}"/></geometry></collision>'
+        "</link></robot>\n"
+    )
+    loader = dart.utils.DartLoader()
+    options = dart.utils.DartLoader.Options()
+    options.mDefaultRootJointType = dart.utils.DartLoader.RootJointType.FIXED
+    loader.setOptions(options)
+    skeleton = loader.parseSkeleton(dart.common.Uri(urdf.resolve().as_uri()))
+    if skeleton is None or skeleton.getNumBodyNodes() != 1:
+        raise SimulationError(f"DART could not load the terrain mesh {obj}")
+    body = skeleton.getBodyNode(0)
+    if not any(node.getCollisionAspect() is not None for node in body.getShapeNodes()):
+        raise SimulationError(f"the terrain mesh {obj} loaded without a collision shape")
+    skeleton.setName("terrain")
+    _set_friction(skeleton, friction)
+    return skeleton
+
+
+class QuadrupedWorld:
+    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs."""
+
+    def __init__(
+        self,
+        terrain: Terrain,
+        urdf: Path,
+        cache_dir: Path,
+        time_step: float = 0.001,
+        friction: float = 0.8,
+        enforce_joint_limits: bool = True,
+    ) -> None:
+        if not (time_step > 0.0 and math.isfinite(time_step)):
+            raise SimulationError(f"physics time step must be positive, got {time_step}")
+        self.terrain = terrain
+        self.world = dart.simulation.World()
+        self.world.setTimeStep(time_step)
+        self.world.setGravity(np.array([0.0, 0.0, -9.81]))
+        self.world.setCollisionDetector(dart.collision.OdeCollisionDetector())
+        self.terrain_skeleton = load_terrain_skeleton(terrain, cache_dir, friction)
+        self.world.addSkeleton(self.terrain_skeleton)
+
+        robot = dart.utils.DartLoader().parseSkeleton(dart.common.Uri(Path(urdf).resolve().as_uri()))
+        if robot is None:
+            raise SimulationError(f"DART could not parse the robot URDF {urdf}")
+        self.robot = robot
+        self.base = robot.getBodyNode("base")
+        if self.base is None:
+            raise SimulationError(f"{urdf}: no link named 'base'")
+        self.joint_dofs = np.zeros(NUM_JOINTS, dtype=np.int64)
+        for k, name in enumerate(JOINT_NAMES):
+            joint = robot.getJoint(name)
+            if joint is None or joint.getNumDofs() != 1:
+                raise SimulationError(f"{urdf}: missing revolute joint '{name}'")
+            joint.setLimitEnforcement(enforce_joint_limits)
+            self.joint_dofs[k] = joint.getIndexInSkeleton(0)
+        self.feet = []
+        for name in FOOT_NAMES:
+            foot = robot.getBodyNode(name)
+            if foot is None:
+                raise SimulationError(f"{urdf}: missing foot link '{name}'")
+            self.feet.append(foot)
+        self.foot_radius = self._foot_radius()
+        _set_friction(robot, friction)
+        self.world.addSkeleton(robot)
+        self.effort_limits = np.array([robot.getJoint(n).getForceUpperLimit(0) for n in JOINT_NAMES])
+        self._forces = np.zeros(robot.getNumDofs())
+
+    def _foot_radius(self) -> float:
+        for node in self.feet[0].getShapeNodes():
+            shape = node.getShape()
+            if node.getCollisionAspect() is not None and isinstance(shape, dart.dynamics.SphereShape):
+                return float(shape.getRadius())
+        raise SimulationError("the foot links need a sphere collision shape")
+
+    @property
+    def time(self) -> float:
+        return float(self.world.getTime())
+
+    @property
+    def time_step(self) -> float:
+        return float(self.world.getTimeStep())
+
+    @property
+    def mass(self) -> float:
+        return float(self.robot.getMass())
+
+    def place(
+        self,
+        x: float,
+        y: float,
+        yaw: float,
+        joint_positions: NDArray[np.float64] | None = None,
+        clearance: float = 0.002,
+        align_with_terrain: bool = True,
+    ) -> None:
+        """Puts the robot at (x, y) facing `yaw`, lowest foot `clearance` above the ground.
+
+        With `align_with_terrain` the body is tilted like the local terrain plane, so on a slope all
+        four feet land together instead of the uphill pair carrying the robot first.
+        """
+        q_joints = DEFAULT_STANCE if joint_positions is None else np.asarray(joint_positions, dtype=np.float64)
+        if q_joints.shape != (NUM_JOINTS,):
+            raise SimulationError(f"expected {NUM_JOINTS} joint positions, got shape {q_joints.shape}")
+        pitch = roll = 0.0
+        if align_with_terrain:
+            plane = self.terrain.plane(x, y)
+            along = plane.dzdx * math.cos(yaw) + plane.dzdy * math.sin(yaw)
+            across = -plane.dzdx * math.sin(yaw) + plane.dzdy * math.cos(yaw)
+            pitch = -math.atan(along)
+            roll = math.atan(across / math.sqrt(1.0 + along * along))
+        transform = dart.math.Isometry3()
+        transform.set_rotation(dart.math.eulerZYXToMatrix(np.array([yaw, pitch, roll])))
+        transform.set_translation(np.array([x, y, self.terrain.height_at(x, y) + 1.0]))
+        positions = np.zeros(self.robot.getNumDofs())
+        positions[0:6] = dart.dynamics.FreeJoint.convertToPositions(transform)
+        positions[self.joint_dofs] = q_joints
+        self.robot.setPositions(positions)
+        self.robot.setVelocities(np.zeros(self.robot.getNumDofs()))
+        gaps = []
+        for foot in self.feet:
+            p = foot.getWorldTransform().translation()
+            gaps.append(p[2] - self.foot_radius - self.terrain.height_at(float(p[0]), float(p[1])))
+        positions[5] -= min(gaps) - clearance
+        self.robot.setPositions(positions)
+
+    def state(self) -> RobotState:
+        transform = self.base.getWorldTransform()
+        q = self.robot.getPositions()
+        dq = self.robot.getVelocities()
+        return RobotState(
+            position=np.array(transform.translation()),
+            quaternion=rotation_to_quaternion(transform.rotation()),
+            linear_velocity=np.array(self.base.getLinearVelocity()),
+            angular_velocity=np.array(self.base.getAngularVelocity()),
+            joint_positions=q[self.joint_dofs],
+            joint_velocities=dq[self.joint_dofs],
+        )
+
+    def state_vector(self, out: NDArray[np.float64]) -> None:
+        """Writes the 37 FMU state inputs in order pos(3), quat(4), vel(3), omega(3), q(12), dq(12)."""
+        transform = self.base.getWorldTransform()
+        out[0:3] = transform.translation()
+        quat = transform.quaternion()
+        # Same sign convention as rotation_to_quaternion: w ≥ 0.
+        sign = -1.0 if quat.w() < 0.0 else 1.0
+        out[3] = sign * quat.w()
+        out[4] = sign * quat.x()
+        out[5] = sign * quat.y()
+        out[6] = sign * quat.z()
+        out[7:10] = self.base.getLinearVelocity()
+        out[10:13] = self.base.getAngularVelocity()
+        q = self.robot.getPositions()
+        dq = self.robot.getVelocities()
+        out[13:25] = q[self.joint_dofs]
+        out[25:37] = dq[self.joint_dofs]
+
+    def apply_torques(self, torques: NDArray[np.float64]) -> None:
+        """Joint torques (canonical order) for the next physics step, clamped to the URDF effort limits."""
+        self._forces[:] = 0.0
+        self._forces[self.joint_dofs] = np.clip(torques, -self.effort_limits, self.effort_limits)
+        self.robot.setForces(self._forces)
+
+    def step(self) -> None:
+        self.world.step()
+
+    def foot_positions(self) -> NDArray[np.float64]:
+        return np.array([foot.getWorldTransform().translation() for foot in self.feet])
+
+    def foot_contacts(self) -> NDArray[np.bool_]:
+        """Which feet touch anything, from the last collision check of the physics step."""
+        touching = np.zeros(len(self.feet), dtype=bool)
+        result = self.world.getLastCollisionResult()
+        for i, foot in enumerate(self.feet):
+            touching[i] = result.inCollision(foot)
+        return touching

@@ -1,0 +1,95 @@
+"""Bad input at the command line: one clear line on stderr and a non-zero exit, no traceback."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+FAKE_PF_PLAN = textwrap.dedent(
+    """\
+    import json, sys
+    from pathlib import Path
+    import numpy as np
+    args = sys.argv[1:]
+    name, out = args[2], Path(args[args.index("--out") + 1])
+    if name != "ramp":
+        print(f"error: unknown scenario '{name}' (known: ramp)", file=sys.stderr)
+        sys.exit(2)
+    out.mkdir(parents=True, exist_ok=True)
+    np.save(out / "ramp.heights.npy", np.zeros((10, 20)))
+    meta = {"name": "ramp", "seed": 1, "origin": [0, 0], "resolution": 0.1, "width": 20, "height": 10,
+            "heights": "ramp.heights.npy", "obstacles": None, "start": [0.5, 0.5], "start_yaw": 0.0,
+            "goal": {"center": [1.5, 0.5], "radius": 0.2}, "traversability": {}}
+    (out / "ramp.json").write_text(json.dumps(meta))
+    """
+)
+
+
+@pytest.fixture
+def fake_tools(tmp_path: Path) -> dict[str, str]:
+    pf_plan = tmp_path / "pf-plan"
+    pf_plan.write_text(f"#!{sys.executable}\n" + FAKE_PF_PLAN)
+    pf_plan.chmod(0o755)
+    silent_service = tmp_path / "silent-service"
+    silent_service.write_text("#!/bin/sh\necho 'silent service starting' >&2\nexec sleep 30\n")
+    silent_service.chmod(0o755)
+    fmu = tmp_path / "Fake.fmu"
+    fmu.write_bytes(b"not really an FMU")
+    return {
+        **os.environ,
+        "PFNAV_PF_PLAN": str(pf_plan),
+        "PFNAV_PLANNER_SERVICE": str(silent_service),
+        "PFNAV_FMU": str(fmu),
+    }
+
+
+def run_cli(env: dict[str, str], *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "pfnav_harness", *args], env=env, cwd=cwd, capture_output=True, text=True, timeout=120, check=False)
+
+
+def assert_clean_failure(proc: subprocess.CompletedProcess[str], code: int, message: str) -> None:
+    assert proc.returncode == code, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert message in proc.stderr
+    assert any(line.startswith("pfnav-demo: error:") for line in proc.stderr.splitlines())
+
+
+def test_missing_fmu(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    env = {**fake_tools, "PFNAV_FMU": str(tmp_path / "nowhere" / "QuadController.fmu")}
+    proc = run_cli(env, "run", "--scenario", "ramp", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 3, "controller FMU not found")
+
+
+def test_unknown_scenario(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(fake_tools, "demo", "--scenario", "atlantis", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 2, "unknown scenario 'atlantis'")
+
+
+def test_planner_that_does_not_answer(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(
+        fake_tools,
+        "run",
+        "--scenario",
+        "ramp",
+        "--lcm-url",
+        "memq://",
+        "--service-timeout",
+        "1",
+        "--out",
+        str(tmp_path / "out"),
+        cwd=tmp_path,
+    )
+    assert_clean_failure(proc, 4, "published no status")
+    assert "silent service starting" in proc.stderr  # the service log tail is shown
+
+
+def test_bad_arguments(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(fake_tools, "demo", "--methods", "pf,rrt", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 1, "unknown method(s) rrt")
+    proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--duration", "-1", cwd=tmp_path)
+    assert_clean_failure(proc, 1, "--duration must be positive")

@@ -1,0 +1,76 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pfnav_harness.errors import PlannerError
+from pfnav_harness.planner_client import Plan
+from pfnav_harness.reference import T_DZDX, T_HEIGHT, VX, YAW, ReferenceTrajectory, X, Y, Z
+from pfnav_harness.scenario import Scenario
+
+
+def make_plan(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> Plan:
+    n = len(t)
+    vx = np.gradient(x, t)
+    vy = np.gradient(y, t)
+    return Plan("pf", t, x, y, np.zeros(n), yaw, vx, vy, np.gradient(np.unwrap(yaw), t))
+
+
+def test_interpolates_and_holds(ramp_scenario: Scenario) -> None:
+    t = np.array([0.0, 1.0, 2.0])
+    plan = make_plan(t, np.array([0.5, 1.0, 1.5]), np.array([1.0, 1.0, 1.0]), np.zeros(3))
+    ref = ReferenceTrajectory(plan, ramp_scenario.terrain)
+    row = np.zeros(10)
+    ref.sample(0.25, row)
+    assert row[X] == pytest.approx(0.625) and row[Y] == pytest.approx(1.0)
+    assert row[VX] == pytest.approx(0.5)
+    # Heights come from the physics surface (ramp z = 0.1 + 0.2 x), not from the plan's z = 0.
+    assert row[Z] == pytest.approx(0.1 + 0.2 * 0.625)
+    assert row[T_HEIGHT] == pytest.approx(0.1 + 0.2 * 0.625, abs=1e-9)
+    assert row[T_DZDX] == pytest.approx(0.2, abs=1e-9)
+    ref.sample(-1.0, row)
+    assert row[X] == pytest.approx(0.5) and row[VX] == 0.0
+    ref.sample(10.0, row)
+    assert row[X] == pytest.approx(1.5) and row[VX] == 0.0
+
+
+def test_yaw_is_interpolated_across_the_wrap(ramp_scenario: Scenario) -> None:
+    t = np.array([0.0, 1.0])
+    yaw = np.array([math.pi - 0.1, -math.pi + 0.1])  # 0.2 rad turn through ±π
+    plan = make_plan(t, np.array([1.0, 1.1]), np.array([1.0, 1.0]), yaw)
+    ref = ReferenceTrajectory(plan, ramp_scenario.terrain)
+    row = np.zeros(10)
+    ref.sample(0.5, row)
+    assert abs(abs(row[YAW]) - math.pi) < 1e-9
+
+
+def test_invalid_plans_are_rejected(ramp_scenario: Scenario) -> None:
+    with pytest.raises(PlannerError, match="at least 2"):
+        one = np.ones(1)
+        ReferenceTrajectory(Plan("pf", one * 0.0, one, one, one, one, one, one, one), ramp_scenario.terrain)
+    bad = make_plan(np.array([0.0, 1.0]), np.array([1.0, 1.2]), np.array([1.0, 1.0]), np.zeros(2))
+    bad.x[1] = np.nan
+    with pytest.raises(PlannerError, match="NaN"):
+        ReferenceTrajectory(bad, ramp_scenario.terrain)
+    back = make_plan(np.array([0.0, 1.0]), np.array([1.0, 1.2]), np.array([1.0, 1.0]), np.zeros(2))
+    back.t[1] = 0.0
+    with pytest.raises(PlannerError, match="increasing"):
+        ReferenceTrajectory(back, ramp_scenario.terrain)
+
+
+def test_heading_smoothing_keeps_positions_and_removes_zig_zag(ramp_scenario: Scenario) -> None:
+    # A staircase path alternating heading 0 and 45° every sample, like an 8-connected grid path.
+    t = np.arange(0.0, 4.0, 0.1)
+    yaw = np.where(np.arange(len(t)) % 2 == 0, 0.0, math.pi / 4)
+    step = 0.05 * np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
+    xy = np.vstack([[0.5, 0.5], 0.5 + np.cumsum(step, axis=0)[:-1]])
+    plan = make_plan(t, xy[:, 0], xy[:, 1], yaw)
+    smooth = ReferenceTrajectory(plan, ramp_scenario.terrain, heading_smoothing=1.0)
+    raw = ReferenceTrajectory(plan, ramp_scenario.terrain)
+    np.testing.assert_array_equal(smooth.rows[:, [X, Y]], raw.rows[:, [X, Y]])
+    middle = slice(10, 30)
+    # The mean direction of the zig-zag is 22.5°; smoothed headings stay within a few degrees of it.
+    assert np.max(np.abs(smooth.rows[middle, YAW] - math.pi / 8)) < math.radians(5.0)
+    assert np.max(np.abs(raw.rows[middle, YAW] - math.pi / 8)) == pytest.approx(math.pi / 8)

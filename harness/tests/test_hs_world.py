@@ -1,0 +1,80 @@
+"""DART world: the URDF robot on the triangle-mesh terrain (needs dartpy and robot/quadruped.urdf)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pfnav_harness import paths
+from pfnav_harness.scenario import Scenario, Terrain
+from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld, quaternion_to_rpy, rotation_to_quaternion
+
+
+@pytest.fixture(scope="module")
+def urdf() -> Path:
+    return paths.urdf_path()
+
+
+def test_rotation_quaternion_round_trip() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        w, x, y, z = q
+        rot = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+        got = rotation_to_quaternion(rot)
+        assert got[0] >= 0
+        np.testing.assert_allclose(got, q if q[0] >= 0 else -q, atol=1e-12)
+
+
+def test_placement_puts_the_lowest_foot_on_the_ground(ramp_scenario: Scenario, urdf: Path, tmp_path: Path) -> None:
+    world = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path)
+    world.place(1.5, 1.0, 0.4, clearance=0.002)
+    feet = world.foot_positions()
+    gaps = feet[:, 2] - world.foot_radius - ramp_scenario.terrain.height(feet[:, 0], feet[:, 1])
+    assert min(gaps) == pytest.approx(0.002, abs=1e-9)
+    state = world.state()
+    roll, pitch, yaw = quaternion_to_rpy(state.quaternion)
+    assert yaw == pytest.approx(0.4)
+    # Levelled with the ramp (slope 0.2 along x): pitch and roll match the heading's slope components.
+    assert pitch == pytest.approx(-math.atan(0.2 * math.cos(0.4)), abs=1e-6)
+    assert roll == pytest.approx(math.atan(-0.2 * math.sin(0.4) / math.hypot(1.0, 0.2 * math.cos(0.4))), abs=1e-6)
+    # All four feet touch together.
+    assert max(gaps) - min(gaps) < 0.01
+    np.testing.assert_allclose(state.joint_positions, DEFAULT_STANCE)
+    assert world.mass == pytest.approx(12.0)
+
+
+def test_pd_stance_stands_on_a_sloped_mesh(urdf: Path, tmp_path: Path) -> None:
+    """Joint PD on the crouched stance holds the 12 kg robot on a 10° mesh slope: no sinking, no falling through."""
+    n, res = 40, 0.1
+    xs = (np.arange(n) + 0.5) * res
+    slope = math.tan(math.radians(10.0))
+    terrain = Terrain((0.0, 0.0), res, np.tile(0.2 + slope * xs, (n, 1)))
+    world = QuadrupedWorld(terrain, urdf, tmp_path, friction=0.8)
+    world.place(2.0, 2.0, 0.0)
+    kp, kd = 120.0, 3.0
+    for _ in range(1500):
+        s = world.state()
+        world.apply_torques(kp * (DEFAULT_STANCE - s.joint_positions) - kd * s.joint_velocities)
+        world.step()
+    s = world.state()
+    ground = terrain.height_at(float(s.position[0]), float(s.position[1]))
+    assert 0.18 < s.position[2] - ground < 0.32
+    assert np.hypot(s.position[0] - 2.0, s.position[1] - 2.0) < 0.15
+    assert world.foot_contacts().sum() == 4
+    # Placed levelled with the slope, it stays so: pitch ≈ −atan(slope) (nose up), no tipping.
+    _, pitch, _ = quaternion_to_rpy(s.quaternion)
+    assert pitch == pytest.approx(-math.atan(slope), abs=0.05)
+    feet = world.foot_positions()
+    penetration = terrain.height(feet[:, 0], feet[:, 1]) - (feet[:, 2] - world.foot_radius)
+    assert penetration.max() < 0.01

@@ -1,0 +1,22 @@
+//! Perron-Frobenius density-space planner: maps, scenarios, ANSDMD generators, the LP, feedback law, baselines.
+//!
+//! Data flow: [`map::GridMap`] (terrain) → traversability p(x) → generators + LP (density space)
+//! → feedback law u = ρ̄/ρ → integrated path → time-parameterised reference trajectory.
+
+pub mod basis;
+pub mod error;
+pub mod feedback;
+pub mod generators;
+pub mod graph;
+pub mod grid;
+pub mod io;
+pub mod lp;
+pub mod map;
+pub mod metrics;
+pub mod pf;
+pub mod plan;
+pub mod plot;
+pub mod report;
+pub mod scenarios;
+pub mod trajectory;
+pub mod traversability;

@@ -1,0 +1,376 @@
+//! The P-F pipeline: planning grid → basis and ANSDMD generators → LP → feedback field → path.
+//!
+//! [`PfGenerators::build`] depends only on the grid (cost and obstacles), the basis and the
+//! number of directions, so a service can cache it and reuse it for any start and goal: the
+//! goal's basis functions are removed from the LP at solve time (absorbing target).
+
+use std::collections::VecDeque;
+use std::time::Instant;
+
+use tracing::{debug, info};
+
+pub use crate::basis::BasisKind;
+use crate::error::PlanError;
+use crate::feedback::integrate;
+pub use crate::feedback::{FeedbackField, IntegrationOutcome, IntegrationSettings};
+use crate::generators::Generators;
+use crate::graph::endpoints;
+use crate::grid::{GoalRegion, PlanningGrid};
+use crate::lp::{self, LpProblem};
+pub use crate::lp::{LpReport, LpSettings};
+use crate::map::Point;
+
+/// Quadrature points per axis per cell for the cost integrals Bᵢ = ∫ p φᵢ (RBF; indicators are exact with any count).
+const COST_QUADRATURE_PER_AXIS: usize = 4;
+
+/// Initial density h₀ of the LP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StartDensity {
+    /// All mass in the start's basis function: the flow is one optimal tube from the start.
+    PointMass,
+    /// Uniform over every free basis function that can reach the goal: the law is then a
+    /// feedback everywhere (robust to disturbances), at the price of a larger optimal flow.
+    #[default]
+    UniformFree,
+}
+
+/// Options of one P-F solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PfOptions {
+    /// Speed bound of the LP, m/s (the field's speed along the optimal flow).
+    pub u_max: f64,
+    /// Initial density.
+    pub start_density: StartDensity,
+    /// LP solver settings.
+    pub lp: LpSettings,
+    /// RK4 settings.
+    pub integration: IntegrationSettings,
+}
+
+impl Default for PfOptions {
+    fn default() -> Self {
+        Self {
+            u_max: 1.0,
+            start_density: StartDensity::default(),
+            lp: LpSettings::default(),
+            integration: IntegrationSettings::default(),
+        }
+    }
+}
+
+/// Basis, generators and cost integrals of one grid: build once, solve for many start/goal pairs.
+#[derive(Debug, Clone)]
+pub struct PfGenerators {
+    generators: Generators,
+    /// Bᵢ = ∫ p φᵢ over the plane (p clamped at the grid edge).
+    cost: Vec<f64>,
+    /// ∫ φᵢ, to turn masses into coefficients.
+    mass: Vec<f64>,
+    /// Identity of the grid the generators were built for.
+    grid_key: GridKey,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct GridKey {
+    origin: Point,
+    cell_size: f64,
+    width: usize,
+    height: usize,
+    blocked: Vec<bool>,
+    cost: Vec<f64>,
+}
+
+impl GridKey {
+    fn of(grid: &PlanningGrid) -> Self {
+        Self {
+            origin: grid.origin,
+            cell_size: grid.cell_size,
+            width: grid.width,
+            height: grid.height,
+            blocked: grid.blocked.clone(),
+            cost: grid.cost.clone(),
+        }
+    }
+}
+
+impl PfGenerators {
+    /// Builds basis, generators (one per direction, 4 or 8) and cost integrals on `grid`.
+    pub fn build(
+        grid: &PlanningGrid,
+        basis: &BasisKind,
+        directions: usize,
+    ) -> Result<Self, PlanError> {
+        let started = Instant::now();
+        let generators = Generators::build(grid, *basis, directions)?;
+        let per_axis = match basis {
+            BasisKind::Indicator => 1,
+            BasisKind::Rbf { .. } => COST_QUADRATURE_PER_AXIS,
+        };
+        let cost = generators.basis.integrals(per_axis, |p| grid.cost_at(p));
+        let mass = generators.basis.integrals(per_axis, |_| 1.0);
+        info!(
+            functions = generators.basis.len(),
+            directions,
+            nnz = generators.stats.nnz,
+            time_s = started.elapsed().as_secs_f64(),
+            "P-F generators ready"
+        );
+        Ok(Self {
+            generators,
+            cost,
+            mass,
+            grid_key: GridKey::of(grid),
+        })
+    }
+
+    /// The generators and their basis.
+    pub fn generators(&self) -> &Generators {
+        &self.generators
+    }
+
+    /// Bᵢ = ∫ p φᵢ per active function.
+    pub fn cost_integrals(&self) -> &[f64] {
+        &self.cost
+    }
+
+    /// ∫ φᵢ per active function.
+    pub fn mass_integrals(&self) -> &[f64] {
+        &self.mass
+    }
+
+    /// Whether these generators were built for exactly this grid.
+    pub fn matches(&self, grid: &PlanningGrid) -> bool {
+        self.grid_key == GridKey::of(grid)
+    }
+}
+
+/// Result of one P-F solve.
+#[derive(Debug, Clone)]
+pub struct PfSolution {
+    /// The integrated path from the start (world frame).
+    pub path: Vec<Point>,
+    /// How the integration ended.
+    pub outcome: IntegrationOutcome,
+    /// LP report (status, objective, residuals, times, size).
+    pub lp: LpReport,
+    /// The feedback law u = ρ̄/ρ, evaluable anywhere.
+    pub field: FeedbackField,
+    /// LP objective divided by (1 + 1/u_max): the traversability-weighted length of the optimal
+    /// flow, Σ mass × ∫p ds (comparable with graph distances).
+    pub weighted_length: f64,
+    /// Start coefficients t that were used (per active function).
+    pub start_coefficients: Vec<f64>,
+    /// Target flags per active function.
+    pub targets: Vec<bool>,
+}
+
+/// Active functions that can reach the target through the generators' flows (reverse BFS).
+fn can_reach_target(gens: &Generators, target: &[bool]) -> Vec<bool> {
+    let n = gens.basis.len();
+    // Incoming adjacency: j ← i when some Lₖ moves mass from i to j.
+    let mut predecessors: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for l in &gens.generators {
+        for i in 0..n {
+            for (j, v) in l.column(i) {
+                if j != i && v > 0.0 {
+                    predecessors[j].push(i);
+                }
+            }
+        }
+    }
+    let mut reach = target.to_vec();
+    let mut queue: VecDeque<usize> = (0..n).filter(|&i| target[i]).collect();
+    while let Some(j) = queue.pop_front() {
+        for &i in &predecessors[j] {
+            if !reach[i] {
+                reach[i] = true;
+                queue.push_back(i);
+            }
+        }
+    }
+    reach
+}
+
+/// The LP inputs of one start/goal pair on cached generators (see [`prepare`]).
+#[derive(Debug, Clone)]
+pub struct PreparedLp {
+    /// Start density coefficients t per active function (unit total mass).
+    pub start: Vec<f64>,
+    /// Target flags per active function.
+    pub target: Vec<bool>,
+    /// Goal cells of the planning grid.
+    pub goal_cells: Vec<usize>,
+}
+
+impl PreparedLp {
+    /// The LP of this start/goal pair.
+    pub fn problem<'a>(&'a self, gens: &'a PfGenerators, u_max: f64) -> LpProblem<'a> {
+        LpProblem {
+            generators: &gens.generators,
+            cost: &gens.cost,
+            start: &self.start,
+            target: &self.target,
+            u_max,
+        }
+    }
+}
+
+/// Checks start and goal and builds the start density and the target set.
+///
+/// Errors: start/goal off the map or in an obstacle, a goal that no basis function covers, a
+/// start that cannot reach the goal ([`PlanError::Unreachable`]).
+pub fn prepare(
+    gens: &PfGenerators,
+    grid: &PlanningGrid,
+    start: Point,
+    goal: &GoalRegion,
+    density: StartDensity,
+) -> Result<PreparedLp, PlanError> {
+    if !gens.matches(grid) {
+        return Err(PlanError::InvalidOption {
+            name: "generators",
+            reason: "the P-F generators were built for a different planning grid".into(),
+        });
+    }
+    let (start_cell, goal_cells) = endpoints(grid, start, goal)?;
+    let g = &gens.generators;
+    let basis = &g.basis;
+    let n = basis.len();
+    let mut target = vec![false; n];
+    for &c in &goal_cells {
+        if let Some(i) = basis.index_of_cell(c) {
+            target[i] = true;
+        }
+    }
+    if !target.iter().any(|&t| t) {
+        return Err(PlanError::GoalInObstacle { point: goal.center });
+    }
+    // The start's function: its own cell's, or (RBF next to an obstacle) the nearest active centre.
+    let start_fn = match basis.index_of_cell(start_cell) {
+        Some(i) => i,
+        None => (0..n)
+            .min_by(|&a, &b| dist(basis.center(a), start).total_cmp(&dist(basis.center(b), start)))
+            .ok_or(PlanError::StartInObstacle { point: start })?,
+    };
+    let reach = can_reach_target(g, &target);
+    if !reach[start_fn] {
+        return Err(PlanError::Unreachable {
+            reason: "no sequence of moves through free cells connects the start to the goal region"
+                .into(),
+        });
+    }
+    let mut t = vec![0.0; n];
+    match density {
+        StartDensity::PointMass => {
+            if !target[start_fn] {
+                t[start_fn] = 1.0 / gens.mass[start_fn];
+            }
+        }
+        StartDensity::UniformFree => {
+            let total: f64 = (0..n)
+                .filter(|&i| reach[i] && !target[i])
+                .map(|i| gens.mass[i])
+                .sum();
+            if total > 0.0 {
+                for i in 0..n {
+                    if reach[i] && !target[i] {
+                        t[i] = 1.0 / total;
+                    }
+                }
+            }
+        }
+    }
+    Ok(PreparedLp {
+        start: t,
+        target,
+        goal_cells,
+    })
+}
+
+/// Plans with the P-F method: LP on the cached generators, then the feedback law from `start`.
+///
+/// Errors as [`prepare`], plus an infeasible or failed LP. A trajectory that does not reach the
+/// goal is *not* an error here: see [`PfSolution::outcome`].
+pub fn solve(
+    gens: &PfGenerators,
+    grid: &PlanningGrid,
+    start: Point,
+    goal: &GoalRegion,
+    opts: &PfOptions,
+) -> Result<PfSolution, PlanError> {
+    if !(opts.u_max.is_finite() && opts.u_max > 0.0) {
+        return Err(PlanError::InvalidOption {
+            name: "u_max",
+            reason: format!("{} must be finite and > 0", opts.u_max),
+        });
+    }
+    let prepared = prepare(gens, grid, start, goal, opts.start_density)?;
+    let solution = lp::solve(&prepared.problem(gens, opts.u_max), &opts.lp)?;
+    let weighted_length = solution.report.objective / (1.0 + 1.0 / opts.u_max);
+    let g = &gens.generators;
+    let field = FeedbackField::new(
+        g.basis.clone(),
+        &g.directions,
+        solution.density,
+        &solution.flux,
+    );
+    let mut is_goal_cell = vec![false; grid.len()];
+    for &c in &prepared.goal_cells {
+        is_goal_cell[c] = true;
+    }
+    let (mut path, outcome) = integrate(
+        &field,
+        grid,
+        start,
+        &|c| is_goal_cell[c],
+        opts.u_max,
+        &opts.integration,
+    );
+    if outcome.reached_goal() {
+        finish_into_goal_disc(grid, goal, &mut path);
+    }
+    debug!(?outcome, points = path.len(), "P-F trajectory integrated");
+    Ok(PfSolution {
+        path,
+        outcome,
+        lp: solution.report,
+        field,
+        weighted_length,
+        start_coefficients: prepared.start,
+        targets: prepared.target,
+    })
+}
+
+fn dist(a: Point, b: Point) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// The integration stops on entering a target cell, whose corner may lie just outside the goal
+/// disc; append the straight move to the goal centre when it stays in free cells.
+fn finish_into_goal_disc(grid: &PlanningGrid, goal: &GoalRegion, path: &mut Vec<Point>) {
+    let Some(&end) = path.last() else {
+        return;
+    };
+    if goal.contains(end) {
+        return;
+    }
+    let length = dist(end, goal.center);
+    let steps = ((length / (0.1 * grid.cell_size)).ceil() as usize).max(1);
+    let point = |s: usize| {
+        let a = s as f64 / steps as f64;
+        [
+            end[0] + a * (goal.center[0] - end[0]),
+            end[1] + a * (goal.center[1] - end[1]),
+        ]
+    };
+    let free = (0..=steps).all(|s| {
+        let p = point(s);
+        grid.contains(p) && !grid.blocked_at(p)
+    });
+    if free {
+        // Stop at the first point inside the disc rather than running to the centre.
+        if let Some(s) = (1..=steps).find(|&s| goal.contains(point(s))) {
+            path.push(point(s));
+        }
+    }
+}

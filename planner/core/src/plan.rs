@@ -1,0 +1,319 @@
+//! The planner's front door: one request in, one plan (path, reference trajectory, metrics) out.
+//! Used by the `pf-plan` CLI and the LCM service alike.
+//!
+//! [`Planner`] keeps the resampled grid and the P-F generators of one map, so repeated requests
+//! on the same map (a service, or `--method all`) do not rebuild them; [`plan`] is the one-shot form.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Instant;
+
+use tracing::info;
+
+use crate::error::PlanError;
+use crate::graph::{astar_path, dijkstra_path, Connectivity};
+use crate::grid::{GoalRegion, PlanningGrid};
+use crate::map::{GridMap, Point};
+use crate::metrics::{evaluate_path, PathMetrics};
+use crate::pf::{self, BasisKind, LpReport, PfGenerators, PfOptions, StartDensity};
+pub use crate::trajectory::TrajectorySample;
+use crate::trajectory::{build_trajectory, TrajectoryOptions};
+use crate::traversability::{TraversabilityField, TraversabilityParams};
+
+/// Planning method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// The Perron-Frobenius density-space LP with the feedback law.
+    Pf,
+    /// A* with the Euclidean heuristic (the paper's baseline).
+    AStar,
+    /// Dijkstra (the graph optimum).
+    Dijkstra,
+}
+
+impl Method {
+    /// Every method, in report order.
+    pub const ALL: [Method; 3] = [Method::Pf, Method::AStar, Method::Dijkstra];
+
+    /// Short name used on the command line and in file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Pf => "pf",
+            Method::AStar => "astar",
+            Method::Dijkstra => "dijkstra",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = PlanError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "pf" => Ok(Method::Pf),
+            "astar" => Ok(Method::AStar),
+            "dijkstra" => Ok(Method::Dijkstra),
+            other => Err(PlanError::InvalidOption {
+                name: "method",
+                reason: format!("unknown method {other:?}; use pf, astar or dijkstra"),
+            }),
+        }
+    }
+}
+
+/// Everything a request can tune.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannerOptions {
+    /// Planning cells along the map's longer side.
+    pub grid_size: usize,
+    /// 4 or 8 move directions (P-F flux directions and graph connectivity alike).
+    pub directions: usize,
+    /// P-F basis.
+    pub basis: BasisKind,
+    /// Nominal speed of the reference trajectory, m/s.
+    pub speed: f64,
+    /// Speed bound of the P-F LP (scales its objective only; the trajectory is re-timed at `speed`).
+    pub u_max: f64,
+    /// Initial density of the P-F LP.
+    pub start_density: StartDensity,
+    /// Traversability model.
+    pub traversability: TraversabilityParams,
+    /// Sample period of the reference trajectory, seconds.
+    pub dt: f64,
+}
+
+impl Default for PlannerOptions {
+    fn default() -> Self {
+        Self {
+            grid_size: 64,
+            directions: 8,
+            basis: BasisKind::Indicator,
+            speed: 0.5,
+            u_max: 1.0,
+            start_density: StartDensity::default(),
+            traversability: TraversabilityParams::default(),
+            dt: 0.1,
+        }
+    }
+}
+
+/// A planning request.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanRequest {
+    pub map: GridMap,
+    pub start: Point,
+    pub start_yaw: f64,
+    pub goal: GoalRegion,
+    pub method: Method,
+    pub options: PlannerOptions,
+}
+
+/// A planning answer.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub method: Method,
+    /// The continuous path (polyline), start first, ending in the goal region.
+    pub path: Vec<Point>,
+    /// The time-parameterised reference along `path`.
+    pub trajectory: Vec<TrajectorySample>,
+    /// The shared metric, measured on the map.
+    pub metrics: PathMetrics,
+    /// The method's own optimal value on the planning grid: graph path cost for A*/Dijkstra,
+    /// LP objective / (1 + 1/u_max) for P-F (the latter summed over the start density's mass).
+    pub planner_cost: f64,
+    /// Nodes expanded (graph methods).
+    pub expanded: Option<usize>,
+    /// LP report (P-F).
+    pub lp: Option<LpReport>,
+    /// Wall-clock time of the method (P-F: generators, unless cached, plus LP and integration), seconds.
+    pub solve_time_s: f64,
+}
+
+/// A map prepared for planning: traversability, planning grid and cached P-F generators.
+pub struct Planner {
+    map: GridMap,
+    traversability: TraversabilityParams,
+    grid_size: usize,
+    field: TraversabilityField,
+    grid: PlanningGrid,
+    pf_cache: Option<(BasisKind, usize, PfGenerators)>,
+}
+
+impl Planner {
+    /// Evaluates p on `map` and resamples it to `grid_size` cells along the longer side.
+    pub fn new(
+        map: GridMap,
+        traversability: TraversabilityParams,
+        grid_size: usize,
+    ) -> Result<Self, PlanError> {
+        let field = TraversabilityField::from_map(&map, &traversability)?;
+        let grid = PlanningGrid::from_field(&map, &field, grid_size)?;
+        Ok(Self {
+            map,
+            traversability,
+            grid_size,
+            field,
+            grid,
+            pf_cache: None,
+        })
+    }
+
+    /// The terrain.
+    pub fn map(&self) -> &GridMap {
+        &self.map
+    }
+
+    /// p on the map.
+    pub fn field(&self) -> &TraversabilityField {
+        &self.field
+    }
+
+    /// The planning grid.
+    pub fn grid(&self) -> &PlanningGrid {
+        &self.grid
+    }
+
+    /// Plans from `start` to `goal` with `method`. A grid size or traversability model different
+    /// from the prepared one rebuilds the grid (and drops cached generators).
+    pub fn plan(
+        &mut self,
+        start: Point,
+        start_yaw: f64,
+        goal: &GoalRegion,
+        method: Method,
+        options: &PlannerOptions,
+    ) -> Result<Plan, PlanError> {
+        let trajectory_options = TrajectoryOptions {
+            speed: options.speed,
+            dt: options.dt,
+            ..TrajectoryOptions::default()
+        };
+        trajectory_options.validate()?;
+        let connectivity = Connectivity::from_directions(options.directions)?;
+        if options.grid_size != self.grid_size || options.traversability != self.traversability {
+            *self = Planner::new(self.map.clone(), options.traversability, options.grid_size)?;
+        }
+        self.check_endpoints(start, start_yaw, goal)?;
+        let started = Instant::now();
+        let (path, planner_cost, expanded, lp) = match method {
+            Method::Dijkstra | Method::AStar => {
+                let found = if method == Method::Dijkstra {
+                    dijkstra_path(&self.grid, start, goal, connectivity)?
+                } else {
+                    astar_path(&self.grid, start, goal, connectivity)?
+                };
+                (found.points, found.cost, Some(found.expanded), None)
+            }
+            Method::Pf => {
+                options.basis.validate()?;
+                let cached = matches!(&self.pf_cache, Some((b, d, g)) if *b == options.basis && *d == options.directions && g.matches(&self.grid));
+                let mut generator_time_s = 0.0;
+                if !cached {
+                    let t0 = Instant::now();
+                    let built =
+                        PfGenerators::build(&self.grid, &options.basis, options.directions)?;
+                    generator_time_s = t0.elapsed().as_secs_f64();
+                    self.pf_cache = Some((options.basis, options.directions, built));
+                }
+                let generators = match &self.pf_cache {
+                    Some((_, _, g)) => g,
+                    None => {
+                        return Err(PlanError::InvalidOption {
+                            name: "basis",
+                            reason: "P-F generators could not be prepared".into(),
+                        })
+                    }
+                };
+                let pf_options = PfOptions {
+                    u_max: options.u_max,
+                    start_density: options.start_density,
+                    ..PfOptions::default()
+                };
+                let solution = pf::solve(generators, &self.grid, start, goal, &pf_options)?;
+                if !solution.outcome.reached_goal() {
+                    return Err(PlanError::TrajectoryFailed {
+                        reason: format!("{:?}", solution.outcome),
+                    });
+                }
+                let mut lp = solution.lp;
+                lp.generator_time_s = generator_time_s;
+                (solution.path, solution.weighted_length, None, Some(lp))
+            }
+        };
+        let solve_time_s = started.elapsed().as_secs_f64();
+        let metrics = evaluate_path(&self.map, &self.field, &path);
+        let trajectory = build_trajectory(&self.map, &path, start_yaw, &trajectory_options)?;
+        info!(
+            %method,
+            cost_integral = metrics.cost_integral,
+            length = metrics.length,
+            solve_time_s,
+            "plan ready"
+        );
+        Ok(Plan {
+            method,
+            path,
+            trajectory,
+            metrics,
+            planner_cost,
+            expanded,
+            lp,
+            solve_time_s,
+        })
+    }
+
+    /// Start and goal against the map itself (the grid adds its padding later).
+    fn check_endpoints(
+        &self,
+        start: Point,
+        start_yaw: f64,
+        goal: &GoalRegion,
+    ) -> Result<(), PlanError> {
+        if !self.map.contains(start) {
+            return Err(PlanError::StartOffMap { point: start });
+        }
+        if !start_yaw.is_finite() {
+            return Err(PlanError::InvalidOption {
+                name: "start_yaw",
+                reason: format!("{start_yaw} is not finite"),
+            });
+        }
+        if self.map.is_obstacle_at(start) {
+            return Err(PlanError::StartInObstacle { point: start });
+        }
+        if !self.map.contains(goal.center) {
+            return Err(PlanError::GoalOffMap { point: goal.center });
+        }
+        if !(goal.radius.is_finite() && goal.radius >= 0.0) {
+            return Err(PlanError::InvalidOption {
+                name: "goal.radius",
+                reason: format!("{} must be finite and >= 0", goal.radius),
+            });
+        }
+        if self.map.is_obstacle_at(goal.center) {
+            return Err(PlanError::GoalInObstacle { point: goal.center });
+        }
+        Ok(())
+    }
+}
+
+/// One-shot planning: prepares the map and plans once.
+pub fn plan(req: &PlanRequest) -> Result<Plan, PlanError> {
+    let mut planner = Planner::new(
+        req.map.clone(),
+        req.options.traversability,
+        req.options.grid_size,
+    )?;
+    planner.plan(
+        req.start,
+        req.start_yaw,
+        &req.goal,
+        req.method,
+        &req.options,
+    )
+}

@@ -1,0 +1,206 @@
+//! PNG of a map with every method's path: terrain colour map (height), hard obstacles, start,
+//! goal region, one coloured polyline per method, a legend and the metrics of each path.
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use crate::error::PlanError;
+use crate::grid::GoalRegion;
+use crate::map::{GridMap, Point};
+use crate::metrics::PathMetrics;
+
+/// One path to draw.
+#[derive(Debug, Clone)]
+pub struct PlotPath {
+    /// Legend label (method name).
+    pub label: String,
+    /// The polyline.
+    pub points: Vec<Point>,
+    /// Metrics printed under the map.
+    pub metrics: Option<PathMetrics>,
+}
+
+/// Path colours, one per method in order (colour-blind friendly).
+const PATH_COLOURS: [RGBColor; 6] = [
+    RGBColor(230, 25, 75),
+    RGBColor(0, 130, 200),
+    RGBColor(255, 225, 25),
+    RGBColor(245, 130, 48),
+    RGBColor(145, 30, 180),
+    RGBColor(70, 240, 240),
+];
+
+/// Height colour map stops (fraction of the height range → colour): lowland green to rock to snow.
+const TERRAIN_STOPS: [(f64, [f64; 3]); 5] = [
+    (0.0, [38.0, 115.0, 77.0]),
+    (0.2, [120.0, 170.0, 90.0]),
+    (0.45, [215.0, 200.0, 120.0]),
+    (0.75, [150.0, 110.0, 80.0]),
+    (1.0, [245.0, 245.0, 245.0]),
+];
+
+fn terrain_colour(fraction: f64) -> RGBColor {
+    let f = fraction.clamp(0.0, 1.0);
+    let i = TERRAIN_STOPS
+        .iter()
+        .position(|s| s.0 >= f)
+        .unwrap_or(TERRAIN_STOPS.len() - 1)
+        .max(1);
+    let (f0, c0) = TERRAIN_STOPS[i - 1];
+    let (f1, c1) = TERRAIN_STOPS[i];
+    let t = if f1 > f0 { (f - f0) / (f1 - f0) } else { 0.0 };
+    let mix = |k: usize| (c0[k] + t * (c1[k] - c0[k])).round() as u8;
+    RGBColor(mix(0), mix(1), mix(2))
+}
+
+fn plot_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
+    PlanError::Io {
+        path: path.display().to_string(),
+        reason: format!("plotting failed: {e}"),
+    }
+}
+
+/// Draws `map`, `start`, `goal`, `paths` and free-text `notes` (e.g. failed methods) to a PNG at `out`.
+pub fn plot_plans(
+    out: &Path,
+    title: &str,
+    map: &GridMap,
+    start: Point,
+    goal: &GoalRegion,
+    paths: &[PlotPath],
+    notes: &[String],
+) -> Result<(), PlanError> {
+    map.validate()?;
+    let text_lines = paths.len() + notes.len() + 1;
+    let (width, map_px) = (900u32, 820u32);
+    let height = map_px + 30 + 22 * text_lines as u32;
+    let root = BitMapBackend::new(out, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_error(out, e))?;
+    let (upper, lower) = root.split_vertically(map_px);
+    let (lo, hi) = map.bounds();
+    let (h_min, h_max) = map
+        .heights
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+            (a.min(h), b.max(h))
+        });
+    let mut chart = ChartBuilder::on(&upper)
+        .caption(
+            format!("{title}   (colour: height {h_min:.2}–{h_max:.2} m; black: obstacles)"),
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
+        .map_err(|e| plot_error(out, e))?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("x [m]")
+        .y_desc("y [m]")
+        .draw()
+        .map_err(|e| plot_error(out, e))?;
+    let span = (h_max - h_min).max(1e-9);
+    let res = map.resolution;
+    chart
+        .draw_series((0..map.len()).map(|i| {
+            let (ix, iy) = (i % map.width, i / map.width);
+            let x0 = map.origin[0] + ix as f64 * res;
+            let y0 = map.origin[1] + iy as f64 * res;
+            let colour = if map.is_obstacle(ix, iy) {
+                RGBColor(20, 20, 20)
+            } else {
+                terrain_colour((map.heights[i] - h_min) / span)
+            };
+            Rectangle::new([(x0, y0), (x0 + res, y0 + res)], colour.filled())
+        }))
+        .map_err(|e| plot_error(out, e))?;
+    let goal_outline: Vec<(f64, f64)> = (0..=64)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 64.0;
+            let r = goal.radius.max(0.5 * res);
+            (goal.center[0] + r * a.cos(), goal.center[1] + r * a.sin())
+        })
+        .collect();
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            goal_outline,
+            BLUE.stroke_width(3),
+        )))
+        .map_err(|e| plot_error(out, e))?
+        .label("goal")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.stroke_width(2)));
+    for (k, p) in paths.iter().enumerate() {
+        let colour = PATH_COLOURS[k % PATH_COLOURS.len()];
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                p.points.iter().map(|q| (q[0], q[1])).collect::<Vec<_>>(),
+                colour.stroke_width(3),
+            )))
+            .map_err(|e| plot_error(out, e))?
+            .label(p.label.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(3))
+            });
+    }
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (start[0], start[1]),
+            7,
+            GREEN.filled(),
+        )))
+        .map_err(|e| plot_error(out, e))?
+        .label("start")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, GREEN.filled()));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| plot_error(out, e))?;
+    let style = ("monospace", 15).into_font().color(&BLACK);
+    let mut y = 8;
+    lower
+        .draw_text(
+            &format!(
+                "{:<22}{:>10}{:>11}{:>14}{:>14}{:>11}",
+                "method", "∫p ds", "length m", "in obst. m", "clearance m", "max slope"
+            ),
+            &style,
+            (20, y),
+        )
+        .map_err(|e| plot_error(out, e))?;
+    for p in paths {
+        y += 22;
+        let line = match &p.metrics {
+            Some(m) => format!(
+                "{:<22}{:>10.4}{:>11.2}{:>14.3}{:>14}{:>10.1}°",
+                p.label,
+                m.cost_integral,
+                m.length,
+                m.length_in_obstacles,
+                if m.min_clearance.is_finite() {
+                    format!("{:.3}", m.min_clearance)
+                } else {
+                    "–".into()
+                },
+                m.max_slope_deg
+            ),
+            None => p.label.clone(),
+        };
+        lower
+            .draw_text(&line, &style, (20, y))
+            .map_err(|e| plot_error(out, e))?;
+    }
+    for note in notes {
+        y += 22;
+        lower
+            .draw_text(note, &style, (20, y))
+            .map_err(|e| plot_error(out, e))?;
+    }
+    root.present().map_err(|e| plot_error(out, e))?;
+    Ok(())
+}

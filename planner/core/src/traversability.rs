@@ -1,0 +1,312 @@
+//! Traversability p(x) ∈ [p_floor, 1]: the cost density every planner integrates (∫ p ds).
+//!
+//! The paper's choice is p = h / h_max (low ground is cheap, mountains are expensive). Optional
+//! slope and roughness terms are blended in with non-negative weights:
+//!
+//! ```text
+//! p = clamp( (w_h · h/h_max + w_s · min(slope/slope_ref, 1) + w_r · min(rough/rough_ref, 1))
+//!            / (w_h + w_s + w_r),  p_floor, 1 )
+//! ```
+//!
+//! - `h` is the cell height (must be ≥ 0), `h_max` the map's highest cell unless overridden;
+//! - `slope` is the terrain inclination from central differences of the heights, in degrees;
+//! - `rough` is the RMS deviation of the 3×3 neighbourhood from its mean, metres;
+//! - `p_floor > 0` keeps the density-space LP well posed (where p = 0 speed and density are
+//!   undetermined) and keeps graph edge weights positive.
+//!
+//! Defaults (`w_h = 1`, `w_s = w_r = 0`) give exactly the paper's p = h/h_max (floored).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{MapError, PlanError};
+use crate::map::{GridMap, Point};
+
+/// Weights and references of the traversability model (see the module docs for the formula).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TraversabilityParams {
+    /// Weight of the paper's height term h/h_max.
+    pub height_weight: f64,
+    /// Weight of the slope term min(slope/slope_ref, 1).
+    pub slope_weight: f64,
+    /// Weight of the roughness term min(rough/rough_ref, 1).
+    pub roughness_weight: f64,
+    /// Slope (degrees) at which the slope term saturates at 1.
+    pub slope_ref_deg: f64,
+    /// Roughness (metres, RMS of the 3×3 neighbourhood) at which the roughness term saturates at 1.
+    pub roughness_ref_m: f64,
+    /// Lower bound of p; must lie in (0, 1].
+    pub p_floor: f64,
+    /// Height that maps to p = 1; `None` uses the highest cell of the map.
+    pub h_max: Option<f64>,
+}
+
+impl Default for TraversabilityParams {
+    fn default() -> Self {
+        Self {
+            height_weight: 1.0,
+            slope_weight: 0.0,
+            roughness_weight: 0.0,
+            slope_ref_deg: 30.0,
+            roughness_ref_m: 0.1,
+            p_floor: 0.05,
+            h_max: None,
+        }
+    }
+}
+
+impl TraversabilityParams {
+    /// Rejects weights and references that would make p undefined or outside [p_floor, 1].
+    pub fn validate(&self) -> Result<(), PlanError> {
+        let bad =
+            |name: &'static str, reason: String| Err(PlanError::InvalidOption { name, reason });
+        for (name, w) in [
+            ("traversability.height_weight", self.height_weight),
+            ("traversability.slope_weight", self.slope_weight),
+            ("traversability.roughness_weight", self.roughness_weight),
+        ] {
+            if !(w.is_finite() && w >= 0.0) {
+                return bad(name, format!("must be finite and >= 0, got {w}"));
+            }
+        }
+        if self.height_weight + self.slope_weight + self.roughness_weight <= 0.0 {
+            return bad(
+                "traversability weights",
+                "at least one weight must be positive".into(),
+            );
+        }
+        if !(self.slope_ref_deg.is_finite()
+            && self.slope_ref_deg > 0.0
+            && self.slope_ref_deg < 90.0)
+        {
+            return bad(
+                "traversability.slope_ref_deg",
+                format!("must lie in (0, 90), got {}", self.slope_ref_deg),
+            );
+        }
+        if !(self.roughness_ref_m.is_finite() && self.roughness_ref_m > 0.0) {
+            return bad(
+                "traversability.roughness_ref_m",
+                format!("must be finite and > 0, got {}", self.roughness_ref_m),
+            );
+        }
+        if !(self.p_floor.is_finite() && self.p_floor > 0.0 && self.p_floor <= 1.0) {
+            return bad(
+                "traversability.p_floor",
+                format!("must lie in (0, 1], got {}", self.p_floor),
+            );
+        }
+        if let Some(h) = self.h_max {
+            if !(h.is_finite() && h > 0.0) {
+                return bad(
+                    "traversability.h_max",
+                    format!("must be finite and > 0, got {h}"),
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// p at every cell centre of a map, with bilinear interpolation in between: the continuous
+/// field that [`crate::metrics`] integrates for every method alike.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TraversabilityField {
+    /// Lower-left corner of cell (0, 0), as in the map.
+    pub origin: Point,
+    /// Cell size of the map, metres.
+    pub resolution: f64,
+    /// Cells along x.
+    pub width: usize,
+    /// Cells along y.
+    pub height: usize,
+    /// p per map cell, row-major `iy · width + ix`, each in [p_floor, 1].
+    pub values: Vec<f64>,
+}
+
+impl TraversabilityField {
+    /// Evaluates the model on every cell of `map`.
+    pub fn from_map(map: &GridMap, params: &TraversabilityParams) -> Result<Self, PlanError> {
+        map.validate()?;
+        params.validate()?;
+        if let Some(i) = map.heights.iter().position(|&h| h < 0.0) {
+            return Err(MapError::NegativeHeight {
+                ix: i % map.width,
+                iy: i / map.width,
+                value: map.heights[i],
+            }
+            .into());
+        }
+        let observed_max = map.heights.iter().copied().fold(0.0_f64, f64::max);
+        let h_max = params.h_max.unwrap_or(observed_max);
+        let weight_sum = params.height_weight + params.slope_weight + params.roughness_weight;
+        let mut values = Vec::with_capacity(map.len());
+        for iy in 0..map.height {
+            for ix in 0..map.width {
+                let h = map.heights[map.index(ix, iy)];
+                let height_term = if h_max > 0.0 {
+                    (h / h_max).min(1.0)
+                } else {
+                    0.0
+                };
+                let slope_term = if params.slope_weight > 0.0 {
+                    (slope_deg(map, ix, iy) / params.slope_ref_deg).min(1.0)
+                } else {
+                    0.0
+                };
+                let rough_term = if params.roughness_weight > 0.0 {
+                    (roughness(map, ix, iy) / params.roughness_ref_m).min(1.0)
+                } else {
+                    0.0
+                };
+                let p = (params.height_weight * height_term
+                    + params.slope_weight * slope_term
+                    + params.roughness_weight * rough_term)
+                    / weight_sum;
+                values.push(p.clamp(params.p_floor, 1.0));
+            }
+        }
+        Ok(Self {
+            origin: map.origin,
+            resolution: map.resolution,
+            width: map.width,
+            height: map.height,
+            values,
+        })
+    }
+
+    /// p of the cell containing `p`, clamped to the nearest edge cell outside the map.
+    pub fn cell_value_at(&self, p: Point) -> f64 {
+        let ix = (((p[0] - self.origin[0]) / self.resolution).floor().max(0.0) as usize)
+            .min(self.width - 1);
+        let iy = (((p[1] - self.origin[1]) / self.resolution).floor().max(0.0) as usize)
+            .min(self.height - 1);
+        self.values[iy * self.width + ix]
+    }
+
+    /// p at `p` by bilinear interpolation between cell centres, clamped at the map edge.
+    pub fn at(&self, p: Point) -> f64 {
+        let fx =
+            ((p[0] - self.origin[0]) / self.resolution - 0.5).clamp(0.0, (self.width - 1) as f64);
+        let fy =
+            ((p[1] - self.origin[1]) / self.resolution - 0.5).clamp(0.0, (self.height - 1) as f64);
+        // NaN coordinates clamp to NaN; fall back to the lower-left cell rather than index garbage.
+        let (fx, fy) = (
+            if fx.is_nan() { 0.0 } else { fx },
+            if fy.is_nan() { 0.0 } else { fy },
+        );
+        let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
+        let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+        let v = |ix: usize, iy: usize| self.values[iy * self.width + ix];
+        let bottom = v(x0, y0) * (1.0 - tx) + v(x1, y0) * tx;
+        let top = v(x0, y1) * (1.0 - tx) + v(x1, y1) * tx;
+        bottom * (1.0 - ty) + top * ty
+    }
+}
+
+/// Terrain inclination at a cell centre in degrees (central differences, one-sided at the edge).
+pub fn slope_deg(map: &GridMap, ix: usize, iy: usize) -> f64 {
+    let h = |x: usize, y: usize| map.heights[map.index(x, y)];
+    let derivative = |lo: usize, hi: usize, hl: f64, hh: f64| {
+        if hi > lo {
+            (hh - hl) / ((hi - lo) as f64 * map.resolution)
+        } else {
+            0.0
+        }
+    };
+    let (xl, xh) = (ix.saturating_sub(1), (ix + 1).min(map.width - 1));
+    let (yl, yh) = (iy.saturating_sub(1), (iy + 1).min(map.height - 1));
+    let dx = derivative(xl, xh, h(xl, iy), h(xh, iy));
+    let dy = derivative(yl, yh, h(ix, yl), h(ix, yh));
+    dx.hypot(dy).atan().to_degrees()
+}
+
+/// RMS deviation of the heights of the 3×3 neighbourhood (clipped at the edge) from their mean, metres.
+pub fn roughness(map: &GridMap, ix: usize, iy: usize) -> f64 {
+    let mut samples = Vec::with_capacity(9);
+    for y in iy.saturating_sub(1)..=(iy + 1).min(map.height - 1) {
+        for x in ix.saturating_sub(1)..=(ix + 1).min(map.width - 1) {
+            samples.push(map.heights[map.index(x, y)]);
+        }
+    }
+    let n = samples.len() as f64;
+    let mean = samples.iter().sum::<f64>() / n;
+    (samples.iter().map(|h| (h - mean).powi(2)).sum::<f64>() / n).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(slope: f64) -> GridMap {
+        let (w, h) = (5, 4);
+        let heights = (0..w * h).map(|i| 1.0 + slope * (i % w) as f64).collect();
+        GridMap::new([0.0, 0.0], 1.0, w, h, heights, None).expect("valid map")
+    }
+
+    #[test]
+    fn default_is_height_over_max_height_with_floor() {
+        let map = ramp(1.0);
+        let f =
+            TraversabilityField::from_map(&map, &TraversabilityParams::default()).expect("field");
+        for ix in 0..5 {
+            let expected = (1.0 + ix as f64) / 5.0;
+            assert!((f.values[ix] - expected).abs() < 1e-12, "ix {ix}");
+        }
+        let flat_zero = GridMap::new([0.0, 0.0], 1.0, 2, 2, vec![0.0; 4], None).expect("map");
+        let f = TraversabilityField::from_map(&flat_zero, &TraversabilityParams::default())
+            .expect("field");
+        assert!(f.values.iter().all(|&p| p == 0.05));
+    }
+
+    #[test]
+    fn slope_term_measures_inclination() {
+        // A 1:1 ramp is 45 degrees; with slope_ref 90-epsilon... use 60 degrees: term = 45/60.
+        let map = ramp(1.0);
+        assert!((slope_deg(&map, 2, 1) - 45.0).abs() < 1e-9);
+        let params = TraversabilityParams {
+            height_weight: 0.0,
+            slope_weight: 1.0,
+            slope_ref_deg: 60.0,
+            ..Default::default()
+        };
+        let f = TraversabilityField::from_map(&map, &params).expect("field");
+        assert!((f.values[2] - 0.75).abs() < 1e-9);
+    }
+
+    #[test]
+    fn negative_heights_and_bad_weights_are_rejected() {
+        let map = GridMap::new([0.0, 0.0], 1.0, 2, 1, vec![0.0, -0.5], None).expect("map");
+        assert!(matches!(
+            TraversabilityField::from_map(&map, &TraversabilityParams::default()),
+            Err(PlanError::InvalidMap(MapError::NegativeHeight {
+                ix: 1,
+                iy: 0,
+                ..
+            }))
+        ));
+        let params = TraversabilityParams {
+            p_floor: 0.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            TraversabilityField::from_map(&ramp(1.0), &params),
+            Err(PlanError::InvalidOption { .. })
+        ));
+    }
+
+    #[test]
+    fn bilinear_value_matches_cell_values_at_centres() {
+        let map = ramp(0.5);
+        let f =
+            TraversabilityField::from_map(&map, &TraversabilityParams::default()).expect("field");
+        for iy in 0..map.height {
+            for ix in 0..map.width {
+                let c = map.cell_center(ix, iy);
+                assert!((f.at(c) - f.values[map.index(ix, iy)]).abs() < 1e-12);
+                assert_eq!(f.cell_value_at(c), f.values[map.index(ix, iy)]);
+            }
+        }
+    }
+}

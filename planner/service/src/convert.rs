@@ -1,0 +1,495 @@
+//! Validation and conversion between the wire messages (`lcm_types::pfnav`) and the planner's
+//! types. Every rule of `lcm_types/*.lcm` that the service enforces lives here; each violation
+//! becomes a [`Rejection`] carrying the reply status and a human-readable reason.
+
+use std::sync::Arc;
+
+use lcm_types::pfnav::{PlanOptions, PlanReply, PlanRequest, TerrainMap};
+use pf_planner::basis::BasisKind;
+use pf_planner::grid::GoalRegion;
+use pf_planner::map::{GridMap, Point};
+use pf_planner::pf::StartDensity;
+
+/// Why a message is not planned: the reply status (`PlanReply::STATUS_*`) and the reason.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Rejection {
+    pub status: i8,
+    pub reason: String,
+}
+
+impl Rejection {
+    pub fn new(status: i8, reason: impl Into<String>) -> Self {
+        Self {
+            status,
+            reason: reason.into(),
+        }
+    }
+    fn invalid_request(reason: impl Into<String>) -> Self {
+        Self::new(PlanReply::STATUS_INVALID_REQUEST, reason)
+    }
+    fn invalid_map(reason: impl Into<String>) -> Self {
+        Self::new(PlanReply::STATUS_INVALID_MAP, reason)
+    }
+}
+
+/// Accepted values of the frame name of every message: the world frame.
+fn check_frame(frame_id: &str, what: &str) -> Result<(), String> {
+    if frame_id.is_empty() || frame_id == "world" {
+        Ok(())
+    } else {
+        Err(format!(
+            "{what} frame_id {frame_id:?} is not supported (only \"world\" or empty)"
+        ))
+    }
+}
+
+/// Checks a map's size claims against the service's cell limit. Runs on the claims read before
+/// decoding (see [`crate::preflight`]) and again on the decoded message.
+pub fn check_map_size(
+    width: i32,
+    height: i32,
+    num_cells: i32,
+    max_cells: usize,
+) -> Result<(), Rejection> {
+    if width <= 0 || height <= 0 {
+        return Err(Rejection::invalid_map(format!(
+            "map width and height must be > 0, got {width} x {height}"
+        )));
+    }
+    let cells = i64::from(width) * i64::from(height);
+    let claimed = cells.max(i64::from(num_cells));
+    if usize::try_from(claimed).map_or(true, |c| c > max_cells) {
+        return Err(Rejection::new(
+            PlanReply::STATUS_MAP_TOO_LARGE,
+            format!(
+                "map of {width} x {height} cells ({claimed} claimed) exceeds the service limit of {max_cells} cells (--max-map-cells)"
+            ),
+        ));
+    }
+    if i64::from(num_cells) != cells {
+        return Err(Rejection::invalid_map(format!(
+            "num_cells is {num_cells}, expected width x height = {cells}"
+        )));
+    }
+    Ok(())
+}
+
+/// Turns a decoded `terrain_map_t` into a validated [`GridMap`].
+pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<GridMap, Rejection> {
+    check_map_size(msg.width, msg.height, msg.num_cells, max_cells)?;
+    check_frame(&msg.header.frame_id, "map").map_err(Rejection::invalid_map)?;
+    let cells = msg.heights.len();
+    let obstacles = match msg.obstacle_mask.len() {
+        0 => None,
+        n if n == cells => Some(msg.obstacle_mask.clone()),
+        n => {
+            return Err(Rejection::invalid_map(format!(
+                "obstacle_mask has {n} entries, expected 0 or width x height = {cells}"
+            )))
+        }
+    };
+    let width = usize::try_from(msg.width).map_err(|_| Rejection::invalid_map("negative width"))?;
+    let height =
+        usize::try_from(msg.height).map_err(|_| Rejection::invalid_map("negative height"))?;
+    GridMap::new(
+        [msg.origin_x, msg.origin_y],
+        msg.resolution,
+        width,
+        height,
+        msg.heights.clone(),
+        obstacles,
+    )
+    .map_err(|e| Rejection::invalid_map(e.to_string()))
+}
+
+/// The planning method of a request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MethodChoice {
+    Pf,
+    AStar,
+    Dijkstra,
+}
+
+/// Defaults the service applies to `plan_options_t` fields left at 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OptionDefaults {
+    /// RBF lattice size when `grid_size` is 0 and the basis is RBF.
+    pub rbf_grid_size: usize,
+    pub directions: usize,
+    pub speed: f64,
+    pub sample_period: f64,
+    /// Solve-time limit, seconds (`f64::INFINITY` for none).
+    pub max_solve_time: f64,
+}
+
+impl Default for OptionDefaults {
+    fn default() -> Self {
+        Self {
+            rbf_grid_size: 32,
+            directions: 8,
+            speed: 0.5,
+            sample_period: 0.1,
+            max_solve_time: 30.0,
+        }
+    }
+}
+
+/// Smallest and largest accepted `grid_size`.
+pub const GRID_SIZE_RANGE: std::ops::RangeInclusive<usize> = 2..=512;
+
+/// Planner settings after defaults were applied and ranges checked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResolvedOptions {
+    pub basis: BasisKind,
+    /// Planning cells along the longer map side.
+    pub grid_size: usize,
+    pub directions: usize,
+    pub speed: f64,
+    pub start_density: StartDensity,
+    pub sample_period: f64,
+    pub max_solve_time: f64,
+}
+
+fn positive_or_default(value: f64, default: f64, name: &str) -> Result<f64, Rejection> {
+    if value == 0.0 {
+        Ok(default)
+    } else if value.is_finite() && value > 0.0 {
+        Ok(value)
+    } else {
+        Err(Rejection::invalid_request(format!(
+            "options.{name} must be 0 (default) or finite and > 0, got {value}"
+        )))
+    }
+}
+
+/// Applies the defaults of `plan_options_t` and checks every range.
+pub fn resolve_options(
+    options: &PlanOptions,
+    map: &GridMap,
+    defaults: &OptionDefaults,
+) -> Result<ResolvedOptions, Rejection> {
+    let basis = match options.basis {
+        PlanOptions::BASIS_DEFAULT | PlanOptions::BASIS_INDICATOR => BasisKind::Indicator,
+        PlanOptions::BASIS_RBF => BasisKind::DEFAULT_RBF,
+        other => {
+            return Err(Rejection::invalid_request(format!(
+                "unknown options.basis {other} (0 default, 1 indicator, 2 rbf)"
+            )))
+        }
+    };
+    let grid_size = match options.grid_size {
+        0 => match basis {
+            BasisKind::Indicator => map.width.max(map.height).min(*GRID_SIZE_RANGE.end()),
+            BasisKind::Rbf { .. } => defaults.rbf_grid_size,
+        },
+        n => usize::try_from(n)
+            .ok()
+            .filter(|n| GRID_SIZE_RANGE.contains(n))
+            .ok_or_else(|| {
+                Rejection::invalid_request(format!(
+                    "options.grid_size must be 0 (default) or 2..=512, got {n}"
+                ))
+            })?,
+    };
+    let directions = match options.directions {
+        0 => defaults.directions,
+        4 => 4,
+        8 => 8,
+        other => {
+            return Err(Rejection::invalid_request(format!(
+                "options.directions must be 0 (default), 4 or 8, got {other}"
+            )))
+        }
+    };
+    let start_density = match options.start_density {
+        PlanOptions::START_DENSITY_DEFAULT | PlanOptions::START_DENSITY_POINT => {
+            StartDensity::PointMass
+        }
+        PlanOptions::START_DENSITY_UNIFORM => StartDensity::UniformFree,
+        other => {
+            return Err(Rejection::invalid_request(format!(
+                "unknown options.start_density {other} (0 default, 1 point, 2 uniform)"
+            )))
+        }
+    };
+    Ok(ResolvedOptions {
+        basis,
+        grid_size,
+        directions,
+        speed: positive_or_default(options.speed, defaults.speed, "speed")?,
+        start_density,
+        sample_period: positive_or_default(
+            options.sample_period,
+            defaults.sample_period,
+            "sample_period",
+        )?,
+        max_solve_time: positive_or_default(
+            options.max_solve_time,
+            defaults.max_solve_time,
+            "max_solve_time",
+        )?,
+    })
+}
+
+/// A request that passed every check the service can make without planning.
+#[derive(Debug, Clone)]
+pub struct ValidatedRequest {
+    pub request_id: i64,
+    /// The method code as sent (echoed in the reply).
+    pub method_code: i8,
+    pub method: MethodChoice,
+    pub map: Arc<GridMap>,
+    /// `header.seq` of the map planned on.
+    pub map_seq: i64,
+    pub start: Point,
+    pub start_yaw: f64,
+    pub goal: GoalRegion,
+    pub options: ResolvedOptions,
+}
+
+/// Where a request's map comes from when it is not inline.
+pub trait MapSource {
+    /// The stored map with `header.seq == seq`, or the latest one for `seq == -1`, with its seq.
+    fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<GridMap>)>;
+}
+
+/// Checks a decoded request field by field and resolves its map.
+pub fn validate_request(
+    msg: &PlanRequest,
+    maps: &dyn MapSource,
+    max_cells: usize,
+    defaults: &OptionDefaults,
+) -> Result<ValidatedRequest, Rejection> {
+    if msg.request_id <= 0 {
+        return Err(Rejection::invalid_request(format!(
+            "request_id must be > 0, got {}",
+            msg.request_id
+        )));
+    }
+    check_frame(&msg.header.frame_id, "request").map_err(Rejection::invalid_request)?;
+    let method = match msg.method {
+        PlanRequest::METHOD_PF => MethodChoice::Pf,
+        PlanRequest::METHOD_ASTAR => MethodChoice::AStar,
+        PlanRequest::METHOD_DIJKSTRA => MethodChoice::Dijkstra,
+        other => {
+            return Err(Rejection::invalid_request(format!(
+                "unknown method {other} (0 pf, 1 astar, 2 dijkstra)"
+            )))
+        }
+    };
+    for (name, value) in [
+        ("start_x", msg.start_x),
+        ("start_y", msg.start_y),
+        ("start_yaw", msg.start_yaw),
+        ("goal_x", msg.goal_x),
+        ("goal_y", msg.goal_y),
+    ] {
+        if !value.is_finite() {
+            return Err(Rejection::invalid_request(format!(
+                "{name} must be finite, got {value}"
+            )));
+        }
+    }
+    if !(msg.goal_radius.is_finite() && msg.goal_radius > 0.0) {
+        return Err(Rejection::invalid_request(format!(
+            "goal_radius must be finite and > 0, got {}",
+            msg.goal_radius
+        )));
+    }
+    let (map_seq, map) = match (msg.num_inline_maps, msg.inline_map.as_slice()) {
+        (1, [inline]) => (inline.header.seq, Arc::new(map_from_message(inline, max_cells)?)),
+        (0, []) => maps.map_by_seq(msg.map_seq).ok_or_else(|| {
+            Rejection::invalid_map(if msg.map_seq == -1 {
+                "no inline map and the service has not received any map yet".to_owned()
+            } else {
+                format!(
+                    "no inline map and the service holds no map with seq {} (it keeps the most recent ones)",
+                    msg.map_seq
+                )
+            })
+        })?,
+        (n, _) => {
+            return Err(Rejection::invalid_request(format!(
+                "num_inline_maps must be 0 or 1, got {n}"
+            )))
+        }
+    };
+    let options = resolve_options(&msg.options, &map, defaults)?;
+    Ok(ValidatedRequest {
+        request_id: msg.request_id,
+        method_code: msg.method,
+        method,
+        map,
+        map_seq,
+        start: [msg.start_x, msg.start_y],
+        start_yaw: msg.start_yaw,
+        goal: GoalRegion {
+            center: [msg.goal_x, msg.goal_y],
+            radius: msg.goal_radius,
+        },
+        options,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lcm_types::pfnav::Header;
+
+    struct NoMaps;
+    impl MapSource for NoMaps {
+        fn map_by_seq(&self, _: i64) -> Option<(i64, Arc<GridMap>)> {
+            None
+        }
+    }
+
+    fn map_msg(width: i32, height: i32) -> TerrainMap {
+        let n = (width * height) as usize;
+        TerrainMap {
+            header: Header {
+                utime: 0,
+                seq: 3,
+                frame_id: "world".into(),
+            },
+            origin_x: -1.0,
+            origin_y: 2.0,
+            resolution: 0.25,
+            width,
+            height,
+            num_cells: width * height,
+            heights: (0..n).map(|i| i as f64 * 0.01).collect(),
+            num_obstacle_cells: 0,
+            obstacle_mask: Vec::new(),
+        }
+    }
+
+    fn request() -> PlanRequest {
+        PlanRequest {
+            request_id: 9,
+            num_inline_maps: 1,
+            inline_map: vec![map_msg(4, 3)],
+            start_x: -0.9,
+            start_y: 2.1,
+            goal_x: -0.1,
+            goal_y: 2.6,
+            goal_radius: 0.2,
+            method: PlanRequest::METHOD_DIJKSTRA,
+            ..PlanRequest::default()
+        }
+    }
+
+    #[test]
+    fn a_valid_request_resolves_defaults() {
+        let v = validate_request(&request(), &NoMaps, 100, &OptionDefaults::default()).unwrap();
+        assert_eq!(v.request_id, 9);
+        assert_eq!(v.method, MethodChoice::Dijkstra);
+        assert_eq!(v.map_seq, 3);
+        assert_eq!((v.map.width, v.map.height), (4, 3));
+        assert_eq!(v.map.origin, [-1.0, 2.0]);
+        assert_eq!(v.options.grid_size, 4);
+        assert_eq!(v.options.directions, 8);
+        assert_eq!(v.options.speed, 0.5);
+        assert_eq!(v.options.start_density, StartDensity::PointMass);
+    }
+
+    #[test]
+    fn each_invalid_field_gets_its_status_and_names_the_field() {
+        let defaults = OptionDefaults::default();
+        type Case = (Box<dyn Fn(&mut PlanRequest)>, i8, &'static str);
+        let cases: Vec<Case> = vec![
+            (
+                Box::new(|r| r.request_id = 0),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "request_id",
+            ),
+            (
+                Box::new(|r| r.method = 5),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "unknown method",
+            ),
+            (
+                Box::new(|r| r.start_x = f64::NAN),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "start_x",
+            ),
+            (
+                Box::new(|r| r.goal_radius = 0.0),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "goal_radius",
+            ),
+            (
+                Box::new(|r| r.options.directions = 6),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "directions",
+            ),
+            (
+                Box::new(|r| r.options.grid_size = 1),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "grid_size",
+            ),
+            (
+                Box::new(|r| r.options.basis = 9),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "basis",
+            ),
+            (
+                Box::new(|r| r.options.speed = -1.0),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "speed",
+            ),
+            (
+                Box::new(|r| r.header.frame_id = "odom".into()),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "frame_id",
+            ),
+            (
+                Box::new(|r| r.inline_map[0].heights[5] = f64::NAN),
+                PlanReply::STATUS_INVALID_MAP,
+                "not finite",
+            ),
+            (
+                Box::new(|r| r.inline_map[0].resolution = 0.0),
+                PlanReply::STATUS_INVALID_MAP,
+                "resolution",
+            ),
+            (
+                Box::new(|r| r.inline_map[0].num_cells = 11),
+                PlanReply::STATUS_INVALID_MAP,
+                "num_cells",
+            ),
+            (
+                Box::new(|r| r.inline_map[0].width = 40),
+                PlanReply::STATUS_MAP_TOO_LARGE,
+                "--max-map-cells",
+            ),
+            (
+                Box::new(|r| {
+                    r.inline_map[0].num_obstacle_cells = 2;
+                    r.inline_map[0].obstacle_mask = vec![true, false];
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "obstacle_mask",
+            ),
+            (
+                Box::new(|r| {
+                    r.num_inline_maps = 0;
+                    r.inline_map.clear();
+                    r.map_seq = -1;
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "not received any map",
+            ),
+        ];
+        for (mutate, status, needle) in cases {
+            let mut r = request();
+            mutate(&mut r);
+            let rejection = validate_request(&r, &NoMaps, 100, &defaults).unwrap_err();
+            assert_eq!(rejection.status, status, "{rejection:?}");
+            assert!(
+                rejection.reason.contains(needle),
+                "{:?} lacks {needle:?}",
+                rejection.reason
+            );
+        }
+    }
+}

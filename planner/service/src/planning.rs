@@ -1,0 +1,231 @@
+//! Runs one validated request through pf-planner and turns the result into reply fields. The
+//! P-F generators, which depend only on the planning grid, the basis and the direction count,
+//! come from a small LRU cache so that repeated requests on one map skip their construction.
+
+use std::collections::hash_map::DefaultHasher;
+use std::hash::{Hash, Hasher};
+use std::sync::Arc;
+
+use lcm_types::pfnav::{PlanMetrics, PlanReply, TrajectorySample};
+use pf_planner::basis::BasisKind;
+use pf_planner::error::PlanError;
+use pf_planner::graph::{self, Connectivity};
+use pf_planner::grid::PlanningGrid;
+use pf_planner::lp::LpSettings;
+use pf_planner::map::Point;
+use pf_planner::metrics::evaluate_path;
+use pf_planner::pf::{self, PfGenerators, PfOptions};
+use pf_planner::trajectory::{build_trajectory, TrajectoryOptions};
+use pf_planner::traversability::{TraversabilityField, TraversabilityParams};
+
+use crate::cache::BuildCache;
+use crate::convert::{MethodChoice, Rejection, ValidatedRequest};
+
+/// Identity of a generator set: the planning grid (by content hash) and the basis settings.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GeneratorKey {
+    grid_hash: u64,
+    basis: BasisKey,
+    directions: usize,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BasisKey {
+    Indicator,
+    Rbf { sigma_bits: u64, samples: usize },
+}
+
+impl GeneratorKey {
+    fn new(grid: &PlanningGrid, basis: &BasisKind, directions: usize) -> Self {
+        let mut hasher = DefaultHasher::new();
+        grid.origin.map(f64::to_bits).hash(&mut hasher);
+        grid.cell_size.to_bits().hash(&mut hasher);
+        (grid.width, grid.height).hash(&mut hasher);
+        for c in &grid.cost {
+            c.to_bits().hash(&mut hasher);
+        }
+        grid.blocked.hash(&mut hasher);
+        let basis = match *basis {
+            BasisKind::Indicator => BasisKey::Indicator,
+            BasisKind::Rbf {
+                sigma_over_spacing,
+                samples_per_basis,
+            } => BasisKey::Rbf {
+                sigma_bits: sigma_over_spacing.to_bits(),
+                samples: samples_per_basis,
+            },
+        };
+        Self {
+            grid_hash: hasher.finish(),
+            basis,
+            directions,
+        }
+    }
+}
+
+type CachedGenerators = Result<Arc<PfGenerators>, Rejection>;
+
+/// The service's generator cache.
+pub struct GeneratorCache(BuildCache<GeneratorKey, CachedGenerators>);
+
+impl GeneratorCache {
+    pub fn new(capacity: usize) -> Self {
+        Self(BuildCache::new(capacity))
+    }
+
+    /// Generators for `grid`, from the cache when possible; the bool says whether it was a hit.
+    fn get(
+        &self,
+        grid: &PlanningGrid,
+        basis: &BasisKind,
+        directions: usize,
+    ) -> (CachedGenerators, bool) {
+        let build = || {
+            PfGenerators::build(grid, basis, directions)
+                .map(Arc::new)
+                .map_err(|e| rejection_of(&e))
+        };
+        let (cached, hit) = self
+            .0
+            .get_or_build(GeneratorKey::new(grid, basis, directions), build);
+        match cached {
+            // A 64-bit hash collision between two grids: never use generators of another grid.
+            Ok(gens) if !gens.matches(grid) => (build(), false),
+            other => (other, hit),
+        }
+    }
+
+    /// Generator sets held.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+/// A successful plan, in reply fields (solve_time is filled in by the caller).
+#[derive(Debug, Clone)]
+pub struct PlanOutcome {
+    pub samples: Vec<TrajectorySample>,
+    pub metrics: PlanMetrics,
+    /// Whether the P-F generators came from the cache.
+    pub cache_hit: bool,
+}
+
+/// Reply status and reason for a planner error.
+pub fn rejection_of(error: &PlanError) -> Rejection {
+    let status = match error {
+        PlanError::InvalidMap(_) => PlanReply::STATUS_INVALID_MAP,
+        PlanError::StartOffMap { .. } | PlanError::StartInObstacle { .. } => {
+            PlanReply::STATUS_START_INVALID
+        }
+        PlanError::GoalOffMap { .. }
+        | PlanError::GoalInObstacle { .. }
+        | PlanError::Unreachable { .. } => PlanReply::STATUS_GOAL_UNREACHABLE,
+        PlanError::InvalidOption { .. } => PlanReply::STATUS_INVALID_REQUEST,
+        PlanError::Infeasible { .. }
+        | PlanError::LpFailed { .. }
+        | PlanError::TrajectoryFailed { .. } => PlanReply::STATUS_SOLVER_FAILED,
+        PlanError::Io { .. } | PlanError::Format { .. } => PlanReply::STATUS_INTERNAL_ERROR,
+    };
+    Rejection::new(status, error.to_string())
+}
+
+/// Clarabel's status names mapped to `plan_metrics_t.LP_*`.
+fn lp_status_code(status: &str) -> i8 {
+    match status {
+        "Solved" => PlanMetrics::LP_SOLVED,
+        "AlmostSolved" => PlanMetrics::LP_ALMOST_SOLVED,
+        s if s.contains("Infeasible") => PlanMetrics::LP_INFEASIBLE,
+        "MaxIterations" | "AlmostMaxIterations" => PlanMetrics::LP_MAX_ITERATIONS,
+        "MaxTime" => PlanMetrics::LP_MAX_TIME,
+        _ => PlanMetrics::LP_NUMERICAL_ERROR,
+    }
+}
+
+/// Plans `request`. Traversability uses the planner's default weights (the wire contract has no
+/// field for them).
+pub fn plan(request: &ValidatedRequest, cache: &GeneratorCache) -> Result<PlanOutcome, Rejection> {
+    let map = &*request.map;
+    let opts = &request.options;
+    let reject = |e: PlanError| rejection_of(&e);
+    let field =
+        TraversabilityField::from_map(map, &TraversabilityParams::default()).map_err(reject)?;
+    let grid = PlanningGrid::from_field(map, &field, opts.grid_size).map_err(reject)?;
+    let mut metrics = PlanMetrics {
+        lp_status: PlanMetrics::LP_NOT_APPLICABLE,
+        ..PlanMetrics::default()
+    };
+    let mut cache_hit = false;
+    let path: Vec<Point> = match request.method {
+        MethodChoice::Dijkstra | MethodChoice::AStar => {
+            let conn = Connectivity::from_directions(opts.directions).map_err(reject)?;
+            let found = if request.method == MethodChoice::Dijkstra {
+                graph::dijkstra_path(&grid, request.start, &request.goal, conn)
+            } else {
+                graph::astar_path(&grid, request.start, &request.goal, conn)
+            }
+            .map_err(reject)?;
+            metrics.objective = found.cost;
+            metrics.expanded_nodes = i64::try_from(found.expanded).unwrap_or(i64::MAX);
+            found.points
+        }
+        MethodChoice::Pf => {
+            let (gens, hit) = cache.get(&grid, &opts.basis, opts.directions);
+            cache_hit = hit;
+            let gens = gens?;
+            let pf_options = PfOptions {
+                u_max: opts.speed,
+                start_density: opts.start_density,
+                lp: LpSettings {
+                    time_limit_s: opts.max_solve_time,
+                    ..LpSettings::default()
+                },
+                ..PfOptions::default()
+            };
+            let solution = pf::solve(&gens, &grid, request.start, &request.goal, &pf_options)
+                .map_err(reject)?;
+            metrics.objective = solution.lp.objective;
+            metrics.lp_status = lp_status_code(&solution.lp.status);
+            metrics.lp_iterations = i32::try_from(solution.lp.iterations).unwrap_or(i32::MAX);
+            if !solution.outcome.reached_goal() {
+                return Err(rejection_of(&PlanError::TrajectoryFailed {
+                    reason: format!("{:?}", solution.outcome),
+                }));
+            }
+            solution.path
+        }
+    };
+    let path_metrics = evaluate_path(map, &field, &path);
+    let trajectory_options = TrajectoryOptions {
+        speed: opts.speed,
+        dt: opts.sample_period,
+        ..TrajectoryOptions::default()
+    };
+    let samples: Vec<TrajectorySample> =
+        build_trajectory(map, &path, request.start_yaw, &trajectory_options)
+            .map_err(reject)?
+            .into_iter()
+            .map(|s| TrajectorySample {
+                t: s.t,
+                x: s.x,
+                y: s.y,
+                z: s.z,
+                yaw: s.yaw,
+                vx: s.vx,
+                vy: s.vy,
+                yaw_rate: s.yaw_rate,
+            })
+            .collect();
+    metrics.cost = path_metrics.cost_integral;
+    metrics.length = path_metrics.length;
+    metrics.duration = samples.last().map_or(0.0, |s| s.t);
+    metrics.reached_goal = path.last().is_some_and(|&p| request.goal.contains(p));
+    Ok(PlanOutcome {
+        samples,
+        metrics,
+        cache_hit,
+    })
+}

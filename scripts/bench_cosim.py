@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Co-simulation speed: wall seconds per simulated second, split into physics (DART world.step),
+FMU (set inputs + fmi2DoStep + get outputs through fmpy/ctypes) and Python overhead (state
+read-out, reference, logging), for several FMU communication steps.
+
+Usage (inside the private network namespace when the plan comes from the service):
+    bash scripts/netns.sh .venv/bin/python scripts/bench_cosim.py [--scenario c_shape] [--seconds 10]
+    .venv/bin/python scripts/bench_cosim.py --synthetic      # straight-line reference, no LCM needed
+The whole-demo time is printed by the demo itself (out/report.md header, out/metrics.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from pfnav_harness import paths
+from pfnav_harness.cosim import CoSimConfig, CoSimulation
+from pfnav_harness.errors import HarnessError
+from pfnav_harness.pipeline import export_scenario
+from pfnav_harness.planner_client import DEFAULT_LCM_URL, Plan, plan_scenario
+from pfnav_harness.scenario import Scenario
+
+
+def straight_plan(scenario: Scenario, speed: float, seconds: float) -> Plan:
+    """A straight walk from the start towards the goal at `speed` (benchmark reference only)."""
+    sx, sy = scenario.start
+    gx, gy = scenario.goal.center
+    heading = math.atan2(gy - sy, gx - sx)
+    t = np.arange(0.0, seconds + 0.05, 0.1)
+    distance = np.minimum(speed * t, math.hypot(gx - sx, gy - sy))
+    x = sx + distance * math.cos(heading)
+    y = sy + distance * math.sin(heading)
+    n = len(t)
+    vx = np.gradient(x, t)
+    vy = np.gradient(y, t)
+    return Plan(
+        "synthetic",
+        t,
+        x,
+        y,
+        scenario.terrain.height(x, y),
+        np.full(n, heading),
+        vx,
+        vy,
+        np.zeros(n),
+    )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--scenario", default="c_shape")
+    parser.add_argument(
+        "--seconds", type=float, default=8.0, help="simulated seconds per measurement"
+    )
+    parser.add_argument(
+        "--comm-steps",
+        default="0.001,0.002,0.005",
+        help="FMU communication steps to measure, s",
+    )
+    parser.add_argument(
+        "--synthetic",
+        action="store_true",
+        help="straight-line reference instead of a P-F plan",
+    )
+    parser.add_argument("--lcm-url", default=DEFAULT_LCM_URL)
+    args = parser.parse_args()
+    try:
+        fmu = paths.fmu_path()
+        urdf = paths.urdf_path()
+        with tempfile.TemporaryDirectory(prefix="pfnav_bench_") as tmp:
+            work = Path(tmp)
+            scenario = export_scenario(
+                paths.pf_plan_path(), args.scenario, work / "scenarios"
+            )
+            if args.synthetic:
+                plan = straight_plan(scenario, 0.4, args.seconds)
+            else:
+                plan = plan_scenario(
+                    scenario,
+                    ["pf"],
+                    args.lcm_url,
+                    service_binary=paths.planner_service_path(),
+                )["pf"]
+            print(
+                f"scenario {args.scenario}, plan {plan.method} ({plan.duration:.1f} s), {args.seconds:.0f} simulated s per row"
+            )
+            print(
+                f"{'comm step':>10} {'total':>8} {'physics':>8} {'FMU':>8} {'Python':>8} {'x realtime':>10}  result"
+            )
+            for step in (float(s) for s in args.comm_steps.split(",")):
+                config = CoSimConfig(comm_step=step, max_duration=args.seconds)
+                with CoSimulation(
+                    scenario, plan, fmu, urdf, work / "cache", config
+                ) as sim:
+                    result = sim.run()
+                per = result.timing.per_sim_second()
+                print(
+                    f"{step * 1000:>8.0f}ms {per['total']:>8.3f} {per['physics']:>8.3f} {per['fmu']:>8.3f} "
+                    f"{per['overhead']:>8.3f} {1.0 / per['total']:>10.1f}  {result.stop_reason}"
+                )
+    except HarnessError as err:
+        print(f"bench_cosim: error: {err}", file=sys.stderr)
+        return err.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,59 @@
+"""CI version of the demo: a few simulated seconds of each scenario with the P-F plan.
+
+Planner service over LCM (udpm, private network namespace) → reference → controller FMU (fmpy) →
+DART. Asserts that the robot stands up, starts walking along the plan, does not fall, and tracks
+with bounded error. The full-length runs are the demo's job (scripts/demo.sh).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pfnav_harness.cosim import CoSimConfig
+from pfnav_harness.pipeline import PAPER_SCENARIOS, simulate
+from pfnav_harness.planner_client import Plan
+from pfnav_harness.scenario import Scenario
+
+SHORT_SECONDS = 6.0
+STAND_SECONDS = 1.5
+FSM_LOCOMOTION = 3
+
+
+@pytest.mark.parametrize("name", PAPER_SCENARIOS)
+def test_short_pf_run(
+    name: str,
+    plan_for: Callable[[str, str], Plan],
+    paper_scenarios: dict[str, Scenario],
+    fmu_file: Path,
+    urdf_file: Path,
+    tmp_path: Path,
+) -> None:
+    scenario = paper_scenarios[name]
+    plan = plan_for(name, "pf")
+    config = CoSimConfig(stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS)
+    outcome = simulate(
+        scenario,
+        plan,
+        fmu_file,
+        urdf_file,
+        tmp_path,
+        config,
+        tmp_path / "run.npz",
+        show_progress=False,
+    )
+    m = outcome.metrics
+    log = outcome.result.log
+    assert outcome.result.stop_reason == "completed", outcome.result.stop_reason
+    assert not m.fell, m.fall_reason
+    assert m.duration == pytest.approx(SHORT_SECONDS, abs=0.01)
+    # The controller reached locomotion and the robot walked along the plan.
+    assert np.any(log["fsm"] == FSM_LOCOMOTION)
+    walked = np.hypot(*(log["base_pos"][-1, :2] - log["base_pos"][0, :2]))
+    expected = float(np.hypot(*(log["ref"][-1, :2] - log["ref"][0, :2])))
+    assert walked > 0.5 * expected
+    assert m.rms_error <= 0.15
+    assert m.max_error <= 0.30
+    assert (tmp_path / "run.npz").stat().st_size > 10_000

@@ -1,0 +1,44 @@
+"""The planner's exported scenarios become a DART world the URDF robot can stand in."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pfnav_harness.pipeline import PAPER_SCENARIOS
+from pfnav_harness.scenario import Scenario
+from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld
+
+
+@pytest.mark.parametrize("name", PAPER_SCENARIOS)
+def test_exported_scenario_is_a_standable_world(
+    name: str, paper_scenarios: dict[str, Scenario], urdf_file: Path, tmp_path: Path
+) -> None:
+    scenario = paper_scenarios[name]
+    terrain = scenario.terrain
+    (x0, y0), (x1, y1) = terrain.bounds()
+    assert x1 - x0 >= 8.0 and y1 - y0 >= 8.0, "the paper's scenarios are 10-20 m across"
+    assert x0 < scenario.start[0] < x1 and y0 < scenario.start[1] < y1
+    assert not terrain.is_obstacle(*scenario.start)
+    assert not terrain.is_obstacle(*scenario.goal.center)
+    # The physics mesh is the planner's map: every cell centre is a mesh vertex at the map's height.
+    vertices = terrain.vertices()
+    np.testing.assert_array_equal(vertices[:, 2], terrain.heights.ravel())
+
+    world = QuadrupedWorld(terrain, urdf_file, tmp_path)
+    world.place(scenario.start[0], scenario.start[1], scenario.start_yaw)
+    for _ in range(800):
+        s = world.state()
+        world.apply_torques(
+            150.0 * (DEFAULT_STANCE - s.joint_positions) - 3.0 * s.joint_velocities
+        )
+        world.step()
+    s = world.state()
+    ground = terrain.height_at(float(s.position[0]), float(s.position[1]))
+    assert 0.15 < s.position[2] - ground < 0.4
+    assert (
+        np.hypot(s.position[0] - scenario.start[0], s.position[1] - scenario.start[1])
+        < 0.15
+    )
+    assert world.foot_contacts().sum() >= 3

@@ -1,0 +1,263 @@
+"""Python (lcm-gen bindings) <-> Rust (lcm-types codec) cross-decoding.
+
+The Rust side is the `lcm-roundtrip` binary of the lcm-types crate (built by
+`cargo build --release --workspace`; override with PFNAV_LCM_ROUNDTRIP). It decodes a payload to
+JSON, encodes JSON to a payload, or re-encodes a payload. The Python side is the `pfnav` package
+that `lcm_types/gen_python.sh` generates with lcm-gen into build/lcm_python.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO / "build" / "lcm_python") not in sys.path:
+    sys.path.insert(0, str(REPO / "build" / "lcm_python"))
+
+import pfnav
+from pfnav import (
+    header_t,
+    plan_metrics_t,
+    plan_options_t,
+    plan_reply_t,
+    plan_request_t,
+    service_status_t,
+    terrain_map_t,
+    trajectory_sample_t,
+)
+
+PRIMITIVES = {
+    "int8_t",
+    "int16_t",
+    "int32_t",
+    "int64_t",
+    "byte",
+    "float",
+    "double",
+    "string",
+    "boolean",
+}
+
+
+def roundtrip_binary() -> Path:
+    override = os.environ.get("PFNAV_LCM_ROUNDTRIP")
+    candidates = [Path(override)] if override else []
+    candidates += [
+        REPO / "target" / "release" / "lcm-roundtrip",
+        REPO / "target" / "debug" / "lcm-roundtrip",
+    ]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    pytest.fail(
+        "lcm-roundtrip not built: run `cargo build --release -p lcm-types` (or set PFNAV_LCM_ROUNDTRIP)"
+    )
+
+
+def run_rust(mode: str, data: bytes) -> bytes:
+    result = subprocess.run(
+        [str(roundtrip_binary()), mode],
+        input=data,
+        capture_output=True,
+        timeout=30,
+        check=False,
+    )
+    if result.returncode != 0:
+        raise RuntimeError(result.stderr.decode(errors="replace"))
+    return result.stdout
+
+
+def lcm_class(type_name: str) -> type:
+    return getattr(pfnav, type_name.rsplit(".", 1)[1])
+
+
+def to_json(value: Any, type_name: str) -> Any:
+    """Plain JSON form of a generated LCM object, members by their LCM names."""
+    if isinstance(value, (bytes, bytearray)):
+        return list(value)
+    if isinstance(value, (list, tuple)):
+        return [to_json(v, type_name) for v in value]
+    if type_name in PRIMITIVES:
+        return value
+    cls = lcm_class(type_name)
+    return {
+        slot: to_json(getattr(value, slot), member_type)
+        for slot, member_type in zip(cls.__slots__, cls.__typenames__)
+    }
+
+
+def header(seq: int) -> header_t:
+    h = header_t()
+    h.utime = 1_763_860_000_000_000 + seq
+    h.seq = seq
+    h.frame_id = "world"
+    return h
+
+
+def terrain_map(width: int, height: int, with_obstacles: bool) -> terrain_map_t:
+    m = terrain_map_t()
+    m.header = header(4)
+    m.origin_x, m.origin_y, m.resolution = -3.2, 1.6, 0.1
+    m.width, m.height = width, height
+    m.num_cells = width * height
+    # Row-major iy*width + ix, heights in metres with values that are not short decimals.
+    m.heights = [
+        math.sin(0.37 * ix) * math.cos(0.21 * iy) + 1e-9 * ix
+        for iy in range(height)
+        for ix in range(width)
+    ]
+    m.num_obstacle_cells = m.num_cells if with_obstacles else 0
+    m.obstacle_mask = [(i % 7) == 3 for i in range(m.num_obstacle_cells)]
+    return m
+
+
+def sample_messages() -> list[Any]:
+    options = plan_options_t()
+    options.basis = plan_options_t.BASIS_RBF
+    options.grid_size = 32
+    options.directions = 8
+    options.speed = 0.45
+    options.start_density = plan_options_t.START_DENSITY_UNIFORM
+    options.sample_period = 0.05
+    options.max_solve_time = 30.0
+
+    request = plan_request_t()
+    request.header = header(17)
+    request.request_id = 2**40 + 5
+    request.num_inline_maps = 1
+    request.inline_map = [terrain_map(7, 5, True)]
+    request.map_seq = -1
+    request.start_x, request.start_y, request.start_yaw = -2.95, 1.85, -math.pi / 3
+    request.goal_x, request.goal_y, request.goal_radius = -2.6, 2.0, 0.15
+    request.method = plan_request_t.METHOD_PF
+    request.options = options
+
+    by_seq = plan_request_t()
+    by_seq.request_id = 3
+    by_seq.map_seq = 4
+    by_seq.method = plan_request_t.METHOD_ASTAR
+
+    samples = []
+    for i in range(12):
+        s = trajectory_sample_t()
+        s.t = 0.05 * i
+        s.x, s.y = -2.95 + 0.02 * i, 1.85 + 0.01 * i
+        s.z = 0.3 * math.sin(s.x)
+        s.yaw = math.atan2(0.01, 0.02)
+        s.vx, s.vy, s.yaw_rate = 0.4, 0.2, 0.0
+        samples.append(s)
+    metrics = plan_metrics_t()
+    metrics.cost, metrics.length, metrics.duration = 0.1234567891, 0.2459, 0.55
+    metrics.solve_time, metrics.objective = 0.0421, 0.37
+    metrics.lp_status, metrics.lp_iterations = plan_metrics_t.LP_SOLVED, 23
+    metrics.expanded_nodes, metrics.reached_goal = 0, True
+    reply = plan_reply_t()
+    reply.header = header(18)
+    reply.request_id = request.request_id
+    reply.status = plan_reply_t.STATUS_OK
+    reply.method = request.method
+    reply.map_seq = 4
+    reply.num_samples = len(samples)
+    reply.samples = samples
+    reply.metrics = metrics
+
+    failed = plan_reply_t()
+    failed.request_id = 99
+    failed.status = plan_reply_t.STATUS_INVALID_MAP
+    failed.error = "heights[3] is NaN — map rejected (höhe ungültig) 🦀"
+
+    status = service_status_t()
+    status.header = header(19)
+    status.uptime = 3601.25
+    status.requests_received, status.requests_served, status.requests_failed = (
+        1000,
+        990,
+        10,
+    )
+    status.requests_rejected_busy, status.malformed_messages = 4, 100_000
+    status.maps_received, status.latest_map_seq = 2, 4
+    status.last_solve_time, status.queue_depth, status.queue_capacity = 0.031, 3, 64
+    status.cached_generators = 2
+    return [
+        terrain_map(16, 9, False),
+        terrain_map(3, 3, True),
+        request,
+        by_seq,
+        reply,
+        failed,
+        status,
+        header(1),
+    ]
+
+
+def type_name_of(msg: Any) -> str:
+    return f"pfnav.{type(msg).__name__}"
+
+
+def test_fingerprints_agree_for_every_type() -> None:
+    rust = dict(
+        line.split() for line in run_rust("fingerprints", b"").decode().splitlines()
+    )
+    python = {
+        f"pfnav.{name}": "0x"
+        + lcm_class(f"pfnav.{name}")._get_packed_fingerprint().hex()
+        for name in (
+            "header_t",
+            "terrain_map_t",
+            "plan_options_t",
+            "plan_request_t",
+            "trajectory_sample_t",
+            "plan_metrics_t",
+            "plan_reply_t",
+            "service_status_t",
+        )
+    }
+    assert rust == python
+
+
+@pytest.mark.parametrize("index", range(len(sample_messages())))
+def test_rust_decodes_what_python_encodes(index: int) -> None:
+    msg = sample_messages()[index]
+    decoded = json.loads(run_rust("decode", msg.encode()))
+    assert decoded["type"] == type_name_of(msg)
+    assert decoded["value"] == to_json(msg, type_name_of(msg))
+
+
+@pytest.mark.parametrize("index", range(len(sample_messages())))
+def test_python_decodes_what_rust_encodes(index: int) -> None:
+    msg = sample_messages()[index]
+    tagged = {"type": type_name_of(msg), "value": to_json(msg, type_name_of(msg))}
+    rust_bytes = run_rust("encode", json.dumps(tagged).encode())
+    assert rust_bytes == msg.encode()
+    back = type(msg).decode(rust_bytes)
+    assert to_json(back, type_name_of(msg)) == tagged["value"]
+
+
+@pytest.mark.parametrize("index", range(len(sample_messages())))
+def test_rust_reencodes_python_bytes_identically(index: int) -> None:
+    payload = sample_messages()[index].encode()
+    assert run_rust("reencode", payload) == payload
+
+
+def test_rust_rejects_corrupt_payloads_with_a_reason() -> None:
+    payload = terrain_map(4, 4, True).encode()
+    with pytest.raises(RuntimeError, match="truncated"):
+        run_rust("decode", payload[:20])
+    # Cut inside the obstacle mask: the declared length no longer fits the bytes left.
+    with pytest.raises(RuntimeError, match="obstacle_mask: 16 elements cannot fit"):
+        run_rust("decode", payload[:-3])
+    with pytest.raises(RuntimeError, match="fingerprint"):
+        run_rust("decode", b"\x00" * 8 + payload[8:])
+    # num_cells claims 2^31-1 heights: refused before allocation, with the field named.
+    offset = 8 + 8 + 8 + (4 + 6) + 8 * 3 + 4 + 4
+    claimed = payload[:offset] + (2**31 - 1).to_bytes(4, "big") + payload[offset + 4 :]
+    with pytest.raises(RuntimeError, match="heights"):
+        run_rust("decode", claimed)
