@@ -29,6 +29,7 @@ from pfnav import (
     plan_options_t,
     plan_reply_t,
     plan_request_t,
+    robot_state_t,
     service_status_t,
     terrain_map_t,
     trajectory_sample_t,
@@ -186,7 +187,21 @@ def sample_messages() -> list[Any]:
     status.maps_received, status.latest_map_seq = 2, 4
     status.last_solve_time, status.queue_depth, status.queue_capacity = 0.031, 3, 64
     status.cached_generators = 2
+
+    state = robot_state_t()
+    state.utime = 1_500_000
+    state.position = [1.0, -2.0, 0.28]
+    state.orientation = [math.cos(0.1), 0.0, 0.0, math.sin(0.1)]
+    state.linear_velocity = [0.5, 0.01, -0.002]
+    state.angular_velocity = [0.0, 0.02, 0.1]
+    state.joint_positions = [0.01 * i for i in range(12)]
+    state.joint_velocities = [-0.5 + 0.1 * i for i in range(12)]
+    state.joint_torques = [3.0 - 0.25 * i for i in range(12)]
+    state.foot_contact = [True, False, False, True]
+    state.fsm_state = 3
+    state.reference = [1.02, -2.0, 0.0, 0.2, 0.5, 0.0, 0.1]
     return [
+        state,
         terrain_map(16, 9, False),
         terrain_map(3, 3, True),
         request,
@@ -218,6 +233,7 @@ def test_fingerprints_agree_for_every_type() -> None:
             "plan_metrics_t",
             "plan_reply_t",
             "service_status_t",
+            "robot_state_t",
         )
     }
     assert rust == python

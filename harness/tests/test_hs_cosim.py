@@ -109,9 +109,9 @@ def test_master_steps_logs_and_closes(ramp_scenario: Scenario, tmp_path: Path) -
     with np.load(tmp_path / "logs" / "run.npz") as saved:
         np.testing.assert_array_equal(saved["base_pos"], log["base_pos"])
     # The optional LCM log replays the same states.
-    count = write_state_log(log, tmp_path / "run.lcmlog", tmp_path / "gen", period=0.01)
+    count = write_state_log(log, tmp_path / "run.lcmlog", period=0.01)
     assert count == 150
-    robot_state_t = robot_state_type(tmp_path / "gen")
+    robot_state_t = robot_state_type()
     events = list(lcm.EventLog(str(tmp_path / "run.lcmlog"), "r"))
     assert len(events) == 150 and all(e.channel == CHANNEL for e in events)
     last = robot_state_t.decode(events[-1].data)

@@ -109,5 +109,5 @@ def simulate(
     if log_path is not None:
         save_log(result, log_path)
     if lcm_log_path is not None:
-        write_state_log(result.log, lcm_log_path, cache_dir)
+        write_state_log(result.log, lcm_log_path)
     return SimOutcome(result, metrics, wall)
