@@ -9,6 +9,7 @@ $PFNAV_PLANNER_SERVICE.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -194,7 +195,6 @@ def request(
 
 def c_shape_map(tmp_path: Path) -> tuple[Any, dict[str, Any]]:
     """The c_shape scenario as exported by `pf-plan scenario export`, as a terrain_map_t."""
-    import json
 
     pf_plan = binary("PFNAV_PF_PLAN", "pf-plan")
     subprocess.run(
@@ -252,9 +252,29 @@ def test_python_client_gets_the_c_shape_plan(
         assert math.hypot(last.x - gx, last.y - gy) <= meta["goal"]["radius"] + 1e-9
         assert reply.metrics.reached_goal
         assert reply.metrics.cost > 0.0 and reply.metrics.length > 0.0
-    # P-F is optimal in the continuous-flow sense: never worse than the 8-connected graph path by
-    # more than the grid's discretisation, and its LP is solved.
     assert replies[plan_request_t.METHOD_PF].metrics.lp_status == 1
+    # The service is a thin adapter: the same inputs through the planner library (pf-plan) give the
+    # same ∫p ds.
+    pf_plan = binary("PFNAV_PF_PLAN", "pf-plan")
+    for method, name, grid, directions in [
+        (plan_request_t.METHOD_DIJKSTRA, "dijkstra", 64, 8),
+        (plan_request_t.METHOD_PF, "pf", 32, 4),
+    ]:
+        out = tmp_path / f"library_{name}"
+        subprocess.run(
+            [str(pf_plan), "plan", "--scenario", "c_shape", "--method", name,
+             "--grid", str(grid), "--directions", str(directions), "--out", str(out)],
+            check=True,
+            capture_output=True,
+            timeout=300,
+        )
+        (plan_json,) = out.glob("*.json")
+        library_doc = json.loads(plan_json.read_text())
+        library = library_doc["metrics"]
+        if library_doc["lp"] is not None:
+            assert replies[method].metrics.objective == pytest.approx(library_doc["lp"]["objective"], rel=1e-12)
+        assert replies[method].metrics.cost == pytest.approx(library["cost_integral"], rel=1e-9), name
+        assert replies[method].metrics.length == pytest.approx(library["length"], rel=1e-9), name
     service.stop()
 
 

@@ -202,9 +202,8 @@ pub fn resolve_options(
         }
     };
     let start_density = match options.start_density {
-        PlanOptions::START_DENSITY_DEFAULT | PlanOptions::START_DENSITY_POINT => {
-            StartDensity::PointMass
-        }
+        PlanOptions::START_DENSITY_DEFAULT => StartDensity::default(),
+        PlanOptions::START_DENSITY_POINT => StartDensity::PointMass,
         PlanOptions::START_DENSITY_UNIFORM => StartDensity::UniformFree,
         other => {
             return Err(Rejection::invalid_request(format!(
@@ -389,7 +388,7 @@ mod tests {
         assert_eq!(v.options.grid_size, 4);
         assert_eq!(v.options.directions, 8);
         assert_eq!(v.options.speed, 0.5);
-        assert_eq!(v.options.start_density, StartDensity::PointMass);
+        assert_eq!(v.options.start_density, StartDensity::UniformFree);
     }
 
     #[test]

@@ -176,8 +176,9 @@ pub fn plan(request: &ValidatedRequest, cache: &GeneratorCache) -> Result<PlanOu
             let (gens, hit) = cache.get(&grid, &opts.basis, opts.directions);
             cache_hit = hit;
             let gens = gens?;
+            // The LP's speed bound stays the library's (it scales the objective and the feedback
+            // field); the reference is re-timed at `opts.speed` below, as `pf-plan` does.
             let pf_options = PfOptions {
-                u_max: opts.speed,
                 start_density: opts.start_density,
                 lp: LpSettings {
                     time_limit_s: opts.max_solve_time,

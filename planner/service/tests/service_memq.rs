@@ -78,7 +78,7 @@ fn c_shape_pf_optimum_equals_the_shortest_path_and_generators_are_cached() {
     let service = TestService::start(config("T2_"));
     let (mut request, scenario) = c_shape_request(21, PlanRequest::METHOD_PF, 32, 4);
     request.options.basis = PlanOptions::BASIS_INDICATOR;
-    request.options.speed = 1.0;
+    request.options.start_density = PlanOptions::START_DENSITY_POINT;
     service.publish_request(&request);
     let first = service.reply_to(21, WAIT);
     assert_eq!(first.status, PlanReply::STATUS_OK, "{}", first.error);
