@@ -11,6 +11,10 @@ use pf_planner::pf::{prepare, PfGenerators, StartDensity};
 use pf_planner::scenarios;
 
 fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_writer(std::io::stderr)
+        .init();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let basis = match args.first().map(String::as_str) {
         Some("rbf") => BasisKind::DEFAULT_RBF,

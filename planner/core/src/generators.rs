@@ -12,14 +12,20 @@
 //!
 //! Δtₖ makes each displacement exactly one lattice vector (Δt = h axially, √2·h diagonally): the
 //! condition under which the indicator LP is exactly Dijkstra's problem and the RBF generator stays
-//! sparse. A sample pair is invalid data, and contributes nothing to `A`, when its image leaves the
-//! grid or when the axis-aligned box spanned by the displacement touches a blocked cell (a robot
-//! moving past an obstacle corner would graze it). For one-cell moves this is the graph rule
-//! "a diagonal step must not cut a blocked corner".
+//! sparse. A move is *blocked* when its image leaves the grid or when the axis-aligned box spanned
+//! by the displacement touches a blocked cell (a robot moving past an obstacle corner would graze
+//! it; for one-cell moves this is the graph rule "a diagonal step must not cut a blocked corner").
+//! The sampled system stops at obstacles: a blocked move leaves the sample where it is, so its
+//! snapshot pair is `(x, x)`. This keeps every row of `A` complete (`A` is `G` times a
+//! stochastic-like matrix), so the least squares never divides a row by the small remainder of
+//! a partly blocked function — which, with the older "blocked pairs carry no data" rule, gave
+//! RBF rows next to obstacles tens of units of negative mass, fake sinks the LP exploited (the
+//! `pits` failure). For indicators a one-cell move is blocked for all samples of a cell or for
+//! none, so a blocked cell-direction is still exactly the wall `U = I` (zero column in Lₖ).
 
 use std::time::Instant;
 
-use faer::linalg::solvers::Solve;
+use faer::linalg::solvers::DenseSolveCore;
 use faer::{Mat, Side};
 use tracing::debug;
 
@@ -29,7 +35,12 @@ use crate::grid::PlanningGrid;
 use crate::map::Point;
 
 /// Entries of U smaller than this fraction of the largest |U| are dropped (keeps Lₖ sparse).
-pub const SPARSITY_THRESHOLD: f64 = 1e-9;
+///
+/// Only RBF generators have such entries (Ulam's are exactly 0 or 1). Measured on the three
+/// scenarios at 32² centres: going from 1e-9 to 1e-5 changes the LP value by < 1e-5 relative and
+/// the trajectories not at all, while the tiny entries made the LP 10–20× slower (`pits`:
+/// 11 s → 0.5 s).
+pub const SPARSITY_THRESHOLD: f64 = 1e-5;
 
 /// A row of U whose sum is at most this is treated as having lost all its samples (a wall).
 pub const WALL_ROW_SUM: f64 = 1e-6;
@@ -173,9 +184,10 @@ impl SparseMatrix {
 pub struct GeneratorStats {
     /// Snapshot samples per direction (all lattice points of all cells).
     pub samples: usize,
-    /// Sample pairs per direction, summed over directions, that were invalid (left the grid or touched an obstacle).
+    /// Samples, summed over directions, whose move was blocked (left the grid or touched an
+    /// obstacle) and which therefore stayed in place.
     pub invalid_pairs: usize,
-    /// Rows of U, summed over directions, that lost all their samples and became walls.
+    /// Rows of U, summed over directions, that are the identity (every move blocked: a wall).
     pub wall_rows: usize,
     /// Largest total negative mass of a row of U after normalisation (0 for indicators).
     pub max_negative_row_mass: f64,
@@ -198,12 +210,20 @@ pub struct Generators {
     pub stats: GeneratorStats,
 }
 
-/// Whether the sample pair `x → y` is valid data: `y` on the grid and the box spanned by the
+/// Whether `p` lies in the domain of the basis: a grid cell that carries an active function
+/// (indicator: a free cell; RBF: a cell whose centre is active, i.e. at least one cell away from
+/// every blocked cell).
+fn in_domain(grid: &PlanningGrid, basis: &Basis, p: Point) -> bool {
+    grid.cell_of(p)
+        .is_some_and(|(ix, iy)| basis.index_of_cell(grid.index(ix, iy)).is_some())
+}
+
+/// Whether the move `x → y` is allowed: `y` in the domain of the basis and the box spanned by the
 /// displacement free of blocked cells.
-fn valid_pair(grid: &PlanningGrid, x: Point, y: Point) -> bool {
-    let Some(_) = grid.cell_of(y) else {
+fn valid_pair(grid: &PlanningGrid, basis: &Basis, x: Point, y: Point) -> bool {
+    if !in_domain(grid, basis, y) {
         return false;
-    };
+    }
     let (Some(a), Some(b)) = (grid.cell_of(x), grid.cell_of(y)) else {
         return false;
     };
@@ -293,11 +313,11 @@ fn generator_from_rows(n: usize, rows: Vec<Vec<(usize, f64)>>, step: f64) -> Spa
     l
 }
 
-/// Divides each row by its sum; a row that lost its samples becomes the identity (a wall).
+/// Divides each row by its sum; a row without data (no samples) becomes the identity (a wall).
 fn normalise_rows(rows: &mut [Vec<(usize, f64)>], stats: &mut GeneratorStats) {
     for (i, row) in rows.iter_mut().enumerate() {
         let sum: f64 = row.iter().map(|e| e.1).sum();
-        if sum <= WALL_ROW_SUM {
+        if sum <= WALL_ROW_SUM || (row.len() == 1 && row[0].0 == i) {
             stats.wall_rows += 1;
             row.clear();
             row.push((i, 1.0));
@@ -344,11 +364,13 @@ fn build_ulam(
                     continue;
                 }
                 let y = flow(x, dir.vector, dir.step);
-                if !valid_pair(grid, x, y) {
+                // A blocked move stays where it is: the pair (x, x).
+                if valid_pair(grid, basis, x, y) {
+                    basis.eval_into(y, &mut phi_y);
+                } else {
                     stats.invalid_pairs += 1;
-                    continue;
+                    phi_y.clone_from(&phi_x);
                 }
-                basis.eval_into(y, &mut phi_y);
                 for &(i, vi) in &phi_x {
                     for &(j, vj) in &phi_y {
                         accumulate(&mut rows[i], j, vi * vj / p);
@@ -394,11 +416,16 @@ fn build_rbf(
         });
     }
     let p = points.len() as f64;
+    let t0 = Instant::now();
     let phis: Vec<Vec<BasisValue>> = points
         .iter()
         .map(|&x| {
+            // The regression lives on the domain of the basis: samples in the hole around an
+            // obstacle (where no active function is centred) are not data.
             let mut v = Vec::new();
-            basis.eval_into(x, &mut v);
+            if in_domain(grid, basis, x) {
+                basis.eval_into(x, &mut v);
+            }
             v
         })
         .collect();
@@ -416,6 +443,12 @@ fn build_rbf(
             "Gram matrix of the RBF samples is not positive definite ({e:?}): use more samples per basis function or a smaller sigma"
         ),
     })?;
+    // G is symmetric: G⁻¹ once, shared by all directions (column l = row l).
+    let g_inv = llt.inverse();
+    debug!(
+        gram_and_inverse_s = t0.elapsed().as_secs_f64(),
+        "RBF Gram matrix inverted"
+    );
     let mut phi_y = Vec::new();
     let mut out = Vec::with_capacity(directions.len());
     for dir in directions {
@@ -425,11 +458,13 @@ fn build_rbf(
                 continue;
             }
             let y = flow(x, dir.vector, dir.step);
-            if !valid_pair(grid, x, y) {
+            // A blocked move stays where it is: the pair (x, x).
+            if valid_pair(grid, basis, x, y) {
+                basis.eval_into(y, &mut phi_y);
+            } else {
                 stats.invalid_pairs += 1;
-                continue;
+                phi_y.clone_from(phi_x);
             }
-            basis.eval_into(y, &mut phi_y);
             for &(j, vj) in &phi_y {
                 let col = a.col_as_slice_mut(j);
                 for &(i, vi) in phi_x {
@@ -437,18 +472,30 @@ fn build_rbf(
                 }
             }
         }
-        // U = G⁻¹ A (least squares of G U = A with G symmetric positive definite).
-        llt.solve_in_place(&mut a);
+        // U = G⁻¹ A (least squares of G U = A with G symmetric positive definite). A has only
+        // the overlaps of truncated Gaussians (a few dozen entries per column), so G⁻¹ A costs
+        // n · nnz(A) flops instead of the 2n³ of a dense triangular solve per direction.
+        let mut u = Mat::<f64>::zeros(n, n);
+        for j in 0..n {
+            let u_col = u.col_as_slice_mut(j);
+            for (l, &a_lj) in a.col_as_slice(j).iter().enumerate() {
+                if a_lj != 0.0 {
+                    for (u_ij, &g_il) in u_col.iter_mut().zip(g_inv.col_as_slice(l)) {
+                        *u_ij += g_il * a_lj;
+                    }
+                }
+            }
+        }
         let mut max_abs = 0.0f64;
         for j in 0..n {
-            for &v in a.col_as_slice(j) {
+            for &v in u.col_as_slice(j) {
                 max_abs = max_abs.max(v.abs());
             }
         }
         let cut = SPARSITY_THRESHOLD * max_abs;
         let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
         for j in 0..n {
-            for (i, &v) in a.col_as_slice(j).iter().enumerate() {
+            for (i, &v) in u.col_as_slice(j).iter().enumerate() {
                 if v.abs() > cut {
                     rows[i].push((j, v));
                 }
@@ -544,8 +591,10 @@ mod tests {
         }
         // Rows next to the map edge carry the largest negative mass (8 % here, on a tiny grid).
         assert!(gens.stats.max_negative_row_mass < 0.1, "{:?}", gens.stats);
-        // The last row of functions in each direction has no image on the map: a wall.
-        assert_eq!(gens.stats.wall_rows, 4 * 10, "{:?}", gens.stats);
+        // Moves off the map stay in place: the edge functions keep part of their mass (no
+        // function is a complete wall on an open grid), and the blocked samples are counted.
+        assert_eq!(gens.stats.wall_rows, 0, "{:?}", gens.stats);
+        assert!(gens.stats.invalid_pairs > 0, "{:?}", gens.stats);
     }
 
     #[test]
