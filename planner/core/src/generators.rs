@@ -449,62 +449,98 @@ fn build_rbf(
         gram_and_inverse_s = t0.elapsed().as_secs_f64(),
         "RBF Gram matrix inverted"
     );
-    let mut phi_y = Vec::new();
+    let data = RbfData {
+        grid,
+        basis,
+        points,
+        phis: &phis,
+        g_inv: &g_inv,
+        weight: 1.0 / p,
+    };
+    let results: Vec<(SparseMatrix, GeneratorStats)> = directions
+        .iter()
+        .map(|dir| rbf_direction(&data, dir))
+        .collect();
     let mut out = Vec::with_capacity(directions.len());
-    for dir in directions {
-        let mut a = Mat::<f64>::zeros(n, n);
-        for (&x, phi_x) in points.iter().zip(&phis) {
-            if phi_x.is_empty() {
-                continue;
-            }
-            let y = flow(x, dir.vector, dir.step);
-            // A blocked move stays where it is: the pair (x, x).
-            if valid_pair(grid, basis, x, y) {
-                basis.eval_into(y, &mut phi_y);
-            } else {
-                stats.invalid_pairs += 1;
-                phi_y.clone_from(phi_x);
-            }
-            for &(j, vj) in &phi_y {
-                let col = a.col_as_slice_mut(j);
-                for &(i, vi) in phi_x {
-                    col[i] += vi * vj / p;
-                }
-            }
-        }
-        // U = G⁻¹ A (least squares of G U = A with G symmetric positive definite). A has only
-        // the overlaps of truncated Gaussians (a few dozen entries per column), so G⁻¹ A costs
-        // n · nnz(A) flops instead of the 2n³ of a dense triangular solve per direction.
-        let mut u = Mat::<f64>::zeros(n, n);
-        for j in 0..n {
-            let u_col = u.col_as_slice_mut(j);
-            for (l, &a_lj) in a.col_as_slice(j).iter().enumerate() {
-                if a_lj != 0.0 {
-                    for (u_ij, &g_il) in u_col.iter_mut().zip(g_inv.col_as_slice(l)) {
-                        *u_ij += g_il * a_lj;
-                    }
-                }
-            }
-        }
-        let mut max_abs = 0.0f64;
-        for j in 0..n {
-            for &v in u.col_as_slice(j) {
-                max_abs = max_abs.max(v.abs());
-            }
-        }
-        let cut = SPARSITY_THRESHOLD * max_abs;
-        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
-        for j in 0..n {
-            for (i, &v) in u.col_as_slice(j).iter().enumerate() {
-                if v.abs() > cut {
-                    rows[i].push((j, v));
-                }
-            }
-        }
-        normalise_rows(&mut rows, stats);
-        out.push(generator_from_rows(n, rows, dir.step));
+    for (l, s) in results {
+        stats.invalid_pairs += s.invalid_pairs;
+        stats.wall_rows += s.wall_rows;
+        stats.max_negative_row_mass = stats.max_negative_row_mass.max(s.max_negative_row_mass);
+        out.push(l);
     }
     Ok(out)
+}
+
+/// Shared, read-only inputs of the per-direction RBF regression.
+struct RbfData<'a> {
+    grid: &'a PlanningGrid,
+    basis: &'a Basis,
+    points: &'a [Point],
+    /// Basis values at every sample (empty outside the domain of the basis).
+    phis: &'a [Vec<BasisValue>],
+    /// G⁻¹ (symmetric).
+    g_inv: &'a Mat<f64>,
+    /// 1 / number of samples.
+    weight: f64,
+}
+
+/// Lₖ of one direction: A from the snapshot pairs, U = G⁻¹A, sparsified and row-normalised.
+fn rbf_direction(data: &RbfData<'_>, dir: &Direction) -> (SparseMatrix, GeneratorStats) {
+    let n = data.basis.len();
+    let mut stats = GeneratorStats::default();
+    let mut phi_y = Vec::new();
+    let mut a = Mat::<f64>::zeros(n, n);
+    for (&x, phi_x) in data.points.iter().zip(data.phis) {
+        if phi_x.is_empty() {
+            continue;
+        }
+        let y = flow(x, dir.vector, dir.step);
+        // A blocked move stays where it is: the pair (x, x).
+        if valid_pair(data.grid, data.basis, x, y) {
+            data.basis.eval_into(y, &mut phi_y);
+        } else {
+            stats.invalid_pairs += 1;
+            phi_y.clone_from(phi_x);
+        }
+        for &(j, vj) in &phi_y {
+            let col = a.col_as_slice_mut(j);
+            let wj = vj * data.weight;
+            for &(i, vi) in phi_x {
+                col[i] += vi * wj;
+            }
+        }
+    }
+    // U = G⁻¹ A (least squares of G U = A with G symmetric positive definite). A has only the
+    // overlaps of truncated Gaussians (a few dozen entries per column), so G⁻¹ A costs
+    // n · nnz(A) flops instead of the 2n³ of a dense triangular solve per direction.
+    let mut u = Mat::<f64>::zeros(n, n);
+    for j in 0..n {
+        let u_col = u.col_as_slice_mut(j);
+        for (l, &a_lj) in a.col_as_slice(j).iter().enumerate() {
+            if a_lj != 0.0 {
+                for (u_ij, &g_il) in u_col.iter_mut().zip(data.g_inv.col_as_slice(l)) {
+                    *u_ij += g_il * a_lj;
+                }
+            }
+        }
+    }
+    let mut max_abs = 0.0f64;
+    for j in 0..n {
+        for &v in u.col_as_slice(j) {
+            max_abs = max_abs.max(v.abs());
+        }
+    }
+    let cut = SPARSITY_THRESHOLD * max_abs;
+    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+    for j in 0..n {
+        for (i, &v) in u.col_as_slice(j).iter().enumerate() {
+            if v.abs() > cut {
+                rows[i].push((j, v));
+            }
+        }
+    }
+    normalise_rows(&mut rows, &mut stats);
+    (generator_from_rows(n, rows, dir.step), stats)
 }
 
 #[cfg(test)]
