@@ -92,9 +92,11 @@ pub struct LpReport {
     pub solve_time_s: f64,
     /// Time spent building the generators (filled in by the pipeline), seconds.
     pub generator_time_s: f64,
-    /// LP variables.
+    /// Variables of the program handed to Clarabel (dual form: one potential per non-target
+    /// function; primal form: one per flux).
     pub variables: usize,
-    /// LP constraint rows (equalities and inequalities).
+    /// Constraint rows of the program handed to Clarabel (dual form: one inequality per flux;
+    /// primal form: mass balance plus flux non-negativity).
     pub constraints: usize,
 }
 

@@ -294,3 +294,29 @@ fn primal_and_dual_forms_reach_the_same_optimum() {
     }
     assert!(checked >= 8, "only {checked} reachable cases");
 }
+
+#[test]
+fn lp_equals_dijkstra_on_the_full_resolution_c_shape() {
+    // The benchmark's largest case (128² cells, 8 directions, uniform start density): the
+    // reduced dual LP must still reproduce the graph value.
+    let scenario = pf_planner::scenarios::by_name("c_shape").expect("scenario");
+    let grid = PlanningGrid::from_map(&scenario.map, &scenario.traversability, 128).expect("grid");
+    let case = check(
+        &grid,
+        scenario.start,
+        &scenario.goal,
+        8,
+        StartDensity::UniformFree,
+        1.0,
+    )
+    .expect("reachable");
+    println!(
+        "c_shape 128²: LP {:.9} vs Dijkstra {:.9} (rel {:.2e})",
+        case.lp_value, case.graph_value, case.relative_error
+    );
+    assert!(
+        case.relative_error < TOLERANCE,
+        "rel {:.2e}",
+        case.relative_error
+    );
+}
