@@ -1,14 +1,16 @@
 //! Data-driven Perron-Frobenius generators (ANSDMD), one per control direction.
 //!
 //! For each direction dₖ the planner generates snapshot pairs `(xₛ, yₛ)` by flowing the single
-//! integrator ẋ = dₖ for a time Δtₖ from every point xₛ of an exact sub-lattice of every cell, so
-//! the generator only ever sees sampled data, never the flow map itself. Then
+//! integrator ẋ = dₖ for a time Δtₖ from every point xₛ of an exact sub-lattice of every cell in
+//! the domain of the basis (the cells that carry an active function), so the generator only ever
+//! sees sampled data, never the flow map itself. Then
 //! - `G = Φ(X) Φ(X)ᵀ / P`, `A = Φ(X) Φ(Y)ᵀ / P` (P samples),
 //! - `U = argmin ‖G U − A‖_F` (G is diagonal for indicators: Ulam's method; a faer Cholesky
-//!   solve for Gaussian RBFs),
-//! - every row of `U` is divided by its sum (a row that lost all its samples becomes the identity:
+//!   factorisation and G⁻¹ for Gaussian RBFs),
+//! - every row of `U` is divided by its sum (a row whose moves are all blocked is the identity:
 //!   a reflecting wall, never a free sink),
-//! - `Lₖ = (Uᵀ − I) / Δtₖ`, stored sparse (entries below 1e-9 × max |U| dropped).
+//! - `Lₖ = (Uᵀ − I) / Δtₖ`, stored sparse (entries below [`SPARSITY_THRESHOLD`] × max |U|
+//!   dropped).
 //!
 //! Δtₖ makes each displacement exactly one lattice vector (Δt = h axially, √2·h diagonally): the
 //! condition under which the indicator LP is exactly Dijkstra's problem and the RBF generator stays
@@ -397,8 +399,9 @@ fn accumulate(row: &mut Vec<(usize, f64)>, j: usize, v: f64) {
     }
 }
 
-/// Gaussian RBFs: dense Gram matrix, one faer Cholesky factorisation, all directions' A solved
-/// against it; U is then sparsified.
+/// Gaussian RBFs: dense Gram matrix over the samples in the domain of the basis, one faer
+/// Cholesky factorisation and G⁻¹ shared by all directions; each direction's sparse A is
+/// multiplied by G⁻¹ and U is then sparsified (see [`rbf_direction`]).
 fn build_rbf(
     grid: &PlanningGrid,
     basis: &Basis,
