@@ -465,3 +465,84 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         report,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::basis::BasisKind;
+    use crate::grid::PlanningGrid;
+
+    /// A 4 × 3 grid whose third column is blocked: start on the left, target on the right.
+    fn walled_off() -> Generators {
+        let (w, h) = (4, 3);
+        let blocked = (0..w * h).map(|c| c % w == 2).collect();
+        let grid = PlanningGrid::from_parts([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], blocked)
+            .expect("grid");
+        Generators::build(&grid, BasisKind::Indicator, 8).expect("generators")
+    }
+
+    #[test]
+    fn a_walled_off_target_is_infeasible_in_both_forms() {
+        let gens = walled_off();
+        let n = gens.basis.len();
+        let target_cell = 3; // (3, 0), right of the wall
+        let target: Vec<bool> = (0..n).map(|i| gens.basis.cell(i) == target_cell).collect();
+        let mut start = vec![0.0; n];
+        start[gens.basis.index_of_cell(0).expect("free")] = 1.0;
+        let cost = vec![0.5; n];
+        let problem = LpProblem {
+            generators: &gens,
+            cost: &cost,
+            start: &start,
+            target: &target,
+            u_max: 1.0,
+        };
+        for form in [LpForm::Primal, LpForm::Dual] {
+            let settings = LpSettings {
+                form,
+                ..LpSettings::default()
+            };
+            let result = solve(&problem, &settings);
+            assert!(
+                matches!(result, Err(PlanError::Infeasible { .. })),
+                "{form:?}: {result:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_eliminated_density_is_the_speed_bound_at_equality() {
+        // Open 5 × 1 corridor, mass in cell 0, target cell 4, u_max = 2: the flux is 1 per cell
+        // along the corridor (per unit length), the density flux / u_max, the value 4 × 0.5 × 1.5.
+        let grid = PlanningGrid::from_parts([0.0, 0.0], 1.0, 5, 1, vec![0.5; 5], vec![false; 5])
+            .expect("grid");
+        let gens = Generators::build(&grid, BasisKind::Indicator, 4).expect("generators");
+        let target = vec![false, false, false, false, true];
+        let start = vec![1.0, 0.0, 0.0, 0.0, 0.0];
+        let cost = vec![0.5; 5];
+        let problem = LpProblem {
+            generators: &gens,
+            cost: &cost,
+            start: &start,
+            target: &target,
+            u_max: 2.0,
+        };
+        for form in [LpForm::Primal, LpForm::Dual] {
+            let settings = LpSettings {
+                form,
+                ..LpSettings::default()
+            };
+            let sol = solve(&problem, &settings).expect("solved");
+            assert!(
+                (sol.report.objective - 4.0 * 0.5 * 1.5).abs() < 1e-7,
+                "{form:?}: {:?}",
+                sol.report
+            );
+            for i in 0..4 {
+                let z: f64 = sol.flux.iter().map(|f| f[i]).sum();
+                assert!((z - 1.0).abs() < 1e-7, "{form:?}: flux {z} at {i}");
+                assert!((sol.density[i] - z / 2.0).abs() < 1e-12);
+            }
+        }
+    }
+}
