@@ -1,4 +1,4 @@
-//! Diagnostics of one P-F solve: `cargo run --release --example pf_diag -- <scenario> <indicator|rbf> <size>`.
+//! Diagnostics of one P-F solve: `cargo run --release --example pf_diag -- <scenario> <indicator|rbf> <size> [seed]`.
 //! Prints the outcome, the LP value against the grid optimum, and the field around the end point.
 
 use anyhow::{bail, Context, Result};
@@ -17,7 +17,10 @@ fn main() -> Result<()> {
         Some(other) => bail!("unknown basis {other}"),
     };
     let size: usize = args.get(2).map_or(Ok(32), |s| s.parse()).context("size")?;
-    let scenario = scenarios::by_name(name)?;
+    let scenario = match args.get(3) {
+        Some(seed) => scenarios::with_seed(name, seed.parse().context("seed")?)?,
+        None => scenarios::by_name(name)?,
+    };
     let grid = PlanningGrid::from_map(&scenario.map, &scenario.traversability, size)?;
     let gens = PfGenerators::build(&grid, &basis, 8)?;
     println!("generator stats: {:?}", gens.generators().stats);
