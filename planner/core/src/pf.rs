@@ -191,6 +191,41 @@ fn can_reach_target(gens: &Generators, target: &[bool]) -> Vec<bool> {
     reach
 }
 
+/// Active functions from whose cell a sequence of the generators' one-lattice-vector moves
+/// reaches a target function's cell, staying in the domain of the basis and never touching a
+/// blocked cell (the sampling rule of [`crate::generators`]; reverse BFS over cells).
+fn can_move_to_target(gens: &Generators, grid: &PlanningGrid, target: &[bool]) -> Vec<bool> {
+    let basis = &gens.basis;
+    let n = basis.len();
+    let mut reach = target.to_vec();
+    let mut queue: VecDeque<usize> = (0..n).filter(|&i| target[i]).collect();
+    while let Some(j) = queue.pop_front() {
+        let (jx, jy) = grid.coords(basis.cell(j));
+        for dir in &gens.directions {
+            // Predecessor cell: one move against the direction.
+            let (ix, iy) = (jx as i64 - dir.shift[0], jy as i64 - dir.shift[1]);
+            if ix < 0 || iy < 0 || ix >= grid.width as i64 || iy >= grid.height as i64 {
+                continue;
+            }
+            let (ix, iy) = (ix as usize, iy as usize);
+            let Some(i) = basis.index_of_cell(grid.index(ix, iy)) else {
+                continue;
+            };
+            if reach[i] {
+                continue;
+            }
+            let (x0, x1) = (ix.min(jx), ix.max(jx));
+            let (y0, y1) = (iy.min(jy), iy.max(jy));
+            if (y0..=y1).any(|y| (x0..=x1).any(|x| grid.blocked[grid.index(x, y)])) {
+                continue;
+            }
+            reach[i] = true;
+            queue.push_back(i);
+        }
+    }
+    reach
+}
+
 /// The LP inputs of one start/goal pair on cached generators (see [`prepare`]).
 #[derive(Debug, Clone)]
 pub struct PreparedLp {
@@ -252,7 +287,15 @@ pub fn prepare(
             .min_by(|&a, &b| dist(basis.center(a), start).total_cmp(&dist(basis.center(b), start)))
             .ok_or(PlanError::StartInObstacle { point: start })?,
     };
-    let reach = can_reach_target(g, &target);
+    // Reachable through the generators' flows *and* by moves of the sampled system over the
+    // domain of the basis: RBF generators carry small entries (above the sparsity threshold)
+    // across gaps that the robot cannot pass, which would otherwise put start mass into pockets
+    // that can only leak out at enormous cost.
+    let reach: Vec<bool> = can_reach_target(g, &target)
+        .into_iter()
+        .zip(can_move_to_target(g, grid, &target))
+        .map(|(a, b)| a && b)
+        .collect();
     if !reach[start_fn] {
         return Err(PlanError::Unreachable {
             reason: "no sequence of moves through free cells connects the start to the goal region"

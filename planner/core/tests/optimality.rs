@@ -6,6 +6,7 @@
 use pf_planner::basis::BasisKind;
 use pf_planner::graph::{distances_to_targets, Connectivity};
 use pf_planner::grid::{GoalRegion, PlanningGrid};
+use pf_planner::lp::{LpForm, LpSettings};
 use pf_planner::pf::{self, PfGenerators, PfOptions, PfSolution, StartDensity};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -85,10 +86,34 @@ fn check(
     density: StartDensity,
     u_max: f64,
 ) -> Option<Case> {
+    check_form(
+        grid,
+        start,
+        goal,
+        directions,
+        density,
+        u_max,
+        LpForm::default(),
+    )
+}
+
+fn check_form(
+    grid: &PlanningGrid,
+    start: [f64; 2],
+    goal: &GoalRegion,
+    directions: usize,
+    density: StartDensity,
+    u_max: f64,
+    form: LpForm,
+) -> Option<Case> {
     let gens = PfGenerators::build(grid, &BasisKind::Indicator, directions).expect("generators");
     let opts = PfOptions {
         u_max,
         start_density: density,
+        lp: LpSettings {
+            form,
+            ..LpSettings::default()
+        },
         ..PfOptions::default()
     };
     let sol = match pf::solve(&gens, grid, start, goal, &opts) {
@@ -222,4 +247,76 @@ fn lp_equals_dijkstra_on_the_three_scenarios() {
             }
         }
     }
+}
+
+#[test]
+fn primal_and_dual_forms_reach_the_same_optimum() {
+    // The default solves the dual of the reduced LP; the reduced primal must give the same value.
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut checked = 0;
+    for _ in 0..8 {
+        let grid = random_grid(&mut rng);
+        let start = random_free_point(&mut rng, &grid);
+        let goal = GoalRegion {
+            center: random_free_point(&mut rng, &grid),
+            radius: grid.cell_size,
+        };
+        for directions in [4, 8] {
+            let mut values = Vec::new();
+            for form in [LpForm::Primal, LpForm::Dual] {
+                let Some(case) = check_form(
+                    &grid,
+                    start,
+                    &goal,
+                    directions,
+                    StartDensity::UniformFree,
+                    0.8,
+                    form,
+                ) else {
+                    continue;
+                };
+                assert!(
+                    case.relative_error < TOLERANCE,
+                    "{form:?}, {directions} directions: LP {} vs Dijkstra {}",
+                    case.lp_value,
+                    case.graph_value
+                );
+                values.push(case.lp_value);
+            }
+            if let [primal, dual] = values[..] {
+                assert!(
+                    (primal - dual).abs() <= TOLERANCE * dual,
+                    "{primal} vs {dual}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 8, "only {checked} reachable cases");
+}
+
+#[test]
+fn lp_equals_dijkstra_on_the_full_resolution_c_shape() {
+    // The benchmark's largest case (128² cells, 8 directions, uniform start density): the
+    // reduced dual LP must still reproduce the graph value.
+    let scenario = pf_planner::scenarios::by_name("c_shape").expect("scenario");
+    let grid = PlanningGrid::from_map(&scenario.map, &scenario.traversability, 128).expect("grid");
+    let case = check(
+        &grid,
+        scenario.start,
+        &scenario.goal,
+        8,
+        StartDensity::UniformFree,
+        1.0,
+    )
+    .expect("reachable");
+    println!(
+        "c_shape 128²: LP {:.9} vs Dijkstra {:.9} (rel {:.2e})",
+        case.lp_value, case.graph_value, case.relative_error
+    );
+    assert!(
+        case.relative_error < TOLERANCE,
+        "rel {:.2e}",
+        case.relative_error
+    );
 }

@@ -1,10 +1,11 @@
 //! The P-F planner on the paper's three scenarios, with both bases: the feedback-law trajectory
-//! reaches the goal and never enters an obstacle (RBF on `pits`: see the known-limitation test); on `c_shape` its ∫p ds beats the paper's A*
+//! reaches the goal and never enters an obstacle (every scenario × both bases, one test each so a
+//! failure names its case); on `c_shape` its ∫p ds beats the paper's A*
 //! baseline (Euclidean heuristic, inadmissible for p < 1) by at least 20 % and is within 5 % of
 //! the optimal graph path (Dijkstra).
 
 use pf_planner::basis::BasisKind;
-use pf_planner::graph::{astar_path, dijkstra_path, Connectivity};
+use pf_planner::graph::{astar_path, dijkstra_path, distances_to_targets, Connectivity};
 use pf_planner::grid::PlanningGrid;
 use pf_planner::io::MapScenario;
 use pf_planner::map::Point;
@@ -93,39 +94,91 @@ fn assert_reaches_goal_without_obstacles(
     );
 }
 
-#[test]
-fn every_scenario_is_solved_with_the_indicator_basis() {
-    for name in scenarios::SCENARIO_NAMES {
-        let scenario = scenarios::by_name(name).expect("scenario");
-        let run = run(&scenario, BasisKind::Indicator, INDICATOR_GRID);
-        assert_reaches_goal_without_obstacles(name, "indicator", &scenario, &run);
-    }
+fn check_scenario(name: &str, basis: BasisKind) {
+    let scenario = scenarios::by_name(name).expect("scenario");
+    let (label, size) = match basis {
+        BasisKind::Indicator => ("indicator", INDICATOR_GRID),
+        BasisKind::Rbf { .. } => ("rbf", RBF_GRID),
+    };
+    let run = run(&scenario, basis, size);
+    assert_reaches_goal_without_obstacles(name, label, &scenario, &run);
 }
 
 #[test]
-fn open_scenarios_are_solved_with_the_rbf_basis() {
-    for name in ["mountain_pass", "c_shape"] {
-        let scenario = scenarios::by_name(name).expect("scenario");
+fn mountain_pass_is_solved_with_the_indicator_basis() {
+    check_scenario("mountain_pass", BasisKind::Indicator);
+}
+
+#[test]
+fn pits_is_solved_with_the_indicator_basis() {
+    check_scenario("pits", BasisKind::Indicator);
+}
+
+#[test]
+fn c_shape_is_solved_with_the_indicator_basis() {
+    check_scenario("c_shape", BasisKind::Indicator);
+}
+
+#[test]
+fn mountain_pass_is_solved_with_the_rbf_basis() {
+    check_scenario("mountain_pass", BasisKind::DEFAULT_RBF);
+}
+
+/// Used to stall next to a pit: the RBF least squares was fitted on samples in the hole around
+/// the pit and on blocked moves with missing data, which gave rows of U tens of units of negative
+/// mass (fake sinks). See the module docs of `generators`.
+#[test]
+fn pits_is_solved_with_the_rbf_basis() {
+    check_scenario("pits", BasisKind::DEFAULT_RBF);
+}
+
+#[test]
+fn c_shape_is_solved_with_the_rbf_basis() {
+    check_scenario("c_shape", BasisKind::DEFAULT_RBF);
+}
+
+/// Other `pits` layouts: the RBF trajectory still reaches the goal without entering a pit, and
+/// the LP value stays near the grid optimum of the same start mass. (Seeds 6 and 7 used to put
+/// start mass into pockets that the eroded RBF domain cuts off but tiny generator entries still
+/// connected: LP values 5–18× the grid optimum.)
+#[test]
+fn other_pits_layouts_are_solved_with_the_rbf_basis() {
+    for seed in [6, 7] {
+        let scenario = scenarios::with_seed("pits", seed).expect("scenario");
         let run = run(&scenario, BasisKind::DEFAULT_RBF, RBF_GRID);
-        assert_reaches_goal_without_obstacles(name, "rbf", &scenario, &run);
+        let name = format!("pits seed {seed}");
+        assert_reaches_goal_without_obstacles(&name, "rbf", &scenario, &run);
+        let gens = PfGenerators::build(&run.grid, &BasisKind::DEFAULT_RBF, 8).expect("generators");
+        let basis = &gens.generators().basis;
+        let dist = distances_to_targets(
+            &run.grid,
+            &run.grid.goal_cells(&scenario.goal),
+            Connectivity::Eight,
+        );
+        let graph: f64 = run
+            .solution
+            .start_coefficients
+            .iter()
+            .enumerate()
+            .filter(|(_, &t)| t > 0.0)
+            .map(|(i, &t)| t * gens.mass_integrals()[i] * dist[basis.cell(i)])
+            .sum();
+        let ratio = run.solution.weighted_length / graph;
+        println!("{name}/rbf: LP value / grid optimum = {ratio:.3}");
+        assert!(
+            (0.9..1.3).contains(&ratio),
+            "{name}/rbf: LP value {} vs grid optimum {graph}",
+            run.solution.weighted_length
+        );
     }
 }
 
-/// Known limitation: on `pits` the RBF field (32² centres, centres within one spacing of a pit
-/// dropped) stalls next to a pit. The trajectory must still never enter an obstacle, and the
-/// failure must be reported as an outcome, not hidden.
 #[test]
-fn pits_with_the_rbf_basis_never_enters_a_pit() {
-    let scenario = scenarios::by_name("pits").expect("scenario");
-    let run = run(&scenario, BasisKind::DEFAULT_RBF, RBF_GRID);
-    assert_eq!(run.metrics.length_in_obstacles, 0.0, "path enters a pit");
-    for p in &run.solution.path {
-        assert!(!scenario.map.is_obstacle_at(*p), "point {p:?} inside a pit");
-    }
-    println!(
-        "pits/rbf: outcome {:?}, {} points",
-        run.solution.outcome,
-        run.solution.path.len()
+fn every_built_in_scenario_is_covered() {
+    // The per-case tests above list the scenarios by name; a new scenario must be added there.
+    assert_eq!(
+        scenarios::SCENARIO_NAMES,
+        ["mountain_pass", "pits", "c_shape"]
     );
 }
 
