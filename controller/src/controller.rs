@@ -65,6 +65,17 @@ struct MotionTarget {
     yaw_rate: f64,
 }
 
+/// Where the base should stand relative to the ground its feet will use.
+#[derive(Clone, Copy, Debug)]
+struct StanceGround {
+    /// Mean terrain height under the footholds, m.
+    height: f64,
+    /// Pitch reference, rad.
+    pitch: f64,
+    /// Mean displacement of the footholds from their nominal positions, world xy, m.
+    shift: [f64; 2],
+}
+
 /// The quadruped controller (see the crate docs for the API contract).
 pub struct Controller {
     model: RobotModel,
@@ -99,9 +110,9 @@ pub struct Controller {
 }
 
 /// Largest distance a foothold is moved from its Raibert position to find flat ground, m.
-pub const FOOTHOLD_SEARCH_RADIUS: f64 = 0.15;
+pub const FOOTHOLD_SEARCH_RADIUS: f64 = 0.2;
 /// Candidates per ring of the foothold search (ring k at radius k/(len − 1) of the search radius).
-const FOOTHOLD_RINGS: [usize; 6] = [1, 8, 8, 12, 16, 16];
+const FOOTHOLD_RINGS: [usize; 6] = [1, 8, 12, 16, 16, 20];
 /// Distance at which the foothold search probes the height around a candidate, m.
 const EDGE_PROBE: f64 = 0.05;
 /// Cost of one metre of height change around a candidate, in metres of foothold displacement.
@@ -112,6 +123,10 @@ const STEEP_SLOPE: f64 = 0.4;
 /// Cost per unit of local slope beyond `STEEP_SLOPE`, in metres of foothold displacement: a foot
 /// on a slope steeper than its friction cone slides down it.
 const STEEP_WEIGHT: f64 = 0.5;
+/// Fraction of the mean foothold displacement the base reference follows.
+const BODY_SHIFT_GAIN: f64 = 1.0;
+/// Largest shift of the base reference towards displaced footholds, m.
+const MAX_BODY_SHIFT: f64 = 0.1;
 /// Clearance the swing foot keeps above the terrain between lift-off and touchdown, m.
 const SWING_TERRAIN_MARGIN: f64 = 0.04;
 /// Highest swing apex (above the lift-off/touchdown line) the clearance logic may ask for, m.
@@ -848,20 +863,27 @@ impl Controller {
         apex.min(MAX_SWING_HEIGHT.max(nominal))
     }
 
-    /// Ground height and pitch reference for a base at (x, y) facing `yaw`: the mean terrain
-    /// height and front/rear slope at the (edge-avoiding) nominal footholds under the hips with a
-    /// height map, the plane otherwise.
-    fn stance_ground(&self, reference: &Reference, x: f64, y: f64, yaw: f64) -> (f64, f64) {
+    /// Ground height, pitch and xy shift reference for a base at (x, y) facing `yaw`: the mean
+    /// terrain height, the front/rear slope and the mean displacement of the (edge-avoiding)
+    /// nominal footholds under the hips with a height map; the plane and no shift otherwise.
+    fn stance_ground(&self, reference: &Reference, x: f64, y: f64, yaw: f64) -> StanceGround {
         let plane_pitch = self.terrain_pitch(reference, yaw);
         if !self.height_map.is_present() {
-            return (terrain_height(reference, x, y), plane_pitch);
+            return StanceGround {
+                height: terrain_height(reference, x, y),
+                pitch: plane_pitch,
+                shift: [0.0; 2],
+            };
         }
         let rotation = rot_z(yaw);
         let mut heights = [0.0; NUM_LEGS];
+        let mut shift = [0.0; 2];
         for leg in Leg::ALL {
             let hip = rotation * self.nominal_feet_body[leg.index()];
             let foot = self.select_foothold(reference, x + hip.x, y + hip.y);
             heights[leg.index()] = foot.z - self.model.foot_radius();
+            shift[0] += (foot.x - x - hip.x) / NUM_LEGS as f64;
+            shift[1] += (foot.y - y - hip.y) / NUM_LEGS as f64;
         }
         let mean = heights.iter().sum::<f64>() / NUM_LEGS as f64;
         let front = 0.5 * (heights[Leg::FR.index()] + heights[Leg::FL.index()]);
@@ -874,7 +896,11 @@ impl Controller {
         } else {
             plane_pitch
         };
-        (mean, pitch)
+        StanceGround {
+            height: mean,
+            pitch,
+            shift,
+        }
     }
 
     fn body_height(&self, reference: &Reference) -> f64 {
@@ -946,6 +972,16 @@ impl Controller {
         if error.norm() > max_error {
             start = base_xy + error * (max_error / error.norm());
         }
+        // Beside a wall or a rim the footholds of one side move inwards; the base follows its
+        // feet by their mean displacement so that the support stays balanced about the CoM.
+        let shift = self
+            .stance_ground(reference, start.x, start.y, target.yaw)
+            .shift;
+        let mut shift = Vector3::new(shift[0], shift[1], 0.0) * BODY_SHIFT_GAIN;
+        if shift.norm() > MAX_BODY_SHIFT {
+            shift *= MAX_BODY_SHIFT / shift.norm();
+        }
+        start += shift;
         let velocity0 = Vector3::new(target.velocity[0], target.velocity[1], 0.0);
         let mut base_xy_k = start;
         for k in 0..n {
@@ -953,7 +989,11 @@ impl Controller {
             let yaw_k = target.yaw + target.yaw_rate * tk;
             let velocity_k = rot_z(target.yaw_rate * tk) * velocity0;
             base_xy_k += velocity_k * dt;
-            let (ground, pitch) = self.stance_ground(reference, base_xy_k.x, base_xy_k.y, yaw_k);
+            let StanceGround {
+                height: ground,
+                pitch,
+                ..
+            } = self.stance_ground(reference, base_xy_k.x, base_xy_k.y, yaw_k);
             let com_k = Vector3::new(base_xy_k.x, base_xy_k.y, ground + height)
                 + rot_z(yaw_k) * self.com_offset_body;
             let vz =
