@@ -128,7 +128,7 @@ const BODY_SHIFT_GAIN: f64 = 1.0;
 /// Largest shift of the base reference towards displaced footholds, m.
 const MAX_BODY_SHIFT: f64 = 0.1;
 /// Clearance the swing foot keeps above the terrain between lift-off and touchdown, m.
-const SWING_TERRAIN_MARGIN: f64 = 0.04;
+const SWING_TERRAIN_MARGIN: f64 = 0.06;
 /// Highest swing apex (above the lift-off/touchdown line) the clearance logic may ask for, m.
 const MAX_SWING_HEIGHT: f64 = 0.2;
 
