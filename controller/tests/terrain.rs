@@ -1,6 +1,7 @@
 //! Terrain awareness with a local height map: the failure mode of the scenario falls was a foot
 //! placed on the height of a plane fitted around the base while it actually landed on a wall
 //! beside the path (c_shape), a pit rim (pits) or a valley side (mountain_pass).
+#![allow(clippy::needless_range_loop)] // common/ indexes joints and axes in parallel
 mod common;
 
 use quad_controller::{
