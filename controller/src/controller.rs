@@ -119,7 +119,7 @@ const EDGE_PROBE: f64 = 0.05;
 const EDGE_WEIGHT: f64 = 2.0;
 /// Steepest local slope (rise over run within `EDGE_PROBE`) a foothold may have without extra
 /// cost: about half the friction cone of the feet (μ ≈ 0.8 in simulation).
-const STEEP_SLOPE: f64 = 0.4;
+const STEEP_SLOPE: f64 = 0.6;
 /// Cost per unit of local slope beyond `STEEP_SLOPE`, in metres of foothold displacement: a foot
 /// on a slope steeper than its friction cone slides down it.
 const STEEP_WEIGHT: f64 = 0.5;
