@@ -136,7 +136,7 @@ impl Default for ControllerConfig {
             f_max: 150.0,
             body_height: 0.28,
             mpc_q: [
-                2.0, 2.0, 5.0, 50.0, 50.0, 50.0, 0.05, 0.05, 0.3, 1.0, 1.0, 0.5, 0.0,
+                10.0, 10.0, 5.0, 50.0, 50.0, 50.0, 0.05, 0.05, 0.3, 1.0, 1.0, 0.5, 0.0,
             ],
             mpc_r: 1e-5,
             kp_swing: [60.0, 60.0, 60.0],
@@ -194,6 +194,85 @@ pub struct TerrainPlane {
     pub slope_x: f64,
     /// ∂z/∂y, dimensionless.
     pub slope_y: f64,
+}
+
+/// Side length (samples per row and column) of a [`HeightMap`].
+pub const HEIGHT_MAP_SIZE: usize = 11;
+/// Number of samples of a [`HeightMap`].
+pub const HEIGHT_MAP_CELLS: usize = HEIGHT_MAP_SIZE * HEIGHT_MAP_SIZE;
+
+/// Local terrain height samples around the robot (what a perception stack's elevation map gives):
+/// a square grid of `HEIGHT_MAP_SIZE`² heights, axis-aligned in the world frame, sample (ix, iy) at
+/// `origin + spacing·(ix, iy)`, stored row-major `heights[iy·HEIGHT_MAP_SIZE + ix]`. Between
+/// samples the surface is the triangle mesh through them, each cell split along its
+/// (ix, iy)–(ix+1, iy+1) diagonal (the triangulation of the simulated terrain mesh).
+/// `spacing` ≤ 0 means "no map": the controller then uses the [`TerrainPlane`] only.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeightMap {
+    /// World (x, y) of sample (0, 0), m.
+    pub origin: [f64; 2],
+    /// Distance between neighbouring samples, m (≤ 0: no map).
+    pub spacing: f64,
+    /// Heights, world z, m.
+    pub heights: [f64; HEIGHT_MAP_CELLS],
+}
+
+impl Default for HeightMap {
+    fn default() -> Self {
+        HeightMap {
+            origin: [0.0; 2],
+            spacing: 0.0,
+            heights: [0.0; HEIGHT_MAP_CELLS],
+        }
+    }
+}
+
+impl HeightMap {
+    /// Whether the map holds data (positive spacing).
+    pub fn is_present(&self) -> bool {
+        self.spacing > 0.0
+    }
+
+    /// Checks a present map for non-finite values.
+    pub fn validate(&self) -> Result<(), String> {
+        if !self.spacing.is_finite() || !self.origin.iter().all(|v| v.is_finite()) {
+            return Err("height map origin/spacing must be finite".into());
+        }
+        if self.is_present() {
+            if let Some(i) = self.heights.iter().position(|h| !h.is_finite()) {
+                return Err(format!("height map sample {i} = {}", self.heights[i]));
+            }
+        }
+        Ok(())
+    }
+
+    /// Terrain height at (x, y); `None` without a map or outside it.
+    pub fn height(&self, x: f64, y: f64) -> Option<f64> {
+        if !self.is_present() {
+            return None;
+        }
+        let last = (HEIGHT_MAP_SIZE - 1) as f64;
+        let fx = (x - self.origin[0]) / self.spacing;
+        let fy = (y - self.origin[1]) / self.spacing;
+        if !(fx >= 0.0 && fy >= 0.0 && fx <= last && fy <= last) {
+            return None;
+        }
+        // In range 0..=last, so the casts are exact.
+        let ix = (fx.floor() as usize).min(HEIGHT_MAP_SIZE - 2);
+        let iy = (fy.floor() as usize).min(HEIGHT_MAP_SIZE - 2);
+        let u = fx - ix as f64;
+        let v = fy - iy as f64;
+        let at = |i: usize, j: usize| self.heights[j * HEIGHT_MAP_SIZE + i];
+        let za = at(ix, iy);
+        let zb = at(ix + 1, iy);
+        let zc = at(ix + 1, iy + 1);
+        let zd = at(ix, iy + 1);
+        Some(if u >= v {
+            za + u * (zb - za) + v * (zc - zb)
+        } else {
+            za + u * (zc - zd) + v * (zd - za)
+        })
+    }
 }
 
 /// What the master asks for; the FSM decides (stand-up first, damping on faults).

@@ -15,12 +15,20 @@
 //! base position, the pitch reference follows the plane's slope along the heading (clamped to
 //! `max_terrain_pitch`), footholds are placed at the plane's height (plus the foot radius), and
 //! the MPC's friction pyramid is built about the plane's normal.
+//!
+//! With a local [`HeightMap`] (`Controller::set_height_map`) the plane is only the fallback and
+//! the friction normal: footholds take the map's height and are moved (by at most
+//! `FOOTHOLD_SEARCH_RADIUS`) off edges, wall feet and pit rims onto locally flat ground; the swing
+//! apex is raised to clear the terrain between lift-off and touchdown; the base height and pitch
+//! references follow the ground under the four nominal footholds. A single plane fitted around the
+//! reference point is badly wrong beside a wall, a pit or a valley side: footholds at its height
+//! land early, late or on a rim, which is what made the robot fall on the scenario maps.
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::api::{
-    Command, ControllerConfig, ControllerError, FsmState, Leg, ModeRequest, Reference, RobotState,
-    GRAVITY, NUM_JOINTS, NUM_LEGS,
+    Command, ControllerConfig, ControllerError, FsmState, HeightMap, Leg, ModeRequest, Reference,
+    RobotState, GRAVITY, NUM_JOINTS, NUM_LEGS,
 };
 use crate::gait::{swing_trajectory, Gait, LegPhase};
 use crate::model::{wrap_angle, RobotModel};
@@ -57,6 +65,17 @@ struct MotionTarget {
     yaw_rate: f64,
 }
 
+/// Where the base should stand relative to the ground its feet will use.
+#[derive(Clone, Copy, Debug)]
+struct StanceGround {
+    /// Mean terrain height under the footholds, m.
+    height: f64,
+    /// Pitch reference, rad.
+    pitch: f64,
+    /// Mean displacement of the footholds from their nominal positions, world xy, m.
+    shift: [f64; 2],
+}
+
 /// The quadruped controller (see the crate docs for the API contract).
 pub struct Controller {
     model: RobotModel,
@@ -87,7 +106,31 @@ pub struct Controller {
     mpc_reference: Vec<[f64; MPC_STATES]>,
     mpc_schedule: Vec<[bool; NUM_LEGS]>,
     mpc_offsets: Vec<[[f64; 3]; NUM_LEGS]>,
+    height_map: HeightMap,
 }
+
+/// Largest distance a foothold is moved from its Raibert position to find flat ground, m.
+pub const FOOTHOLD_SEARCH_RADIUS: f64 = 0.2;
+/// Candidates per ring of the foothold search (ring k at radius k/(len − 1) of the search radius).
+const FOOTHOLD_RINGS: [usize; 6] = [1, 8, 12, 16, 16, 20];
+/// Distance at which the foothold search probes the height around a candidate, m.
+const EDGE_PROBE: f64 = 0.05;
+/// Cost of one metre of height change around a candidate, in metres of foothold displacement.
+const EDGE_WEIGHT: f64 = 2.0;
+/// Steepest local slope (rise over run within `EDGE_PROBE`) a foothold may have without extra
+/// cost: about half the friction cone of the feet (μ ≈ 0.8 in simulation).
+const STEEP_SLOPE: f64 = 0.6;
+/// Cost per unit of local slope beyond `STEEP_SLOPE`, in metres of foothold displacement: a foot
+/// on a slope steeper than its friction cone slides down it.
+const STEEP_WEIGHT: f64 = 0.5;
+/// Fraction of the mean foothold displacement the base reference follows.
+const BODY_SHIFT_GAIN: f64 = 1.0;
+/// Largest shift of the base reference towards displaced footholds, m.
+const MAX_BODY_SHIFT: f64 = 0.1;
+/// Clearance the swing foot keeps above the terrain between lift-off and touchdown, m.
+const SWING_TERRAIN_MARGIN: f64 = 0.06;
+/// Highest swing apex (above the lift-off/touchdown line) the clearance logic may ask for, m.
+const MAX_SWING_HEIGHT: f64 = 0.2;
 
 fn smoothstep(s: f64) -> f64 {
     let s = s.clamp(0.0, 1.0);
@@ -291,10 +334,25 @@ impl Controller {
             mpc_reference: vec![[0.0; MPC_STATES]; n],
             mpc_schedule: vec![[false; NUM_LEGS]; n],
             mpc_offsets: vec![[[0.0; 3]; NUM_LEGS]; n],
+            height_map: HeightMap::default(),
             mpc,
             model,
             config,
         })
+    }
+
+    /// Sets the local terrain height map used from the next `step` on (a map with spacing ≤ 0
+    /// clears it: the terrain plane of the reference is used alone). On an invalid map the
+    /// previous one is kept and an error returned.
+    pub fn set_height_map(&mut self, map: &HeightMap) -> Result<(), ControllerError> {
+        map.validate().map_err(ControllerError::InvalidReference)?;
+        self.height_map = *map;
+        Ok(())
+    }
+
+    /// The height map in use.
+    pub fn height_map(&self) -> &HeightMap {
+        &self.height_map
     }
 
     /// Current FSM state.
@@ -665,7 +723,7 @@ impl Controller {
                     let sample = swing_trajectory(
                         [start.x, start.y, start.z],
                         [end.x, end.y, end.z],
-                        self.config.swing_height,
+                        self.swing_apex(reference, &start, &end),
                         self.gait.swing_time(),
                         s,
                     );
@@ -713,11 +771,136 @@ impl Controller {
         offset.y = offset.y.clamp(-limit, limit);
         let x = base_at_touchdown.x + hip.x + offset.x;
         let y = base_at_touchdown.y + hip.y + offset.y;
-        Vector3::new(
-            x,
-            y,
-            terrain_height(reference, x, y) + self.model.foot_radius(),
-        )
+        self.select_foothold(reference, x, y)
+    }
+
+    /// Terrain height at (x, y): the height map where it covers the point, else the plane.
+    fn ground(&self, reference: &Reference, x: f64, y: f64) -> f64 {
+        self.height_map
+            .height(x, y)
+            .unwrap_or_else(|| terrain_height(reference, x, y))
+    }
+
+    /// Largest height change within `EDGE_PROBE` of (x, y) (8 directions); `None` off the map.
+    fn edge_measure(&self, x: f64, y: f64) -> Option<f64> {
+        let map = &self.height_map;
+        let centre = map.height(x, y)?;
+        let diagonal = EDGE_PROBE * std::f64::consts::FRAC_1_SQRT_2;
+        let probes = [
+            (EDGE_PROBE, 0.0),
+            (-EDGE_PROBE, 0.0),
+            (0.0, EDGE_PROBE),
+            (0.0, -EDGE_PROBE),
+            (diagonal, diagonal),
+            (diagonal, -diagonal),
+            (-diagonal, diagonal),
+            (-diagonal, -diagonal),
+        ];
+        let mut edge: f64 = 0.0;
+        for (dx, dy) in probes {
+            match map.height(x + dx, y + dy) {
+                Some(h) => edge = edge.max((h - centre).abs()),
+                None => return None,
+            }
+        }
+        Some(edge)
+    }
+
+    /// Foot (sphere centre) target near the nominal foothold (x, y): with a height map, the
+    /// candidate within `FOOTHOLD_SEARCH_RADIUS` minimising displacement + `EDGE_WEIGHT`·edge +
+    /// `STEEP_WEIGHT`·(slope − `STEEP_SLOPE`)⁺
+    /// (rings of `FOOTHOLD_RINGS` candidates; ties keep the earlier, nearer one), at the map's
+    /// height; without one, (x, y) at the plane's height.
+    fn select_foothold(&self, reference: &Reference, x: f64, y: f64) -> Vector3<f64> {
+        let radius = self.model.foot_radius();
+        let mut best: Option<(f64, f64, f64)> = None;
+        if self.height_map.is_present() {
+            for (k, count) in FOOTHOLD_RINGS.iter().enumerate() {
+                let ring = FOOTHOLD_SEARCH_RADIUS * k as f64 / (FOOTHOLD_RINGS.len() - 1) as f64;
+                let count = *count;
+                for i in 0..count {
+                    let angle = std::f64::consts::TAU * i as f64 / count as f64;
+                    let cx = x + ring * angle.cos();
+                    let cy = y + ring * angle.sin();
+                    if let Some(edge) = self.edge_measure(cx, cy) {
+                        let steep = (edge / EDGE_PROBE - STEEP_SLOPE).max(0.0);
+                        let cost = ring + EDGE_WEIGHT * edge + STEEP_WEIGHT * steep;
+                        if best.map_or(true, |(c, _, _)| cost < c - 1e-9) {
+                            best = Some((cost, cx, cy));
+                        }
+                    }
+                }
+            }
+        }
+        let (fx, fy) = best.map_or((x, y), |(_, bx, by)| (bx, by));
+        Vector3::new(fx, fy, self.ground(reference, fx, fy) + radius)
+    }
+
+    /// Swing apex height (above the straight lift-off → touchdown line) that keeps the foot
+    /// `SWING_TERRAIN_MARGIN` above the terrain along the way: at least `swing_height`, at most
+    /// `MAX_SWING_HEIGHT`.
+    fn swing_apex(&self, reference: &Reference, start: &Vector3<f64>, end: &Vector3<f64>) -> f64 {
+        let nominal = self.config.swing_height;
+        if !self.height_map.is_present() {
+            return nominal;
+        }
+        // The bump is 64·h·u³ (u = s(1 − s)): ask for `SWING_TERRAIN_MARGIN` of it above the
+        // terrain's rise over the lift-off → touchdown line, on the middle of the swing only (at
+        // the ends the foot is on the ground by construction).
+        let radius = self.model.foot_radius();
+        let mut apex = nominal;
+        for i in 2..=8 {
+            let s = 0.1 * i as f64;
+            let blend = 3.0 * s * s - 2.0 * s * s * s;
+            let p = start + (end - start) * blend;
+            let rise = self.ground(reference, p.x, p.y) + radius - p.z;
+            if rise > 0.0 {
+                let u = s * (1.0 - s);
+                let shape = 64.0 * u * u * u;
+                apex = apex.max(SWING_TERRAIN_MARGIN + rise / shape);
+            }
+        }
+        apex.min(MAX_SWING_HEIGHT.max(nominal))
+    }
+
+    /// Ground height, pitch and xy shift reference for a base at (x, y) facing `yaw`: the mean
+    /// terrain height, the front/rear slope and the mean displacement of the (edge-avoiding)
+    /// nominal footholds under the hips with a height map; the plane and no shift otherwise.
+    fn stance_ground(&self, reference: &Reference, x: f64, y: f64, yaw: f64) -> StanceGround {
+        let plane_pitch = self.terrain_pitch(reference, yaw);
+        if !self.height_map.is_present() {
+            return StanceGround {
+                height: terrain_height(reference, x, y),
+                pitch: plane_pitch,
+                shift: [0.0; 2],
+            };
+        }
+        let rotation = rot_z(yaw);
+        let mut heights = [0.0; NUM_LEGS];
+        let mut shift = [0.0; 2];
+        for leg in Leg::ALL {
+            let hip = rotation * self.nominal_feet_body[leg.index()];
+            let foot = self.select_foothold(reference, x + hip.x, y + hip.y);
+            heights[leg.index()] = foot.z - self.model.foot_radius();
+            shift[0] += (foot.x - x - hip.x) / NUM_LEGS as f64;
+            shift[1] += (foot.y - y - hip.y) / NUM_LEGS as f64;
+        }
+        let mean = heights.iter().sum::<f64>() / NUM_LEGS as f64;
+        let front = 0.5 * (heights[Leg::FR.index()] + heights[Leg::FL.index()]);
+        let rear = 0.5 * (heights[Leg::RR.index()] + heights[Leg::RL.index()]);
+        let length =
+            self.nominal_feet_body[Leg::FR.index()].x - self.nominal_feet_body[Leg::RR.index()].x;
+        let limit = self.config.max_terrain_pitch;
+        let pitch = if length > 1e-6 {
+            (-((front - rear) / length).atan()).clamp(-limit, limit)
+        } else {
+            plane_pitch
+        };
+        StanceGround {
+            height: mean,
+            pitch,
+            shift,
+        }
     }
 
     fn body_height(&self, reference: &Reference) -> f64 {
@@ -789,6 +972,16 @@ impl Controller {
         if error.norm() > max_error {
             start = base_xy + error * (max_error / error.norm());
         }
+        // Beside a wall or a rim the footholds of one side move inwards; the base follows its
+        // feet by their mean displacement so that the support stays balanced about the CoM.
+        let shift = self
+            .stance_ground(reference, start.x, start.y, target.yaw)
+            .shift;
+        let mut shift = Vector3::new(shift[0], shift[1], 0.0) * BODY_SHIFT_GAIN;
+        if shift.norm() > MAX_BODY_SHIFT {
+            shift *= MAX_BODY_SHIFT / shift.norm();
+        }
+        start += shift;
         let velocity0 = Vector3::new(target.velocity[0], target.velocity[1], 0.0);
         let mut base_xy_k = start;
         for k in 0..n {
@@ -796,8 +989,11 @@ impl Controller {
             let yaw_k = target.yaw + target.yaw_rate * tk;
             let velocity_k = rot_z(target.yaw_rate * tk) * velocity0;
             base_xy_k += velocity_k * dt;
-            let ground = terrain_height(reference, base_xy_k.x, base_xy_k.y);
-            let pitch = self.terrain_pitch(reference, yaw_k);
+            let StanceGround {
+                height: ground,
+                pitch,
+                ..
+            } = self.stance_ground(reference, base_xy_k.x, base_xy_k.y, yaw_k);
             let com_k = Vector3::new(base_xy_k.x, base_xy_k.y, ground + height)
                 + rot_z(yaw_k) * self.com_offset_body;
             let vz =
@@ -836,7 +1032,7 @@ impl Controller {
                 };
             }
         }
-        let normal = terrain_normal(reference);
+        let normal = self.friction_normal(reference, sense, contacts);
         let input = MpcInput {
             x0,
             reference: &self.mpc_reference,
@@ -857,6 +1053,42 @@ impl Controller {
             self.forces = [[0.0, 0.0, share]; NUM_LEGS];
         }
         self.zero_swing_forces(contacts);
+    }
+
+    /// Normal of the MPC's friction pyramids: with a height map, the mean of the local terrain
+    /// normals under the stance feet (a plane fitted around the base tilts by tens of degrees
+    /// beside a valley side or a wall while the feet stand on flat ground), else the plane's.
+    fn friction_normal(
+        &self,
+        reference: &Reference,
+        sense: &Sense,
+        contacts: [bool; NUM_LEGS],
+    ) -> Vector3<f64> {
+        let map = &self.height_map;
+        let d = EDGE_PROBE;
+        let mut sum = Vector3::zeros();
+        for leg in Leg::ALL {
+            let l = leg.index();
+            if !contacts[l] {
+                continue;
+            }
+            let p = sense.feet_world[l];
+            let samples = (
+                map.height(p.x + d, p.y),
+                map.height(p.x - d, p.y),
+                map.height(p.x, p.y + d),
+                map.height(p.x, p.y - d),
+            );
+            if let (Some(xp), Some(xm), Some(yp), Some(ym)) = samples {
+                sum +=
+                    Vector3::new(-(xp - xm) / (2.0 * d), -(yp - ym) / (2.0 * d), 1.0).normalize();
+            }
+        }
+        if sum.norm() > 1e-9 {
+            sum.normalize()
+        } else {
+            terrain_normal(reference)
+        }
     }
 
     fn zero_swing_forces(&mut self, contacts: [bool; NUM_LEGS]) {

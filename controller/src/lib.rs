@@ -15,6 +15,10 @@
 //!   stand-up gains, fault thresholds); `Default` is the tuned set, JSON field names = Rust names,
 //!   unknown fields are rejected.
 //! - [`Reference::body_height`] ≤ 0 selects the configured nominal height.
+//! - [`Controller::set_height_map`] takes a local elevation map ([`HeightMap`], 11×11 samples
+//!   around the robot; the FMU inputs `terrain.map.*`). With it footholds use the map's height and
+//!   avoid edges and steep spots, the swing apex clears the terrain, the base height, pitch and
+//!   xy follow the footholds and the friction normal is the ground's under the stance feet.
 //! - Leg dynamics take gravity in the base frame: `leg_bias(leg, q, dq, gravity_base)`.
 //! - The MPC is exposed as [`mpc::ConvexMpc`] (used by the benchmark and tests); the OSQP
 //!   comparison in `benches/mpc.rs` uses the `osqp` crate 0.6 behind the `osqp-bench` feature,

@@ -1,7 +1,9 @@
 //! One FMU instance: the FMI 2.0 Co-Simulation call-state machine around a `Controller`.
 //! Everything here is safe Rust; `exports.rs` only converts the C arguments.
 
-use quad_controller::{Command, Controller, ControllerConfig, FsmState, Reference, RobotState};
+use quad_controller::{
+    Command, Controller, ControllerConfig, FsmState, HeightMap, Reference, RobotState,
+};
 
 use crate::ffi::Fmi2Status;
 use crate::logger::Logger;
@@ -54,6 +56,7 @@ pub struct Instance {
     config: ControllerConfig,
     state: RobotState,
     reference: Reference,
+    height_map: HeightMap,
     command: Command,
     controller: Option<Controller>,
     start_time: f64,
@@ -76,6 +79,7 @@ impl Instance {
             config,
             state,
             reference,
+            height_map: HeightMap::default(),
             command: initial_command(),
             controller: None,
             start_time: 0.0,
@@ -204,7 +208,7 @@ impl Instance {
             let value = match variable.binding {
                 Binding::Parameter(param) => Some(param.read(&self.config)),
                 b => read_output(b, &self.command)
-                    .or_else(|| read_input(b, &self.state, &self.reference)),
+                    .or_else(|| read_input(b, &self.state, &self.reference, &self.height_map)),
             };
             // Every binding is either a parameter, an input or an output (see the table tests).
             let value = value.ok_or(FmuError::UnknownValueReference { vr, expected })?;
@@ -250,7 +254,13 @@ impl Instance {
         for (variable, value) in checked {
             match variable.binding {
                 Binding::Parameter(param) => param.write(&mut self.config, value),
-                b => write_input(b, value, &mut self.state, &mut self.reference),
+                b => write_input(
+                    b,
+                    value,
+                    &mut self.state,
+                    &mut self.reference,
+                    &mut self.height_map,
+                ),
             }
         }
         Ok(())
@@ -290,6 +300,15 @@ impl Instance {
             ));
         };
         let fsm_before = self.command.fsm_state;
+        if let Err(e) = controller.set_height_map(&self.height_map) {
+            self.command = controller.safe_command(&self.state);
+            self.phase = Phase::StepFailed;
+            self.last_successful_time = self.start_time + self.ticks_done as f64 * dt;
+            return Err(FmuError::StepRejected {
+                time: self.last_successful_time,
+                reason: e.to_string(),
+            });
+        }
         while self.ticks_done < target {
             match controller.step(&self.state, &self.reference, dt) {
                 Ok(command) => {

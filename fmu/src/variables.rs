@@ -7,8 +7,8 @@
 use std::sync::OnceLock;
 
 use quad_controller::{
-    Command, ControllerConfig, FsmState, GaitKind, ModeRequest, Reference, RobotState, NUM_JOINTS,
-    NUM_LEGS,
+    Command, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference, RobotState,
+    HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
 };
 
 use crate::FmuError;
@@ -353,6 +353,12 @@ pub enum Binding {
     TerrainSlopeX,
     /// `Reference::terrain.slope_y`.
     TerrainSlopeY,
+    /// `HeightMap::origin[i]`.
+    HeightMapOrigin(usize),
+    /// `HeightMap::spacing`.
+    HeightMapSpacing,
+    /// `HeightMap::heights[i]`.
+    HeightMapHeight(usize),
     /// `Reference::mode`.
     ModeRequest,
     /// `Command::joint_torques[i]`.
@@ -661,6 +667,39 @@ fn build_table() -> Vec<Variable> {
             binding,
         );
     }
+    // Inputs: local terrain height map (elevation map around the robot).
+    let map = HeightMap::default();
+    for (i, axis) in ["x0", "y0"].iter().enumerate() {
+        t.input(
+            format!("terrain.map.{axis}"),
+            map.origin[i],
+            format!("World {} of height-map sample (1, 1)", &axis[..1]),
+            Some(Metre),
+            Binding::HeightMapOrigin(i),
+        );
+    }
+    t.input(
+        "terrain.map.spacing".to_owned(),
+        map.spacing,
+        format!(
+            "Height-map sample spacing (<= 0: no map, the terrain plane is used alone); the map has {HEIGHT_MAP_SIZE}x{HEIGHT_MAP_SIZE} samples, triangulated like the terrain mesh"
+        ),
+        Some(Metre),
+        Binding::HeightMapSpacing,
+    );
+    for i in 0..HEIGHT_MAP_CELLS {
+        t.input(
+            format!("terrain.map.h[{}]", i + 1),
+            map.heights[i],
+            format!(
+                "Terrain height of height-map sample (ix={}, iy={}) at (x0 + ix*spacing, y0 + iy*spacing), row-major by iy",
+                i % HEIGHT_MAP_SIZE,
+                i / HEIGHT_MAP_SIZE
+            ),
+            Some(Metre),
+            Binding::HeightMapHeight(i),
+        );
+    }
     t.push(
         "cmd.mode".to_owned(),
         Causality::Input,
@@ -966,7 +1005,12 @@ pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
 }
 
 /// Reads an input variable from the stored inputs.
-pub fn read_input(binding: Binding, state: &RobotState, reference: &Reference) -> Option<Value> {
+pub fn read_input(
+    binding: Binding,
+    state: &RobotState,
+    reference: &Reference,
+    map: &HeightMap,
+) -> Option<Value> {
     let real = match binding {
         Binding::BasePosition(i) => state.base_position[i],
         Binding::BaseOrientation(i) => state.base_orientation[i],
@@ -984,6 +1028,9 @@ pub fn read_input(binding: Binding, state: &RobotState, reference: &Reference) -
         Binding::RefBodyHeight => reference.body_height,
         Binding::TerrainSlopeX => reference.terrain.slope_x,
         Binding::TerrainSlopeY => reference.terrain.slope_y,
+        Binding::HeightMapOrigin(i) => map.origin[i],
+        Binding::HeightMapSpacing => map.spacing,
+        Binding::HeightMapHeight(i) => map.heights[i],
         Binding::ModeRequest => return Some(Value::Integer(reference.mode.as_code())),
         _ => return None,
     };
@@ -996,6 +1043,7 @@ pub fn write_input(
     value: Value,
     state: &mut RobotState,
     reference: &mut Reference,
+    map: &mut HeightMap,
 ) {
     if let (Binding::ModeRequest, Value::Integer(code)) = (binding, value) {
         if let Some(mode) = ModeRequest::from_code(code) {
@@ -1021,6 +1069,9 @@ pub fn write_input(
         Binding::RefBodyHeight => &mut reference.body_height,
         Binding::TerrainSlopeX => &mut reference.terrain.slope_x,
         Binding::TerrainSlopeY => &mut reference.terrain.slope_y,
+        Binding::HeightMapOrigin(i) => &mut map.origin[i],
+        Binding::HeightMapSpacing => &mut map.spacing,
+        Binding::HeightMapHeight(i) => &mut map.heights[i],
         _ => return,
     };
     *field = v;
@@ -1058,7 +1109,8 @@ mod tests {
     fn table_has_the_documented_signals() {
         let count = |c: Causality| table().iter().filter(|v| v.causality == c).count();
         // 3 pos + 4 quat + 3 vel + 3 omega + 12 q + 12 dq + 10 reference/terrain + cmd.mode
-        assert_eq!(count(Causality::Input), 48);
+        // + height map (x0, y0, spacing, 121 heights)
+        assert_eq!(count(Causality::Input), 48 + 3 + HEIGHT_MAP_CELLS);
         // 12 tau + 4 contact + fsm + 12 force + solve time + solved
         assert_eq!(count(Causality::Output), 31);
         for name in [
@@ -1090,6 +1142,7 @@ mod tests {
     #[test]
     fn every_binding_round_trips_through_its_storage() {
         let (mut state, mut reference) = initial_inputs();
+        let mut map = HeightMap::default();
         let mut config = ControllerConfig::default();
         for (k, v) in table().iter().enumerate() {
             let probe = match v.start {
@@ -1105,13 +1158,18 @@ mod tests {
                 }
                 b if v.causality == Causality::Input => {
                     assert_eq!(
-                        read_input(b, &state, &reference),
+                        read_input(b, &state, &reference, &map),
                         Some(v.start),
                         "{}",
                         v.name
                     );
-                    write_input(b, probe, &mut state, &mut reference);
-                    assert_eq!(read_input(b, &state, &reference), Some(probe), "{}", v.name);
+                    write_input(b, probe, &mut state, &mut reference, &mut map);
+                    assert_eq!(
+                        read_input(b, &state, &reference, &map),
+                        Some(probe),
+                        "{}",
+                        v.name
+                    );
                 }
                 b => assert_eq!(
                     read_output(b, &initial_command()),

@@ -98,3 +98,22 @@ def test_obstacles_are_loaded_and_queried(tmp_path: Path, scenario_writer: Calla
     assert s.terrain.is_obstacle(3.5, 2.5)
     assert not s.terrain.is_obstacle(2.5, 2.5)
     assert not s.terrain.is_obstacle(-1.0, 2.5)
+
+
+def test_local_grid_is_the_block_of_mesh_vertices_around_a_point() -> None:
+    rng = np.random.default_rng(3)
+    heights = rng.uniform(0.0, 0.5, size=(20, 30))
+    terrain = Terrain((1.0, -2.0), 0.125, heights)
+    grid = terrain.local_grid(2.3, -1.0, 11)
+    assert grid is not None
+    x0, y0, block = grid
+    assert block.shape == (11, 11)
+    # The block's vertices are mesh vertices: the surface passes through them.
+    for iy in (0, 4, 10):
+        for ix in (0, 7, 10):
+            assert terrain.height_at(x0 + ix * 0.125, y0 + iy * 0.125) == pytest.approx(block[iy, ix])
+    # Centred on the nearest vertex, clamped inside the map near its border.
+    assert abs(x0 + 5 * 0.125 - 2.3) <= 0.0625 + 1e-12
+    x0_edge, y0_edge, _ = terrain.local_grid(1.0, -2.0, 11) or (0.0, 0.0, None)
+    assert (x0_edge, y0_edge) == pytest.approx((1.0625, -1.9375))
+    assert terrain.local_grid(2.3, -1.0, 31) is None

@@ -46,6 +46,8 @@ class CoSimConfig:
     plane_radius: float = 0.3
     # Moving-average window (s) over the plan's heading and velocity feed-forward (positions untouched).
     heading_smoothing: float = 1.0
+    # Feed the controller the local elevation map (mesh vertices around the base) when its FMU has the inputs.
+    height_map: bool = True
     fall: FallThresholds = field(default_factory=FallThresholds)
     # Hard cap on simulated time (None: stand + plan + settle).
     max_duration: float | None = None
@@ -161,7 +163,10 @@ class CoSimulation:
         inputs = fmu.real_inputs
         state = inputs[0 : fr.N_STATE]
         ref_in = inputs[fr.N_STATE : fr.N_STATE + fr.N_REF]
-        terrain_in = inputs[fr.N_STATE + fr.N_REF :]
+        terrain_in = inputs[fr.N_STATE + fr.N_REF : fr.N_STATE + fr.N_REF + fr.N_TERRAIN]
+        map_in = inputs[fr.N_STATE + fr.N_REF + fr.N_TERRAIN :]
+        terrain = self.scenario.terrain
+        use_map = c.height_map and getattr(fmu, "has_height_map", False)
         ref_row = np.zeros(N_COLUMNS)
         torques = np.zeros(NUM_JOINTS)
         timing = Timing()
@@ -191,6 +196,14 @@ class CoSimulation:
                 terrain_in[0] = ref_row[T_HEIGHT]
                 terrain_in[1] = ref_row[T_DZDX]
                 terrain_in[2] = ref_row[T_DZDY]
+                # The elevation map a perception stack would give: the mesh vertices around the base.
+                grid = terrain.local_grid(float(state[0]), float(state[1]), fr.HEIGHT_MAP_SIZE) if use_map else None
+                if grid is None:
+                    map_in[2] = 0.0
+                else:
+                    map_in[0], map_in[1] = grid[0], grid[1]
+                    map_in[2] = terrain.resolution
+                    map_in[3:] = grid[2].ravel()
                 mode = fr.MODE_LOCOMOTION if walking else fr.MODE_STAND
                 t0 = perf()
                 fmu.exchange_inputs(mode)

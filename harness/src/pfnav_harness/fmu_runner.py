@@ -30,6 +30,11 @@ STATE_INPUTS = (
 )
 REFERENCE_INPUTS = ["ref.x", "ref.y", "ref.z", "ref.yaw", "ref.vx", "ref.vy", "ref.yawRate", "ref.bodyHeight"]
 TERRAIN_INPUTS = ["terrain.height", "terrain.dzdx", "terrain.dzdy"]
+# Local elevation map around the robot (HEIGHT_MAP_SIZE² mesh vertices); optional.
+HEIGHT_MAP_SIZE = 11
+HEIGHT_MAP_INPUTS = ["terrain.map.x0", "terrain.map.y0", "terrain.map.spacing"] + [
+    f"terrain.map.h[{i}]" for i in range(1, HEIGHT_MAP_SIZE * HEIGHT_MAP_SIZE + 1)
+]
 MODE_INPUT = "cmd.mode"
 TORQUE_OUTPUTS = [f"joint.tau[{i}]" for i in range(1, 13)]
 FORCE_OUTPUTS = [f"force[{k}].{c}" for k in range(1, 5) for c in "xyz"]
@@ -45,7 +50,8 @@ MODE_LOCOMOTION = 2
 N_STATE = len(STATE_INPUTS)
 N_REF = len(REFERENCE_INPUTS)
 N_TERRAIN = len(TERRAIN_INPUTS)
-N_REAL_INPUTS = N_STATE + N_REF + N_TERRAIN
+N_MAP = len(HEIGHT_MAP_INPUTS)
+N_REAL_INPUTS = N_STATE + N_REF + N_TERRAIN + N_MAP
 N_REAL_OUTPUTS = len(TORQUE_OUTPUTS) + len(FORCE_OUTPUTS) + 1
 
 
@@ -92,11 +98,12 @@ class ControllerFmu:
             v = variables.get(name)
             return None if v is None else int(v.valueReference)
 
-        real_in_names = STATE_INPUTS + REFERENCE_INPUTS + TERRAIN_INPUTS
+        real_in_names = STATE_INPUTS + REFERENCE_INPUTS + TERRAIN_INPUTS + HEIGHT_MAP_INPUTS
         # Terrain inputs and a few outputs are optional: an FMU without them still runs.
         self._real_in_mask = np.array([vr(n) is not None for n in real_in_names])
         in_vrs = [vr(n) for n in real_in_names if vr(n) is not None]
         self.missing_optional = [n for n in real_in_names if vr(n) is None]
+        self.has_height_map = all(vr(n) is not None for n in HEIGHT_MAP_INPUTS)
         out_names = TORQUE_OUTPUTS + FORCE_OUTPUTS + [SOLVE_TIME_OUTPUT]
         self._real_out_mask = np.array([vr(n) is not None for n in out_names])
         out_vrs = [vr(n) for n in out_names if vr(n) is not None]

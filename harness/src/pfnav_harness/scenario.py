@@ -124,6 +124,24 @@ class Terrain:
     def height_at(self, x: float, y: float) -> float:
         return float(self.height(x, y))
 
+    def local_grid(self, x: float, y: float, size: int) -> tuple[float, float, FloatArray] | None:
+        """The `size`×`size` block of mesh vertices nearest to (x, y) (kept inside the map).
+
+        Returns the world (x, y) of its first vertex and the heights (rows along y), or None when
+        the map is smaller than the block. The mesh between these vertices is exactly the terrain.
+        """
+        ny, nx = self.shape
+        if size < 2 or nx < size or ny < size:
+            return None
+        res = self.resolution
+        ix0 = round((x - self.origin[0]) / res - 0.5) - size // 2
+        iy0 = round((y - self.origin[1]) / res - 0.5) - size // 2
+        ix0 = min(max(ix0, 0), nx - size)
+        iy0 = min(max(iy0, 0), ny - size)
+        x0 = self.origin[0] + (ix0 + 0.5) * res
+        y0 = self.origin[1] + (iy0 + 0.5) * res
+        return x0, y0, self.heights[iy0 : iy0 + size, ix0 : ix0 + size]
+
     def plane(self, x: float, y: float, radius: float = 0.3, samples: int = 7) -> TerrainPlane:
         """Least-squares plane of the surface over a square window around (x, y).
 
