@@ -1204,9 +1204,9 @@ impl Controller {
         let mut q = current;
         for scale in [1.0, 0.95, 0.9, 0.8, 0.7] {
             let target = hip + (p_body - hip) * scale;
-            if let Ok(solution) = self
+            if let Some(solution) = self
                 .model
-                .inverse_kinematics(leg, [target.x, target.y, target.z])
+                .try_inverse_kinematics(leg, [target.x, target.y, target.z])
             {
                 q = solution;
                 break;

@@ -135,6 +135,15 @@ pub struct RobotModel {
     foot_radius: f64,
 }
 
+/// Why an IK target was not reached (turned into [`ModelError::Unreachable`] on demand).
+#[derive(Clone, Copy, Debug)]
+enum IkFailure {
+    NotFinite,
+    InsideOffset,
+    OutOfReach { reach: f64, min: f64, max: f64 },
+    NotConverged { residual: f64 },
+}
+
 fn finite3(v: &[f64; 3], what: &str) -> Result<(), ModelError> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
@@ -595,11 +604,32 @@ impl RobotModel {
     /// branch (knee angle < 0), foot below the hip axis in the leg plane. Closed-form for the nominal layout, refined by Newton steps on
     /// the full URDF kinematics. Joint limits are not enforced here (callers clamp).
     pub fn inverse_kinematics(&self, leg: Leg, p_body: [f64; 3]) -> Result<[f64; 3], ModelError> {
-        if p_body.iter().any(|v| !v.is_finite()) {
-            return Err(ModelError::Unreachable {
+        self.solve_ik(leg, p_body)
+            .map_err(|failure| ModelError::Unreachable {
                 leg,
-                reason: "target is not finite".into(),
-            });
+                reason: match failure {
+                    IkFailure::NotFinite => "target is not finite".into(),
+                    IkFailure::InsideOffset => "target inside the abduction offset".into(),
+                    IkFailure::OutOfReach { reach, min, max } => {
+                        format!("distance {reach:.4} m outside [{min:.4}, {max:.4}] m")
+                    }
+                    IkFailure::NotConverged { residual } => {
+                        format!("IK did not converge (residual {residual:.2e} m)")
+                    }
+                },
+            })
+    }
+
+    /// [`RobotModel::inverse_kinematics`] without building an error message: for callers that
+    /// retry or fall back on failure every control tick (formatting the message's floats cost
+    /// more than the IK itself).
+    pub(crate) fn try_inverse_kinematics(&self, leg: Leg, p_body: [f64; 3]) -> Option<[f64; 3]> {
+        self.solve_ik(leg, p_body).ok()
+    }
+
+    fn solve_ik(&self, leg: Leg, p_body: [f64; 3]) -> Result<[f64; 3], IkFailure> {
+        if p_body.iter().any(|v| !v.is_finite()) {
+            return Err(IkFailure::NotFinite);
         }
         let g = &self.legs[leg.index()].geometry;
         let rel = Vector3::new(p_body[0], p_body[1], p_body[2]) - g.abd_origin;
@@ -607,10 +637,7 @@ impl RobotModel {
         let (l1, l2) = (g.thigh_length, g.calf_length);
         let yz_sq = rel.y * rel.y + rel.z * rel.z;
         if yz_sq < d * d + 1e-12 {
-            return Err(ModelError::Unreachable {
-                leg,
-                reason: "target inside the abduction offset".into(),
-            });
+            return Err(IkFailure::InsideOffset);
         }
         let z_plane = -(yz_sq - d * d).sqrt();
         let q0 = rel.z.atan2(rel.y) - z_plane.atan2(d);
@@ -618,13 +645,10 @@ impl RobotModel {
         let reach_sq = x_plane * x_plane + z_plane * z_plane;
         let reach = reach_sq.sqrt();
         if reach > l1 + l2 - 1e-9 || reach < (l1 - l2).abs() + 1e-9 {
-            return Err(ModelError::Unreachable {
-                leg,
-                reason: format!(
-                    "distance {reach:.4} m outside [{:.4}, {:.4}] m",
-                    (l1 - l2).abs(),
-                    l1 + l2
-                ),
+            return Err(IkFailure::OutOfReach {
+                reach,
+                min: (l1 - l2).abs(),
+                max: l1 + l2,
             });
         }
         let cos_knee = ((reach_sq - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)).clamp(-1.0, 1.0);
@@ -648,10 +672,7 @@ impl RobotModel {
         }
         let residual = (target - self.frames(leg, q).foot).norm();
         if residual > 1e-6 {
-            return Err(ModelError::Unreachable {
-                leg,
-                reason: format!("IK did not converge (residual {residual:.2e} m)"),
-            });
+            return Err(IkFailure::NotConverged { residual });
         }
         Ok(q)
     }

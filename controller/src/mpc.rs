@@ -1,5 +1,5 @@
 //! Convex MPC on ground reaction forces (Di Carlo et al., "Dynamic Locomotion in the MIT Cheetah 3
-//! Through Convex Model-Predictive Control", 2018), solved as a condensed QP with Clarabel.
+//! Through Convex Model-Predictive Control", 2018), solved as a sparse QP with Clarabel.
 //!
 //! Model: single rigid body with 13 states
 //! `x = [roll, pitch, yaw, p_x, p_y, p_z, ω_x, ω_y, ω_z, v_x, v_y, v_z, g]`
@@ -14,13 +14,22 @@
 //! per stance foot: friction pyramid about the terrain normal n with tangents t₁, t₂
 //! (`|f·tⱼ| ≤ μ f·n`) and `f_min ≤ f·n ≤ f_max`.
 //!
-//! Cost: `Σ_k (x_k − x_ref,k)ᵀ Q (x_k − x_ref,k) + Σ_k u_kᵀ R u_k`, condensed to
-//! `½ Uᵀ P U + qᵀ U` with `P = 2(S_uᵀ Q̄ S_u + R̄)` and `q = 2 S_uᵀ Q̄ (S_x x₀ − X_ref)`.
+//! Cost: `Σ_k (x_k − x_ref,k)ᵀ Q (x_k − x_ref,k) + Σ_k u_kᵀ R u_k`.
 //!
-//! Reuse: all dense work buffers are allocated once; Clarabel solvers are cached per contact
-//! schedule over the horizon (which fixes the sparsity of P and A), and later solves with the same
-//! schedule only update the numeric values (`update_P/q/A/b`), skipping symbolic setup.
+//! Formulation (sparse, not condensed): the predicted states x_1..x_N (first 12 components; the
+//! constant g is folded into an offset) are QP variables next to the forces, and the dynamics
+//! `x_{k+1} = A_k x_k + B_k u_k` are equality constraints. P is then diagonal and the KKT matrix
+//! is banded (stage-wise), so Clarabel's sparse LDL costs O(N) per iteration instead of the
+//! O(n_u³) of the dense condensed Hessian (which also made every KKT product O(n_u²)). Forces are
+//! scaled to units of m·g inside the QP. The optimum is the one of the condensed QP
+//! ([`ConvexMpc::last_qp`]), which the tests check.
+//!
+//! Reuse: all work buffers are allocated once; Clarabel solvers are cached per contact schedule
+//! over the horizon (which fixes the sparsity of P and A), and later solves with the same
+//! schedule only update the numeric values (`update_q/A/b`; P only depends on the schedule),
+//! skipping symbolic setup.
 
+use std::cell::OnceCell;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -34,8 +43,33 @@ use crate::api::NUM_LEGS;
 
 /// Number of MPC states.
 pub const MPC_STATES: usize = 13;
+/// MPC states that are QP variables: the constant gravity state is folded into the dynamics.
+const NX: usize = 12;
 const ROWS_PER_FOOT: usize = 6;
 const MAX_CACHED_SOLVERS: usize = 32;
+/// Rows of the discrete B_k (per leg) that may be nonzero in column `axis`: Θ and ω rows are
+/// dense (`I_w⁻¹ [r]×`), p and v rows only see their own axis.
+const B_ROWS: [[usize; 8]; 3] = [
+    [0, 1, 2, 3, 6, 7, 8, 9],
+    [0, 1, 2, 4, 6, 7, 8, 10],
+    [0, 1, 2, 5, 6, 7, 8, 11],
+];
+/// Off-diagonal rows of the discrete A_k that may be nonzero in column j (the diagonal is 1):
+/// `Θ += dt R_zᵀ ω` (R_zᵀ has the pattern of a yaw rotation) and `p += dt v`.
+const A_OFFDIAG_ROWS: [&[usize]; NX] = [
+    &[],
+    &[],
+    &[],
+    &[],
+    &[],
+    &[],
+    &[0, 1],
+    &[0, 1],
+    &[2],
+    &[3],
+    &[4],
+    &[5],
+];
 
 type Mat13 = SMatrix<f64, 13, 13>;
 type Mat13x3 = SMatrix<f64, 13, 3>;
@@ -98,16 +132,18 @@ pub struct MpcSolution {
     pub status: MpcStatus,
     /// Wall time of setup + solve, s (diagnostic only).
     pub solve_time_s: f64,
-    /// Time spent inside Clarabel's `solve` (its own timer), s; the rest of `solve_time_s` is
-    /// condensing and QP assembly.
+    /// Time spent inside Clarabel's `solve`, s; the rest of `solve_time_s` is model building and
+    /// QP assembly (and, on a new contact schedule, the solver's symbolic setup).
     pub qp_time_s: f64,
     /// Interior-point iterations.
     pub iterations: u32,
-    /// Number of decision variables.
+    /// Number of decision variables of the QP solved (stance forces and predicted states).
     pub num_variables: usize,
 }
 
-/// The assembled QP of the last solve: minimise ½ uᵀPu + qᵀu s.t. A u ≤ b (for comparisons).
+/// The last solve's problem as a condensed QP over the stance forces (N):
+/// minimise ½ uᵀPu + qᵀu s.t. A u ≤ b. Same optimum as the sparse QP that [`ConvexMpc`] solves;
+/// built on demand for comparisons (other solvers, reference checks).
 #[derive(Clone, Debug, Default)]
 pub struct QpData {
     /// Number of variables.
@@ -128,28 +164,40 @@ pub struct QpData {
     pub b: Vec<f64>,
 }
 
+/// A copy of the last solve's input, for the on-demand condensed QP.
+#[derive(Clone, Debug, Default)]
+struct LastInput {
+    valid: bool,
+    x0: [f64; MPC_STATES],
+    reference: Vec<[f64; MPC_STATES]>,
+    contacts: Vec<[bool; NUM_LEGS]>,
+    foot_offsets: Vec<[[f64; 3]; NUM_LEGS]>,
+    terrain_normal: [f64; 3],
+}
+
 /// Convex MPC with preallocated buffers and a per-schedule solver cache.
 pub struct ConvexMpc {
     params: MpcParams,
     inertia_body: Matrix3<f64>,
     settings: DefaultSettings<f64>,
+    /// Force unit inside the QP (m·g), N.
+    force_scale: f64,
     a_mats: Vec<Mat13>,
     b_mats: Vec<[Mat13x3; NUM_LEGS]>,
-    /// S_x blocks: x_k = S_x[k-1] x₀ + …
-    sx: Vec<Mat13>,
-    /// Condensed input matrix S_u (13N × max variables).
-    su: DMatrix<f64>,
-    weighted_su: DMatrix<f64>,
-    hessian: DMatrix<f64>,
-    gradient: DVector<f64>,
-    free_response: DVector<f64>,
-    /// (step, leg) of each 3-column variable block.
+    /// (step, leg) of each 3-column force block, in column order.
     blocks: Vec<(usize, usize)>,
+    p_colptr: Vec<usize>,
+    p_rowval: Vec<usize>,
     p_values: Vec<f64>,
+    q_values: Vec<f64>,
+    a_colptr: Vec<usize>,
+    a_rowval: Vec<usize>,
     a_values: Vec<f64>,
     b_values: Vec<f64>,
+    key: Vec<u8>,
     solvers: HashMap<Vec<u8>, DefaultSolver<f64>>,
-    last_qp: QpData,
+    last_input: LastInput,
+    last_qp: OnceCell<QpData>,
 }
 
 fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
@@ -171,6 +219,57 @@ pub fn terrain_tangents(normal: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let t1 = (helper - normal * normal.dot(&helper)).normalize();
     let t2 = normal.cross(&t1);
     (t1, t2)
+}
+
+/// Rows `a` of the per-foot constraints `a·f ≤ b`: friction pyramid, then −f·n ≤ −f_min and
+/// f·n ≤ f_max.
+fn foot_constraint_rows(normal: [f64; 3], mu: f64) -> [Vector3<f64>; ROWS_PER_FOOT] {
+    let normal = Vector3::from(normal).normalize();
+    let (t1, t2) = terrain_tangents(&normal);
+    [
+        t1 - normal * mu,
+        -t1 - normal * mu,
+        t2 - normal * mu,
+        -t2 - normal * mu,
+        -normal,
+        normal,
+    ]
+}
+
+/// The discrete model of every step: A_k about the reference yaw, B_k from the feet.
+fn discrete_model(
+    params: &MpcParams,
+    inertia_body: &Matrix3<f64>,
+    input: &MpcInput<'_>,
+    a_mats: &mut [Mat13],
+    b_mats: &mut [[Mat13x3; NUM_LEGS]],
+) {
+    let dt = params.dt;
+    let inv_mass = 1.0 / params.mass;
+    for k in 0..params.horizon {
+        let yaw = input.reference[k][2];
+        let rz = rot_z(yaw);
+        let inertia_world = rz * inertia_body * rz.transpose();
+        let inertia_world_inv = inertia_world
+            .try_inverse()
+            .unwrap_or_else(Matrix3::identity);
+        let mut a_c = Mat13::zeros();
+        a_c.fixed_view_mut::<3, 3>(0, 6).copy_from(&rz.transpose());
+        a_c.fixed_view_mut::<3, 3>(3, 9)
+            .copy_from(&Matrix3::identity());
+        a_c[(11, 12)] = -1.0;
+        let a_c2 = a_c * a_c;
+        a_mats[k] = Mat13::identity() + a_c * dt + a_c2 * (dt * dt * 0.5);
+        for (b_leg, offset) in b_mats[k].iter_mut().zip(&input.foot_offsets[k]) {
+            let r = Vector3::from(*offset);
+            let mut b_c = Mat13x3::zeros();
+            b_c.fixed_view_mut::<3, 3>(6, 0)
+                .copy_from(&(inertia_world_inv * skew(&r)));
+            b_c.fixed_view_mut::<3, 3>(9, 0)
+                .copy_from(&(Matrix3::identity() * inv_mass));
+            *b_leg = b_c * dt + a_c * b_c * (dt * dt * 0.5);
+        }
+    }
 }
 
 impl ConvexMpc {
@@ -205,10 +304,19 @@ impl ConvexMpc {
         if inertia_body.cholesky().is_none() {
             return Err("body inertia is not positive definite".into());
         }
+        // Tolerances 1e-6 (in the scaled units) as before: the step-0 forces then match the exact
+        // optimum as closely as the condensed formulation did (≤ ~0.06 N on a perturbed standing
+        // problem, where the internal force distribution only has the curvature of R; 1e-5 would
+        // save one iteration but allows ~0.4 N there). Equilibration and iterative refinement
+        // are off: the QP is already scaled (forces in m·g, states O(1)); refinement cost ~35 %
+        // of the solve time without changing the forces measurably, and equilibration cost
+        // iterations.
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .presolve_enable(false)
             .input_sparse_dropzeros(false)
+            .equilibrate_enable(false)
+            .iterative_refinement_enable(false)
             .max_iter(50)
             .tol_gap_abs(1e-6)
             .tol_gap_rel(1e-6)
@@ -216,24 +324,35 @@ impl ConvexMpc {
             .build()
             .map_err(|e| format!("clarabel settings: {e:?}"))?;
         let n = params.horizon;
-        let max_vars = 3 * NUM_LEGS * n;
+        let max_vars = 3 * NUM_LEGS * n + NX * n;
+        let max_a_nnz = 3 * NUM_LEGS * n * (8 + ROWS_PER_FOOT) + NX * n * 3;
+        let max_rows = NX * n + ROWS_PER_FOOT * NUM_LEGS * n;
         Ok(ConvexMpc {
             inertia_body,
             settings,
+            force_scale: params.mass * crate::GRAVITY,
             a_mats: vec![Mat13::zeros(); n],
             b_mats: vec![[Mat13x3::zeros(); NUM_LEGS]; n],
-            sx: vec![Mat13::zeros(); n],
-            su: DMatrix::zeros(MPC_STATES * n, max_vars),
-            weighted_su: DMatrix::zeros(MPC_STATES * n, max_vars),
-            hessian: DMatrix::zeros(max_vars, max_vars),
-            gradient: DVector::zeros(max_vars),
-            free_response: DVector::zeros(MPC_STATES * n),
             blocks: Vec::with_capacity(NUM_LEGS * n),
-            p_values: Vec::with_capacity(max_vars * (max_vars + 1) / 2),
-            a_values: Vec::with_capacity(max_vars * ROWS_PER_FOOT * 2),
-            b_values: Vec::with_capacity(ROWS_PER_FOOT * NUM_LEGS * n),
+            p_colptr: Vec::with_capacity(max_vars + 1),
+            p_rowval: Vec::with_capacity(max_vars),
+            p_values: Vec::with_capacity(max_vars),
+            q_values: Vec::with_capacity(max_vars),
+            a_colptr: Vec::with_capacity(max_vars + 1),
+            a_rowval: Vec::with_capacity(max_a_nnz),
+            a_values: Vec::with_capacity(max_a_nnz),
+            b_values: Vec::with_capacity(max_rows),
+            key: Vec::with_capacity(n),
             solvers: HashMap::new(),
-            last_qp: QpData::default(),
+            last_input: LastInput {
+                valid: false,
+                x0: [0.0; MPC_STATES],
+                reference: Vec::with_capacity(n),
+                contacts: Vec::with_capacity(n),
+                foot_offsets: Vec::with_capacity(n),
+                terrain_normal: [0.0; 3],
+            },
+            last_qp: OnceCell::new(),
             params,
         })
     }
@@ -243,9 +362,10 @@ impl ConvexMpc {
         &self.params
     }
 
-    /// The QP assembled by the last call of [`ConvexMpc::solve`].
+    /// The last call of [`ConvexMpc::solve`] as a condensed QP over the stance forces (built on
+    /// first access; empty when the last input was invalid).
     pub fn last_qp(&self) -> &QpData {
-        &self.last_qp
+        self.last_qp.get_or_init(|| self.condensed_qp())
     }
 
     fn validate(&self, input: &MpcInput<'_>) -> bool {
@@ -265,33 +385,101 @@ impl ConvexMpc {
             && Vector3::from(input.terrain_normal).norm() > 0.5
     }
 
-    /// Build the discrete model of every step: A_k about the reference yaw, B_k from the feet.
-    fn build_model(&mut self, input: &MpcInput<'_>) {
-        let dt = self.params.dt;
-        let inv_mass = 1.0 / self.params.mass;
-        for k in 0..self.params.horizon {
-            let yaw = input.reference[k][2];
-            let rz = rot_z(yaw);
-            let inertia_world = rz * self.inertia_body * rz.transpose();
-            let inertia_world_inv = inertia_world
-                .try_inverse()
-                .unwrap_or_else(Matrix3::identity);
-            let mut a_c = Mat13::zeros();
-            a_c.fixed_view_mut::<3, 3>(0, 6).copy_from(&rz.transpose());
-            a_c.fixed_view_mut::<3, 3>(3, 9)
-                .copy_from(&Matrix3::identity());
-            a_c[(11, 12)] = -1.0;
-            let a_c2 = a_c * a_c;
-            self.a_mats[k] = Mat13::identity() + a_c * dt + a_c2 * (dt * dt * 0.5);
-            for leg in 0..NUM_LEGS {
-                let r = Vector3::from(input.foot_offsets[k][leg]);
-                let mut b_c = Mat13x3::zeros();
-                b_c.fixed_view_mut::<3, 3>(6, 0)
-                    .copy_from(&(inertia_world_inv * skew(&r)));
-                b_c.fixed_view_mut::<3, 3>(9, 0)
-                    .copy_from(&(Matrix3::identity() * inv_mass));
-                self.b_mats[k][leg] = b_c * dt + a_c * b_c * (dt * dt * 0.5);
+    fn remember_input(&mut self, input: &MpcInput<'_>, valid: bool) {
+        self.last_qp = OnceCell::new();
+        let last = &mut self.last_input;
+        last.valid = valid;
+        last.reference.clear();
+        last.contacts.clear();
+        last.foot_offsets.clear();
+        if valid {
+            last.x0 = input.x0;
+            last.reference.extend_from_slice(input.reference);
+            last.contacts.extend_from_slice(input.contacts);
+            last.foot_offsets.extend_from_slice(input.foot_offsets);
+            last.terrain_normal = input.terrain_normal;
+        }
+    }
+
+    /// Fill the sparse QP (CSC pattern and values of P and A, q, b) for the current model and
+    /// `self.blocks`. Variables, stage by stage: the stance forces of step k (in units of m·g),
+    /// then x_{k+1} (12 states). Rows: the dynamics of steps 0..N−1 (12 each, zero cone), then
+    /// 6 inequality rows per force block (nonnegative cone).
+    fn assemble_sparse(&mut self, input: &MpcInput<'_>) {
+        let n = self.params.horizon;
+        let scale = self.force_scale;
+        let n_eq = NX * n;
+        let rows_of_block = foot_constraint_rows(input.terrain_normal, self.params.mu);
+        let (r_diag, q_w) = (
+            2.0 * self.params.r_weight * scale * scale,
+            self.params.q_weights,
+        );
+        self.p_colptr.clear();
+        self.p_rowval.clear();
+        self.p_values.clear();
+        self.q_values.clear();
+        self.a_colptr.clear();
+        self.a_rowval.clear();
+        self.a_values.clear();
+        self.p_colptr.push(0);
+        self.a_colptr.push(0);
+        let mut col = 0;
+        let mut block = 0;
+        for k in 0..n {
+            while block < self.blocks.len() && self.blocks[block].0 == k {
+                let bm = &self.b_mats[k][self.blocks[block].1];
+                for (axis, b_rows) in B_ROWS.iter().enumerate() {
+                    for &i in b_rows {
+                        self.a_rowval.push(NX * k + i);
+                        self.a_values.push(-bm[(i, axis)] * scale);
+                    }
+                    for (r, row) in rows_of_block.iter().enumerate() {
+                        self.a_rowval.push(n_eq + ROWS_PER_FOOT * block + r);
+                        self.a_values.push(row[axis]);
+                    }
+                    self.a_colptr.push(self.a_rowval.len());
+                    self.p_rowval.push(col);
+                    self.p_values.push(r_diag);
+                    self.p_colptr.push(col + 1);
+                    self.q_values.push(0.0);
+                    col += 1;
+                }
+                block += 1;
             }
+            for j in 0..NX {
+                self.a_rowval.push(NX * k + j);
+                self.a_values.push(1.0);
+                if k + 1 < n {
+                    let a = &self.a_mats[k + 1];
+                    for &i in A_OFFDIAG_ROWS[j] {
+                        self.a_rowval.push(NX * (k + 1) + i);
+                        self.a_values.push(-a[(i, j)]);
+                    }
+                    self.a_rowval.push(NX * (k + 1) + j);
+                    self.a_values.push(-a[(j, j)]);
+                }
+                self.a_colptr.push(self.a_rowval.len());
+                self.p_rowval.push(col);
+                self.p_values.push(2.0 * q_w[j]);
+                self.p_colptr.push(col + 1);
+                self.q_values.push(-2.0 * q_w[j] * input.reference[k][j]);
+                col += 1;
+            }
+        }
+        // b: x_1 − B_0 u_0 = A_0 x_0, x_{k+1} − A_k x_k − B_k u_k = A_k[:, g] g for k ≥ 1.
+        self.b_values.clear();
+        let x0 = SMatrix::<f64, 13, 1>::from(input.x0);
+        let first = self.a_mats[0] * x0;
+        self.b_values.extend(first.iter().take(NX));
+        let g = input.x0[MPC_STATES - 1];
+        for a in &self.a_mats[1..] {
+            self.b_values
+                .extend((0..NX).map(|i| a[(i, MPC_STATES - 1)] * g));
+        }
+        let (f_min, f_max) = (self.params.f_min / scale, self.params.f_max / scale);
+        for _ in 0..self.blocks.len() {
+            self.b_values
+                .extend_from_slice(&[0.0, 0.0, 0.0, 0.0, -f_min, f_max]);
         }
     }
 
@@ -307,11 +495,19 @@ impl ConvexMpc {
             iterations: 0,
             num_variables: 0,
         };
-        if !self.validate(input) {
+        let valid = self.validate(input);
+        self.remember_input(input, valid);
+        if !valid {
             return solution;
         }
         let n = self.params.horizon;
-        self.build_model(input);
+        discrete_model(
+            &self.params,
+            &self.inertia_body,
+            input,
+            &mut self.a_mats,
+            &mut self.b_mats,
+        );
 
         self.blocks.clear();
         for (k, contacts) in input.contacts.iter().enumerate() {
@@ -321,164 +517,65 @@ impl ConvexMpc {
                 }
             }
         }
-        let nv = 3 * self.blocks.len();
-        solution.num_variables = nv;
-        if nv == 0 {
+        if self.blocks.is_empty() {
             // Flight over the whole horizon: nothing to optimise, zero forces are the answer.
             solution.status = MpcStatus::Solved;
             solution.solve_time_s = start.elapsed().as_secs_f64();
             return solution;
         }
+        self.assemble_sparse(input);
+        let nv = self.q_values.len();
+        let m = self.b_values.len();
+        solution.num_variables = nv;
 
-        // Condensed prediction: x_{k+1} = A_k x_k + B_k u_k.
-        let mut state = Mat13::identity();
-        let x0 = SMatrix::<f64, 13, 1>::from(input.x0);
-        for k in 0..n {
-            state = self.a_mats[k] * state;
-            self.sx[k] = state;
-            let row = MPC_STATES * k;
-            self.su.view_mut((row, 0), (MPC_STATES, nv)).fill(0.0);
-            for (b, &(step, leg)) in self.blocks.iter().enumerate() {
-                if step > k {
-                    break;
-                }
-                let block = if step == k {
-                    self.b_mats[k][leg]
-                } else {
-                    let prev = self
-                        .su
-                        .fixed_view::<13, 3>(row - MPC_STATES, 3 * b)
-                        .into_owned();
-                    self.a_mats[k] * prev
-                };
-                self.su
-                    .fixed_view_mut::<13, 3>(row, 3 * b)
-                    .copy_from(&block);
-            }
-            let free = state * x0;
-            for i in 0..MPC_STATES {
-                self.free_response[row + i] = free[i] - input.reference[k][i];
-            }
-        }
-        // P = 2 (S_uᵀ Q̄ S_u + R̄), q = 2 S_uᵀ Q̄ (S_x x₀ − X_ref).
-        let rows = MPC_STATES * n;
-        for k in 0..n {
-            for i in 0..MPC_STATES {
-                let w = self.params.q_weights[i];
-                let r = MPC_STATES * k + i;
-                for c in 0..nv {
-                    self.weighted_su[(r, c)] = w * self.su[(r, c)];
-                }
-            }
-        }
-        {
-            let su = self.su.view((0, 0), (rows, nv));
-            let wsu = self.weighted_su.view((0, 0), (rows, nv));
-            let mut h = self.hessian.view_mut((0, 0), (nv, nv));
-            h.gemm_tr(2.0, &su, &wsu, 0.0);
-            for i in 0..nv {
-                h[(i, i)] += 2.0 * self.params.r_weight;
-            }
-            let mut g = self.gradient.rows_mut(0, nv);
-            g.gemv_tr(2.0, &wsu, &self.free_response, 0.0);
-        }
-
-        // Upper triangle of P, column by column (dense pattern; structural zeros are kept so the
-        // pattern only depends on the number of variables).
-        self.p_values.clear();
-        for c in 0..nv {
-            for r in 0..=c {
-                self.p_values.push(self.hessian[(r, c)]);
-            }
-        }
-        // A: per stance foot block, 6 rows × 3 columns.
-        let normal = Vector3::from(input.terrain_normal).normalize();
-        let (t1, t2) = terrain_tangents(&normal);
-        let mu = self.params.mu;
-        let rows_of_block = [
-            t1 - normal * mu,
-            -t1 - normal * mu,
-            t2 - normal * mu,
-            -t2 - normal * mu,
-            -normal,
-            normal,
-        ];
-        let nblocks = self.blocks.len();
-        let m = ROWS_PER_FOOT * nblocks;
-        self.a_values.clear();
-        for _ in 0..nblocks {
-            for axis in 0..3 {
-                for row in &rows_of_block {
-                    self.a_values.push(row[axis]);
-                }
-            }
-        }
-        self.b_values.clear();
-        for _ in 0..nblocks {
-            self.b_values.extend_from_slice(&[
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-                -self.params.f_min,
-                self.params.f_max,
-            ]);
-        }
-        let q_values: Vec<f64> = self.gradient.rows(0, nv).iter().copied().collect();
-
-        let key: Vec<u8> = input
-            .contacts
-            .iter()
-            .map(|c| {
-                c.iter()
-                    .enumerate()
-                    .fold(0u8, |acc, (i, &s)| acc | ((s as u8) << i))
-            })
-            .collect();
-        let (p_colptr, p_rowval) = dense_upper_pattern(nv);
-        let (a_colptr, a_rowval) = block_pattern(nblocks);
-        self.last_qp = QpData {
-            n: nv,
-            p_dense: self
-                .hessian
-                .view((0, 0), (nv, nv))
-                .iter()
-                .copied()
-                .collect(),
-            q: q_values.clone(),
-            m,
-            a_colptr: a_colptr.clone(),
-            a_rowval: a_rowval.clone(),
-            a_nzval: self.a_values.clone(),
-            b: self.b_values.clone(),
-        };
-        let reused = match self.solvers.get_mut(&key) {
+        self.key.clear();
+        self.key.extend(input.contacts.iter().map(|c| {
+            c.iter()
+                .enumerate()
+                .fold(0u8, |acc, (i, &s)| acc | ((s as u8) << i))
+        }));
+        // P only depends on the schedule, so a cached solver needs q, A and b.
+        let reused = match self.solvers.get_mut(self.key.as_slice()) {
             Some(solver) => {
-                solver.update_P(&self.p_values).is_ok()
-                    && solver.update_q(&q_values).is_ok()
+                solver.update_q(&self.q_values).is_ok()
                     && solver.update_A(&self.a_values).is_ok()
                     && solver.update_b(&self.b_values).is_ok()
             }
             None => false,
         };
         if !reused {
-            self.solvers.remove(&key);
+            self.solvers.remove(self.key.as_slice());
             if self.solvers.len() >= MAX_CACHED_SOLVERS {
                 self.solvers.clear();
             }
-            let p = CscMatrix::new(nv, nv, p_colptr, p_rowval, self.p_values.clone());
-            let a = CscMatrix::new(m, nv, a_colptr, a_rowval, self.a_values.clone());
-            let cones = [SupportedConeT::NonnegativeConeT(m)];
+            let p = CscMatrix::new(
+                nv,
+                nv,
+                self.p_colptr.clone(),
+                self.p_rowval.clone(),
+                self.p_values.clone(),
+            );
+            let a = CscMatrix::new(
+                m,
+                nv,
+                self.a_colptr.clone(),
+                self.a_rowval.clone(),
+                self.a_values.clone(),
+            );
+            let cones = [
+                SupportedConeT::ZeroConeT(NX * n),
+                SupportedConeT::NonnegativeConeT(m - NX * n),
+            ];
             match DefaultSolver::new(
                 &p,
-                &q_values,
+                &self.q_values,
                 &a,
                 &self.b_values,
                 &cones,
                 self.settings.clone(),
             ) {
                 Ok(solver) => {
-                    self.solvers.insert(key.clone(), solver);
+                    self.solvers.insert(self.key.clone(), solver);
                 }
                 Err(error) => {
                     tracing::warn!(?error, "MPC QP setup failed");
@@ -488,24 +585,31 @@ impl ConvexMpc {
                 }
             }
         }
-        let Some(solver) = self.solvers.get_mut(&key) else {
+        let Some(solver) = self.solvers.get_mut(self.key.as_slice()) else {
             solution.status = MpcStatus::Failed;
             return solution;
         };
+        let qp_start = Instant::now();
         solver.solve();
+        solution.qp_time_s = qp_start.elapsed().as_secs_f64();
         let result = &solver.solution;
         solution.iterations = result.iterations;
-        solution.qp_time_s = result.solve_time;
         let ok = matches!(
             result.status,
             SolverStatus::Solved | SolverStatus::AlmostSolved
         ) && result.x.iter().all(|v| v.is_finite());
         if ok {
+            // Step 0's force blocks are the first columns.
             for (b, &(step, leg)) in self.blocks.iter().enumerate() {
                 if step != 0 {
                     break;
                 }
-                solution.forces[leg] = [result.x[3 * b], result.x[3 * b + 1], result.x[3 * b + 2]];
+                let f = &result.x[3 * b..3 * b + 3];
+                solution.forces[leg] = [
+                    f[0] * self.force_scale,
+                    f[1] * self.force_scale,
+                    f[2] * self.force_scale,
+                ];
             }
             solution.status = MpcStatus::Solved;
         } else {
@@ -515,31 +619,167 @@ impl ConvexMpc {
         solution.solve_time_s = start.elapsed().as_secs_f64();
         solution
     }
-}
 
-/// CSC pattern of a dense upper triangle n×n.
-fn dense_upper_pattern(n: usize) -> (Vec<usize>, Vec<usize>) {
-    let mut colptr = Vec::with_capacity(n + 1);
-    let mut rowval = Vec::with_capacity(n * (n + 1) / 2);
-    colptr.push(0);
-    for c in 0..n {
-        rowval.extend(0..=c);
-        colptr.push(rowval.len());
-    }
-    (colptr, rowval)
-}
+    /// The last input as a condensed QP: states eliminated, `P = 2(S_uᵀ Q̄ S_u + R̄)`,
+    /// `q = 2 S_uᵀ Q̄ (S_x x₀ − X_ref)` over the stance forces (N), constraints `A u ≤ b`.
+    fn condensed_qp(&self) -> QpData {
+        let last = &self.last_input;
+        if !last.valid {
+            return QpData::default();
+        }
+        let input = MpcInput {
+            x0: last.x0,
+            reference: &last.reference,
+            contacts: &last.contacts,
+            foot_offsets: &last.foot_offsets,
+            terrain_normal: last.terrain_normal,
+        };
+        let n = self.params.horizon;
+        let mut a_mats = vec![Mat13::zeros(); n];
+        let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; n];
+        discrete_model(
+            &self.params,
+            &self.inertia_body,
+            &input,
+            &mut a_mats,
+            &mut b_mats,
+        );
+        let blocks: Vec<(usize, usize)> = (0..n)
+            .flat_map(|k| (0..NUM_LEGS).map(move |leg| (k, leg)))
+            .filter(|&(k, leg)| input.contacts[k][leg])
+            .collect();
+        let nv = 3 * blocks.len();
+        let rows = MPC_STATES * n;
+        let mut su = DMatrix::<f64>::zeros(rows, nv);
+        let mut free_response = DVector::<f64>::zeros(rows);
+        let mut state = Mat13::identity();
+        let x0 = SMatrix::<f64, 13, 1>::from(input.x0);
+        for k in 0..n {
+            state = a_mats[k] * state;
+            let row = MPC_STATES * k;
+            for (b, &(step, leg)) in blocks.iter().enumerate() {
+                if step > k {
+                    break;
+                }
+                let block = if step == k {
+                    b_mats[k][leg]
+                } else {
+                    a_mats[k] * su.fixed_view::<13, 3>(row - MPC_STATES, 3 * b)
+                };
+                su.fixed_view_mut::<13, 3>(row, 3 * b).copy_from(&block);
+            }
+            let free = state * x0;
+            for i in 0..MPC_STATES {
+                free_response[row + i] = free[i] - input.reference[k][i];
+            }
+        }
+        let mut weighted_su = su.clone();
+        for r in 0..rows {
+            let w = self.params.q_weights[r % MPC_STATES];
+            weighted_su.row_mut(r).scale_mut(w);
+        }
+        let mut hessian = su.tr_mul(&weighted_su) * 2.0;
+        for i in 0..nv {
+            hessian[(i, i)] += 2.0 * self.params.r_weight;
+        }
+        let gradient = weighted_su.tr_mul(&free_response) * 2.0;
 
-/// CSC pattern of the block-diagonal constraint matrix: block b has rows 6b..6b+5 and columns
-/// 3b..3b+2, all entries present.
-fn block_pattern(nblocks: usize) -> (Vec<usize>, Vec<usize>) {
-    let mut colptr = Vec::with_capacity(3 * nblocks + 1);
-    let mut rowval = Vec::with_capacity(18 * nblocks);
-    colptr.push(0);
-    for b in 0..nblocks {
-        for _ in 0..3 {
-            rowval.extend(ROWS_PER_FOOT * b..ROWS_PER_FOOT * (b + 1));
-            colptr.push(rowval.len());
+        let rows_of_block = foot_constraint_rows(input.terrain_normal, self.params.mu);
+        let nblocks = blocks.len();
+        let mut a_colptr = Vec::with_capacity(nv + 1);
+        let mut a_rowval = Vec::with_capacity(18 * nblocks);
+        let mut a_nzval = Vec::with_capacity(18 * nblocks);
+        a_colptr.push(0);
+        for b in 0..nblocks {
+            for axis in 0..3 {
+                for (r, row) in rows_of_block.iter().enumerate() {
+                    a_rowval.push(ROWS_PER_FOOT * b + r);
+                    a_nzval.push(row[axis]);
+                }
+                a_colptr.push(a_rowval.len());
+            }
+        }
+        let b = (0..nblocks)
+            .flat_map(|_| [0.0, 0.0, 0.0, 0.0, -self.params.f_min, self.params.f_max])
+            .collect();
+        QpData {
+            n: nv,
+            p_dense: hessian.as_slice().to_vec(),
+            q: gradient.as_slice().to_vec(),
+            m: ROWS_PER_FOOT * nblocks,
+            a_colptr,
+            a_rowval,
+            a_nzval,
+            b,
         }
     }
-    (colptr, rowval)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sparse QP's constraint pattern (`A_OFFDIAG_ROWS`, `B_ROWS`) covers every entry of
+    /// the discrete model that can be nonzero, for arbitrary yaw, feet and inertia.
+    #[test]
+    fn discrete_model_fits_the_sparse_pattern() {
+        let params = MpcParams {
+            horizon: 3,
+            dt: 0.03,
+            mass: 12.0,
+            inertia_body: [
+                [0.05, 0.002, -0.003],
+                [0.002, 0.08, 0.001],
+                [-0.003, 0.001, 0.1],
+            ],
+            q_weights: [1.0; 13],
+            r_weight: 1e-5,
+            mu: 0.6,
+            f_min: 5.0,
+            f_max: 150.0,
+        };
+        let inertia = Matrix3::from_fn(|r, c| params.inertia_body[r][c]);
+        let reference = [
+            [0.0; 13],
+            [
+                0.0, 0.0, 0.7, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.81,
+            ],
+            [
+                0.1, -0.2, -2.3, 1.0, 2.0, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.81,
+            ],
+        ];
+        let feet = [[
+            [0.2, 0.15, -0.3],
+            [0.21, -0.14, -0.28],
+            [-0.2, 0.16, -0.31],
+            [-0.19, -0.15, -0.27],
+        ]; 3];
+        let input = MpcInput {
+            x0: [0.0; 13],
+            reference: &reference,
+            contacts: &[[true; 4]; 3],
+            foot_offsets: &feet,
+            terrain_normal: [0.0, 0.0, 1.0],
+        };
+        let mut a_mats = vec![Mat13::zeros(); 3];
+        let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
+        discrete_model(&params, &inertia, &input, &mut a_mats, &mut b_mats);
+        for (a, b) in a_mats.iter().zip(&b_mats) {
+            for j in 0..NX {
+                for i in 0..MPC_STATES {
+                    let in_pattern = i == j || A_OFFDIAG_ROWS[j].contains(&i);
+                    assert!(in_pattern || a[(i, j)] == 0.0, "A[{i},{j}] = {}", a[(i, j)]);
+                }
+            }
+            // The gravity column only acts on rows of x (and g itself).
+            assert_eq!(a[(MPC_STATES - 1, MPC_STATES - 1)], 1.0);
+            for leg in b {
+                for (axis, rows) in B_ROWS.iter().enumerate() {
+                    for i in 0..MPC_STATES {
+                        assert!(rows.contains(&i) || leg[(i, axis)] == 0.0, "B[{i},{axis}]");
+                    }
+                }
+            }
+        }
+    }
 }
