@@ -28,7 +28,7 @@ struct Case {
 fn noise(seed: u64, i: usize) -> f64 {
     let mut z = seed
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        .wrapping_add(i as u64 * 0xBF58_476D_1CE4_E5B9);
+        .wrapping_add((i as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9));
     z ^= z >> 31;
     z = z.wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 29;
