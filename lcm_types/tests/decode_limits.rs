@@ -2,6 +2,7 @@
 //! lengths. A counting global allocator measures the largest single allocation.
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
@@ -14,9 +15,16 @@ static LARGEST_ALLOCATION: AtomicUsize = AtomicUsize::new(0);
 /// Tests share the allocation counter: run the measured sections one at a time.
 static MEASURE: Mutex<()> = Mutex::new(());
 
+thread_local! {
+    /// Only the measuring thread counts: other tests allocate on their own threads meanwhile.
+    static MEASURING: Cell<bool> = const { Cell::new(false) };
+}
+
 unsafe impl GlobalAlloc for CountingAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        LARGEST_ALLOCATION.fetch_max(layout.size(), Ordering::SeqCst);
+        if MEASURING.try_with(Cell::get).unwrap_or(false) {
+            LARGEST_ALLOCATION.fetch_max(layout.size(), Ordering::SeqCst);
+        }
         // SAFETY: forwarded unchanged to the system allocator.
         unsafe { System.alloc(layout) }
     }
@@ -32,7 +40,9 @@ static ALLOCATOR: CountingAllocator = CountingAllocator;
 fn largest_allocation_during<T>(f: impl FnOnce() -> T) -> (T, usize) {
     let _guard = MEASURE.lock().unwrap_or_else(|e| e.into_inner());
     LARGEST_ALLOCATION.store(0, Ordering::SeqCst);
+    MEASURING.with(|m| m.set(true));
     let result = f();
+    MEASURING.with(|m| m.set(false));
     (result, LARGEST_ALLOCATION.load(Ordering::SeqCst))
 }
 
