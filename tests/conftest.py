@@ -23,6 +23,7 @@ if _generated.is_dir() and str(_generated) not in sys.path:
     sys.path.insert(0, str(_generated))
 
 from pfnav_harness import paths
+from pfnav_harness.cli import in_private_network_namespace
 from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.pipeline import PAPER_SCENARIOS, export_scenario
 from pfnav_harness.planner_client import Plan, PlannerClient
@@ -59,20 +60,6 @@ def fmu_file() -> Path:
 @pytest.fixture(scope="session")
 def urdf_file() -> Path:
     return _artifact(paths.urdf_path)
-
-
-def in_private_network_namespace() -> bool:
-    """True when loopback is the only network interface (scripts/netns.sh or `unshare --net`).
-
-    Reads /proc/self/net/dev (per network namespace); /sys/class/net shows the host's interfaces
-    unless sysfs is remounted inside the namespace.
-    """
-    try:
-        lines = Path("/proc/self/net/dev").read_text().splitlines()[2:]
-    except OSError:
-        return False
-    interfaces = [line.split(":", 1)[0].strip() for line in lines if ":" in line]
-    return interfaces == ["lo"]
 
 
 @pytest.fixture(scope="session")
