@@ -26,14 +26,7 @@ impl Problem {
         let (inertia, com) = model.composite_inertia(&q);
         let mpc = ConvexMpc::new(MpcParams {
             horizon: 10,
-            dt: config.mpc_dt,
-            mass: model.total_mass(),
-            inertia_body: inertia,
-            q_weights: config.mpc_q,
-            r_weight: config.mpc_r,
-            mu: config.mu,
-            f_min: config.f_min,
-            f_max: config.f_max,
+            ..config.mpc_params(model.total_mass(), inertia)
         })
         .expect("MPC");
         let z = config.body_height + com[2];

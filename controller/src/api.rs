@@ -121,6 +121,24 @@ pub struct ControllerConfig {
     pub max_terrain_pitch: f64,
 }
 
+impl ControllerConfig {
+    /// The MPC's fixed parameters for a robot of `mass` kg with body-frame inertia
+    /// `inertia_body` (about its centre of mass), at this configuration's horizon.
+    pub fn mpc_params(&self, mass: f64, inertia_body: [[f64; 3]; 3]) -> crate::mpc::MpcParams {
+        crate::mpc::MpcParams {
+            horizon: self.mpc_horizon,
+            dt: self.mpc_dt,
+            mass,
+            inertia_body,
+            q_weights: self.mpc_q,
+            r_weight: self.mpc_r,
+            mu: self.mu,
+            f_min: self.f_min,
+            f_max: self.f_max,
+        }
+    }
+}
+
 impl Default for ControllerConfig {
     fn default() -> Self {
         ControllerConfig {

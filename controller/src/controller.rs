@@ -32,7 +32,7 @@ use crate::api::{
 };
 use crate::gait::{swing_trajectory, Gait, LegPhase};
 use crate::model::{wrap_angle, RobotModel};
-use crate::mpc::{ConvexMpc, MpcInput, MpcParams, MpcStatus, MPC_STATES};
+use crate::mpc::{ConvexMpc, MpcInput, MpcStatus, MPC_STATES};
 
 /// Quantities derived from the measured state once per tick.
 #[derive(Clone, Debug)]
@@ -291,18 +291,8 @@ impl Controller {
             stand_joint_positions[3 * leg.index()..3 * leg.index() + 3].copy_from_slice(&q);
         }
         let (inertia, com) = model.composite_inertia(&stand_joint_positions);
-        let mpc = ConvexMpc::new(MpcParams {
-            horizon: config.mpc_horizon,
-            dt: config.mpc_dt,
-            mass: model.total_mass(),
-            inertia_body: inertia,
-            q_weights: config.mpc_q,
-            r_weight: config.mpc_r,
-            mu: config.mu,
-            f_min: config.f_min,
-            f_max: config.f_max,
-        })
-        .map_err(ControllerError::Config)?;
+        let mpc = ConvexMpc::new(config.mpc_params(model.total_mass(), inertia))
+            .map_err(ControllerError::Config)?;
         let n = config.mpc_horizon;
         Ok(Controller {
             effort_limits: model.effort_limits(),

@@ -37,14 +37,7 @@ fn standing_mpc_forces(contacts: [bool; 4]) -> ([[f64; 3]; 4], f64, ControllerCo
     let (inertia, com) = model.composite_inertia(&ctrl.stand_joint_positions());
     let mut mpc = ConvexMpc::new(MpcParams {
         horizon: 10,
-        dt: config.mpc_dt,
-        mass: model.total_mass(),
-        inertia_body: inertia,
-        q_weights: config.mpc_q,
-        r_weight: config.mpc_r,
-        mu: config.mu,
-        f_min: config.f_min,
-        f_max: config.f_max,
+        ..config.mpc_params(model.total_mass(), inertia)
     })
     .expect("valid MPC");
     let base_z = 0.28;

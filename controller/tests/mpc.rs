@@ -43,14 +43,7 @@ fn setup() -> (ConvexMpc, Vec<Case>) {
     let (inertia, com) = model.composite_inertia(&q);
     let mpc = ConvexMpc::new(MpcParams {
         horizon: HORIZON,
-        dt: config.mpc_dt,
-        mass: model.total_mass(),
-        inertia_body: inertia,
-        q_weights: config.mpc_q,
-        r_weight: config.mpc_r,
-        mu: config.mu,
-        f_min: config.f_min,
-        f_max: config.f_max,
+        ..config.mpc_params(model.total_mass(), inertia)
     })
     .expect("MPC");
     let z = config.body_height + com[2];
