@@ -8,9 +8,10 @@ cd "$ROOT"
 log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*"; }
 
 # libclang-dev: bindgen in the fmi crate (the FMU importer used by the Rust FMU tests).
+# cmake, make: OSQP's C sources (osqp-sys), the MPC benchmark's comparison solver and test cross-check.
 APT_PACKAGES=(liblcm-dev liblcm-bin libglib2.0-dev iproute2 util-linux pkg-config
               libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils
-              libclang-dev)
+              libclang-dev cmake make)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

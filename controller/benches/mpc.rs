@@ -1,7 +1,10 @@
 //! MPC solve time at horizon 10 (Clarabel on the sparse QP, incl. model building and assembly),
-//! median and p99, on a trotting and a standing problem; with `--features osqp-bench` the same
-//! problem, as the condensed QP of `ConvexMpc::last_qp`, is also solved by OSQP for comparison.
+//! median and p99, on a trotting and a standing problem; the same problem, as the condensed QP of
+//! `ConvexMpc::last_qp`, is also solved by OSQP for comparison.
 use std::time::Instant;
+
+#[path = "../tests/support/osqp_qp.rs"]
+mod osqp_qp;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use quad_controller::gait::Gait;
@@ -146,35 +149,16 @@ fn bench_mpc(c: &mut Criterion) {
         c.bench_function(&format!("mpc_clarabel_h10_{label}"), |b| {
             b.iter(|| problem.solve())
         });
-        #[cfg(feature = "osqp-bench")]
         osqp_compare::run(c, label, problem.mpc.last_qp());
     }
 }
 
-#[cfg(feature = "osqp-bench")]
 mod osqp_compare {
     use criterion::Criterion;
     use quad_controller::mpc::QpData;
 
     fn problem(qp: &QpData) -> osqp::Problem {
-        let n = qp.n;
-        // p_dense is column-major and symmetric, so its columns are also its rows.
-        let dense: Vec<Vec<f64>> = qp.p_dense.chunks(n).map(<[f64]>::to_vec).collect();
-        let p = osqp::CscMatrix::from(&dense).into_upper_tri();
-        let a = osqp::CscMatrix {
-            nrows: qp.m,
-            ncols: n,
-            indptr: qp.a_colptr.clone().into(),
-            indices: qp.a_rowval.clone().into(),
-            data: qp.a_nzval.clone().into(),
-        };
-        let lower = vec![f64::NEG_INFINITY; qp.m];
-        let settings = osqp::Settings::default()
-            .verbose(false)
-            .eps_abs(1e-5)
-            .eps_rel(1e-5)
-            .polish(true);
-        osqp::Problem::new(p, &qp.q, a, &lower, &qp.b, &settings).expect("OSQP setup")
+        super::osqp_qp::osqp_problem(qp, 1e-5).expect("OSQP setup")
     }
 
     pub fn run(c: &mut Criterion, label: &str, qp: &QpData) {

@@ -107,6 +107,35 @@ pub struct Controller {
     mpc_schedule: Vec<[bool; NUM_LEGS]>,
     mpc_offsets: Vec<[[f64; 3]; NUM_LEGS]>,
     height_map: HeightMap,
+    /// Foothold search candidates, ring by ring (nearest first).
+    foothold_candidates: Vec<FootholdCandidate>,
+}
+
+/// Offset of one foothold search candidate from the nominal foothold.
+#[derive(Clone, Copy, Debug)]
+struct FootholdCandidate {
+    ring: f64,
+    dx: f64,
+    dy: f64,
+}
+
+fn foothold_candidates() -> Vec<FootholdCandidate> {
+    let last_ring = (FOOTHOLD_RINGS.len() - 1) as f64;
+    FOOTHOLD_RINGS
+        .iter()
+        .enumerate()
+        .flat_map(|(k, &count)| {
+            let ring = FOOTHOLD_SEARCH_RADIUS * k as f64 / last_ring;
+            (0..count).map(move |i| {
+                let angle = std::f64::consts::TAU * i as f64 / count as f64;
+                FootholdCandidate {
+                    ring,
+                    dx: ring * angle.cos(),
+                    dy: ring * angle.sin(),
+                }
+            })
+        })
+        .collect()
 }
 
 /// Largest distance a foothold is moved from its Raibert position to find flat ground, m.
@@ -115,6 +144,18 @@ pub const FOOTHOLD_SEARCH_RADIUS: f64 = 0.2;
 const FOOTHOLD_RINGS: [usize; 6] = [1, 8, 12, 16, 16, 20];
 /// Distance at which the foothold search probes the height around a candidate, m.
 const EDGE_PROBE: f64 = 0.05;
+const EDGE_DIAGONAL: f64 = EDGE_PROBE * std::f64::consts::FRAC_1_SQRT_2;
+/// The probe offsets around a foothold candidate (8 directions).
+const EDGE_PROBES: [(f64, f64); 8] = [
+    (EDGE_PROBE, 0.0),
+    (-EDGE_PROBE, 0.0),
+    (0.0, EDGE_PROBE),
+    (0.0, -EDGE_PROBE),
+    (EDGE_DIAGONAL, EDGE_DIAGONAL),
+    (EDGE_DIAGONAL, -EDGE_DIAGONAL),
+    (-EDGE_DIAGONAL, EDGE_DIAGONAL),
+    (-EDGE_DIAGONAL, -EDGE_DIAGONAL),
+];
 /// Cost of one metre of height change around a candidate, in metres of foothold displacement.
 const EDGE_WEIGHT: f64 = 2.0;
 /// Steepest local slope (rise over run within `EDGE_PROBE`) a foothold may have without extra
@@ -325,6 +366,7 @@ impl Controller {
             mpc_schedule: vec![[false; NUM_LEGS]; n],
             mpc_offsets: vec![[[0.0; 3]; NUM_LEGS]; n],
             height_map: HeightMap::default(),
+            foothold_candidates: foothold_candidates(),
             mpc,
             model,
             config,
@@ -771,29 +813,26 @@ impl Controller {
             .unwrap_or_else(|| terrain_height(reference, x, y))
     }
 
-    /// Largest height change within `EDGE_PROBE` of (x, y) (8 directions); `None` off the map.
-    fn edge_measure(&self, x: f64, y: f64) -> Option<f64> {
+    /// Cost of a foothold candidate at (cx, cy), `ring` metres from the nominal foothold:
+    /// `ring + EDGE_WEIGHT·edge + STEEP_WEIGHT·(edge/EDGE_PROBE − STEEP_SLOPE)⁺`, where `edge` is
+    /// the largest height change within `EDGE_PROBE` (8 directions). `None` when a probe leaves
+    /// the map, or as soon as the cost reaches `reject_at`: the cost only grows with `edge`, so
+    /// the remaining probes cannot make the candidate win.
+    fn foothold_cost(&self, ring: f64, cx: f64, cy: f64, reject_at: f64) -> Option<f64> {
         let map = &self.height_map;
-        let centre = map.height(x, y)?;
-        let diagonal = EDGE_PROBE * std::f64::consts::FRAC_1_SQRT_2;
-        let probes = [
-            (EDGE_PROBE, 0.0),
-            (-EDGE_PROBE, 0.0),
-            (0.0, EDGE_PROBE),
-            (0.0, -EDGE_PROBE),
-            (diagonal, diagonal),
-            (diagonal, -diagonal),
-            (-diagonal, diagonal),
-            (-diagonal, -diagonal),
-        ];
+        let cost_of = |edge: f64| {
+            let steep = (edge / EDGE_PROBE - STEEP_SLOPE).max(0.0);
+            ring + EDGE_WEIGHT * edge + STEEP_WEIGHT * steep
+        };
+        let centre = map.height(cx, cy)?;
         let mut edge: f64 = 0.0;
-        for (dx, dy) in probes {
-            match map.height(x + dx, y + dy) {
-                Some(h) => edge = edge.max((h - centre).abs()),
-                None => return None,
+        for (dx, dy) in EDGE_PROBES {
+            edge = edge.max((map.height(cx + dx, cy + dy)? - centre).abs());
+            if cost_of(edge) >= reject_at {
+                return None;
             }
         }
-        Some(edge)
+        Some(cost_of(edge))
     }
 
     /// Foot (sphere centre) target near the nominal foothold (x, y): with a height map, the
@@ -801,24 +840,23 @@ impl Controller {
     /// `STEEP_WEIGHT`·(slope − `STEEP_SLOPE`)⁺
     /// (rings of `FOOTHOLD_RINGS` candidates; ties keep the earlier, nearer one), at the map's
     /// height; without one, (x, y) at the plane's height.
+    ///
+    /// The search runs ring by ring and stops at the first ring whose displacement alone
+    /// already costs as much as the best candidate (on even ground: after the first one); this
+    /// is what keeps the search cheap enough for every tick and every MPC horizon step.
     fn select_foothold(&self, reference: &Reference, x: f64, y: f64) -> Vector3<f64> {
         let radius = self.model.foot_radius();
         let mut best: Option<(f64, f64, f64)> = None;
         if self.height_map.is_present() {
-            for (k, count) in FOOTHOLD_RINGS.iter().enumerate() {
-                let ring = FOOTHOLD_SEARCH_RADIUS * k as f64 / (FOOTHOLD_RINGS.len() - 1) as f64;
-                let count = *count;
-                for i in 0..count {
-                    let angle = std::f64::consts::TAU * i as f64 / count as f64;
-                    let cx = x + ring * angle.cos();
-                    let cy = y + ring * angle.sin();
-                    if let Some(edge) = self.edge_measure(cx, cy) {
-                        let steep = (edge / EDGE_PROBE - STEEP_SLOPE).max(0.0);
-                        let cost = ring + EDGE_WEIGHT * edge + STEEP_WEIGHT * steep;
-                        if best.map_or(true, |(c, _, _)| cost < c - 1e-9) {
-                            best = Some((cost, cx, cy));
-                        }
-                    }
+            for candidate in &self.foothold_candidates {
+                // A candidate replaces the best only when cheaper by more than 1e-9.
+                let reject_at = best.map_or(f64::INFINITY, |(c, _, _)| c - 1e-9);
+                if candidate.ring >= reject_at {
+                    break; // rings only grow from here on
+                }
+                let (cx, cy) = (x + candidate.dx, y + candidate.dy);
+                if let Some(cost) = self.foothold_cost(candidate.ring, cx, cy, reject_at) {
+                    best = Some((cost, cx, cy));
                 }
             }
         }

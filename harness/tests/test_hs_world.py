@@ -36,6 +36,31 @@ def test_rotation_quaternion_round_trip() -> None:
         np.testing.assert_allclose(got, q if q[0] >= 0 else -q, atol=1e-12)
 
 
+def test_state_vector_matches_the_state(ramp_scenario: Scenario, urdf: Path, tmp_path: Path) -> None:
+    """`state_vector` (the co-simulation's allocation-free read-out, torques held between
+    `apply_torques` calls) agrees with `state` while the robot tumbles through the air."""
+    world = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path)
+    world.place(1.5, 1.0, 0.7)
+    rng = np.random.default_rng(3)
+    velocities = rng.normal(scale=2.0, size=world.robot.getNumDofs())
+    positions = world.robot.getPositions()
+    positions[5] += 1.0  # in the air: nothing stops the tumble
+    world.robot.setPositions(positions)
+    world.robot.setVelocities(velocities)
+    out = np.zeros(37)
+    for step in range(300):
+        world.apply_torques(rng.normal(scale=3.0, size=12))
+        world.step()
+        if step % 30 == 0:
+            s = world.state()
+            world.state_vector(out)
+            expected = np.concatenate(
+                [s.position, s.quaternion, s.linear_velocity, s.angular_velocity, s.joint_positions, s.joint_velocities]
+            )
+            np.testing.assert_allclose(out, expected, atol=1e-9)
+    assert abs(quaternion_to_rpy(out[3:7])[2] - 0.7) > 1e-3  # it did rotate
+
+
 def test_placement_puts_the_lowest_foot_on_the_ground(ramp_scenario: Scenario, urdf: Path, tmp_path: Path) -> None:
     world = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path)
     world.place(1.5, 1.0, 0.4, clearance=0.002)

@@ -142,22 +142,13 @@ class CoSimulation:
         n_steps = max(1, round(self.duration() / dt))
         walk_start = c.stand_time
 
-        log_t = np.zeros(n_steps)
-        log_pos = np.zeros((n_steps, 3))
-        log_quat = np.zeros((n_steps, 4))
-        log_vel = np.zeros((n_steps, 3))
-        log_omega = np.zeros((n_steps, 3))
-        log_q = np.zeros((n_steps, NUM_JOINTS))
-        log_dq = np.zeros((n_steps, NUM_JOINTS))
-        log_tau = np.zeros((n_steps, NUM_JOINTS))
+        # One row per physics step; wide per-step vectors are copied with one assignment each.
+        log_t = np.arange(n_steps) * dt
+        log_state = np.zeros((n_steps, fr.N_STATE))
+        log_outputs = np.zeros((n_steps, fr.N_REAL_OUTPUTS))
         log_ref = np.zeros((n_steps, N_COLUMNS))
-        log_forces = np.zeros((n_steps, 12))
-        log_sched = np.zeros((n_steps, 4), dtype=np.int8)
-        log_touch = np.zeros((n_steps, 4), dtype=np.int8)
-        log_fsm = np.zeros(n_steps, dtype=np.int8)
-        log_solve = np.zeros(n_steps)
-        log_mode = np.zeros(n_steps, dtype=np.int8)
-
+        # contacts scheduled (4), contacts actual (4), FSM state, mode request
+        log_flags = np.zeros((n_steps, 10), dtype=np.int8)
         fmu = self.fmu
         world = self.world
         inputs = fmu.real_inputs
@@ -213,29 +204,22 @@ class CoSimulation:
                 torques[:] = fmu.torques
                 if not math.isfinite(float(torques.sum())):
                     raise SimulationError(f"the FMU returned non-finite torques at t={t:.3f} s")
-            world.apply_torques(torques)
+                world.apply_torques(torques)
             t0 = perf()
             world.step()
             timing.physics += perf() - t0
 
-            log_t[k] = t
-            log_pos[k] = state[0:3]
-            log_quat[k] = state[3:7]
-            log_vel[k] = state[7:10]
-            log_omega[k] = state[10:13]
-            log_q[k] = state[13:25]
-            log_dq[k] = state[25:37]
-            log_tau[k] = torques
+            log_state[k] = state
+            log_outputs[k] = fmu.real_outputs
             log_ref[k] = ref_row
-            log_forces[k] = fmu.forces
-            log_sched[k] = contacts_view
-            log_touch[k] = world.foot_contacts()
-            log_fsm[k] = fmu.fsm_state
-            log_solve[k] = fmu.solve_time
-            log_mode[k] = mode
+            flags = log_flags[k]
+            flags[0:4] = contacts_view
+            flags[4:8] = world.foot_contacts()
+            flags[8] = fmu.fsm_state
+            flags[9] = mode
 
             # The controller's damping state (code 4) is its own verdict that the robot is down.
-            if walking and fall_step is None and k % 10 == 0 and (log_fsm[k] == FSM_DAMPING or self._fallen(state, min_height)):
+            if walking and fall_step is None and k % 10 == 0 and (flags[8] == FSM_DAMPING or self._fallen(state, min_height)):
                 fall_step = k
             if fall_step is not None and (k - fall_step) * dt >= c.after_fall:
                 stop_reason = f"fell at t={fall_step * dt:.2f} s"
@@ -254,20 +238,20 @@ class CoSimulation:
 
         log = {
             "t": log_t[:n],
-            "base_pos": log_pos[:n],
-            "base_quat": log_quat[:n],
-            "base_vel": log_vel[:n],
-            "base_omega": log_omega[:n],
-            "q": log_q[:n],
-            "dq": log_dq[:n],
-            "tau": log_tau[:n],
+            "base_pos": log_state[:n, 0:3],
+            "base_quat": log_state[:n, 3:7],
+            "base_vel": log_state[:n, 7:10],
+            "base_omega": log_state[:n, 10:13],
+            "q": log_state[:n, 13:25],
+            "dq": log_state[:n, 25:37],
+            "tau": log_outputs[:n, 0:12],
             "ref": log_ref[:n],
-            "forces": log_forces[:n],
-            "contact_scheduled": log_sched[:n],
-            "contact_actual": log_touch[:n],
-            "fsm": log_fsm[:n],
-            "mpc_solve_time": log_solve[:n],
-            "mode": log_mode[:n],
+            "forces": log_outputs[:n, 12:24],
+            "contact_scheduled": log_flags[:n, 0:4],
+            "contact_actual": log_flags[:n, 4:8],
+            "fsm": log_flags[:n, 8],
+            "mpc_solve_time": log_outputs[:n, 24],
+            "mode": log_flags[:n, 9],
             "walk_start": np.array(walk_start),
             "comm_step": np.array(c.comm_step),
             "physics_dt": np.array(dt),

@@ -126,8 +126,12 @@ class ControllerFmu:
         self._has_fsm = fsm_vr is not None
         self._fsm_vr = (ctypes.c_uint * 1)(fsm_vr or 0)
         self._fsm_val = (ctypes.c_int * 1)()
-        self.real_inputs = np.zeros(N_REAL_INPUTS)
-        self.real_outputs = np.zeros(N_REAL_OUTPUTS)
+        # With every input present (our FMU), `real_inputs` *is* the ctypes buffer fmi2SetReal
+        # reads: no per-step copy. Likewise for the outputs.
+        self._inputs_complete = bool(self._real_in_mask.all())
+        self.real_inputs = self._in_np if self._inputs_complete else np.zeros(N_REAL_INPUTS)
+        self._outputs_complete = bool(self._real_out_mask.all())
+        self.real_outputs = self._out_np if self._outputs_complete else np.zeros(N_REAL_OUTPUTS)
 
         try:
             extract(str(fmu_path), unzipdir=str(self._unzipdir))
@@ -187,7 +191,8 @@ class ControllerFmu:
 
     def exchange_inputs(self, mode: int) -> None:
         """Writes `real_inputs` (state, reference, terrain) and the mode request into the FMU."""
-        self._in_np[:] = self.real_inputs[self._real_in_mask]
+        if not self._inputs_complete:
+            self._in_np[:] = self.real_inputs[self._real_in_mask]
         self._check(self._set_real(self._component, self._in_vr, len(self._in_np), self._in_val), "fmi2SetReal")
         self._mode_val[0] = mode
         self._check(self._set_integer(self._component, self._mode_vr, 1, self._mode_val), "fmi2SetInteger")
@@ -198,7 +203,8 @@ class ControllerFmu:
     def read_outputs(self) -> None:
         """Fills `real_outputs` (tau[12], force[12], solve time), `contacts` and `fsm_state`."""
         self._check(self._get_real(self._component, self._out_vr, len(self._out_np), self._out_val), "fmi2GetReal")
-        self.real_outputs[self._real_out_mask] = self._out_np
+        if not self._outputs_complete:
+            self.real_outputs[self._real_out_mask] = self._out_np
         if self._has_contacts:
             self._check(self._get_boolean(self._component, self._contact_vr, 4, self._contact_val), "fmi2GetBoolean")
         if self._has_fsm:

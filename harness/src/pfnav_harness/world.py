@@ -254,9 +254,10 @@ class QuadrupedWorld:
 
     def state_vector(self, out: NDArray[np.float64]) -> None:
         """Writes the 37 FMU state inputs in order pos(3), quat(4), vel(3), omega(3), q(12), dq(12)."""
-        transform = self.base.getWorldTransform()
-        out[0:3] = transform.translation()
-        quat = transform.quaternion()
+        q = self.robot.getPositions()
+        dq = self.robot.getVelocities()
+        out[0:3] = q[3:6]
+        quat = self.base.getWorldTransform().quaternion()
         # Same sign convention as rotation_to_quaternion: w ≥ 0.
         sign = -1.0 if quat.w() < 0.0 else 1.0
         out[3] = sign * quat.w()
@@ -265,18 +266,17 @@ class QuadrupedWorld:
         out[6] = sign * quat.z()
         out[7:10] = self.base.getLinearVelocity()
         out[10:13] = self.base.getAngularVelocity()
-        q = self.robot.getPositions()
-        dq = self.robot.getVelocities()
         out[13:25] = q[self.joint_dofs]
         out[25:37] = dq[self.joint_dofs]
 
     def apply_torques(self, torques: NDArray[np.float64]) -> None:
-        """Joint torques (canonical order) for the next physics step, clamped to the URDF effort limits."""
-        self._forces[:] = 0.0
+        """Joint torques (canonical order), clamped to the URDF effort limits, for every following
+        physics step until the next call."""
         self._forces[self.joint_dofs] = np.clip(torques, -self.effort_limits, self.effort_limits)
-        self.robot.setForces(self._forces)
 
     def step(self) -> None:
+        # DART clears the generalized forces in every step, so they are written again each time.
+        self.robot.setForces(self._forces)
         self.world.step()
 
     def foot_positions(self) -> NDArray[np.float64]:
