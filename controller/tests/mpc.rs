@@ -12,7 +12,7 @@ use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
 use quad_controller::gait::Gait;
-use quad_controller::mpc::{ConvexMpc, MpcInput, MpcParams, MpcStatus, QpData};
+use quad_controller::mpc::{ConvexMpc, MpcInput, MpcParams, MpcSolution, MpcStatus, QpData};
 use quad_controller::{Controller, ControllerConfig, GaitKind, Leg, GRAVITY};
 
 const HORIZON: usize = 10;
@@ -205,6 +205,24 @@ fn check_kkt(qp: &QpData, u: &[f64], lambda: &[f64]) {
     }
 }
 
+/// Largest difference between the step-0 forces of `solution` and the first stance-force
+/// blocks of a condensed-QP solution `x` (stance legs in leg order); swing legs must be zero.
+fn step0_force_error(solution: &MpcSolution, case: &Case, x: &[f64]) -> f64 {
+    let mut block = 0;
+    let mut max_error = 0.0f64;
+    for leg in 0..4 {
+        if case.contacts[0][leg] {
+            for axis in 0..3 {
+                max_error = max_error.max((solution.forces[leg][axis] - x[3 * block + axis]).abs());
+            }
+            block += 1;
+        } else {
+            assert_eq!(solution.forces[leg], [0.0; 3], "{}", case.name);
+        }
+    }
+    max_error
+}
+
 #[test]
 fn sparse_mpc_forces_match_the_condensed_reference_optimum() {
     let (mut mpc, cases) = setup();
@@ -219,19 +237,7 @@ fn sparse_mpc_forces_match_the_condensed_reference_optimum() {
         assert_eq!(solution.status, MpcStatus::Solved, "{}", case.name);
         let qp = mpc.last_qp();
         let exact = reference_solution(qp);
-        let mut block = 0;
-        let mut max_error = 0.0f64;
-        for leg in 0..4 {
-            if case.contacts[0][leg] {
-                for axis in 0..3 {
-                    let error = (solution.forces[leg][axis] - exact[3 * block + axis]).abs();
-                    max_error = max_error.max(error);
-                }
-                block += 1;
-            } else {
-                assert_eq!(solution.forces[leg], [0.0; 3], "{}", case.name);
-            }
-        }
+        let max_error = step0_force_error(&solution, case, &exact);
         eprintln!(
             "{}: max |Δf| {max_error:.2e} N, {} iterations",
             case.name, solution.iterations
@@ -268,17 +274,7 @@ fn osqp_finds_the_same_forces_as_clarabel() {
             osqp::Status::Solved(s) => s.x().to_vec(),
             other => panic!("{}: OSQP did not solve: {other:?}", case.name),
         };
-        let mut block = 0;
-        let mut max_error = 0.0f64;
-        for leg in 0..4 {
-            if case.contacts[0][leg] {
-                for axis in 0..3 {
-                    let error = (solution.forces[leg][axis] - x[3 * block + axis]).abs();
-                    max_error = max_error.max(error);
-                }
-                block += 1;
-            }
-        }
+        let max_error = step0_force_error(&solution, case, &x);
         eprintln!("{}: Clarabel vs OSQP max |Δf| {max_error:.2e} N", case.name);
         // Same bound as against the exact optimum: the weakly determined internal force split.
         assert!(max_error < 0.1, "{}: max |Δf| = {max_error} N", case.name);
