@@ -205,6 +205,16 @@ fn check_kkt(qp: &QpData, u: &[f64], lambda: &[f64]) {
     }
 }
 
+fn solve_case(mpc: &mut ConvexMpc, case: &Case) -> MpcSolution {
+    mpc.solve(&MpcInput {
+        x0: case.x0,
+        reference: &case.reference,
+        contacts: &case.contacts,
+        foot_offsets: &case.offsets,
+        terrain_normal: case.normal,
+    })
+}
+
 /// Largest difference between the step-0 forces of `solution` and the first stance-force
 /// blocks of a condensed-QP solution `x` (stance legs in leg order); swing legs must be zero.
 fn step0_force_error(solution: &MpcSolution, case: &Case, x: &[f64]) -> f64 {
@@ -227,13 +237,7 @@ fn step0_force_error(solution: &MpcSolution, case: &Case, x: &[f64]) -> f64 {
 fn sparse_mpc_forces_match_the_condensed_reference_optimum() {
     let (mut mpc, cases) = setup();
     for case in &cases {
-        let solution = mpc.solve(&MpcInput {
-            x0: case.x0,
-            reference: &case.reference,
-            contacts: &case.contacts,
-            foot_offsets: &case.offsets,
-            terrain_normal: case.normal,
-        });
+        let solution = solve_case(&mut mpc, case);
         assert_eq!(solution.status, MpcStatus::Solved, "{}", case.name);
         let qp = mpc.last_qp();
         let exact = reference_solution(qp);
@@ -260,13 +264,7 @@ fn sparse_mpc_forces_match_the_condensed_reference_optimum() {
 fn osqp_finds_the_same_forces_as_clarabel() {
     let (mut mpc, cases) = setup();
     for case in &cases {
-        let solution = mpc.solve(&MpcInput {
-            x0: case.x0,
-            reference: &case.reference,
-            contacts: &case.contacts,
-            foot_offsets: &case.offsets,
-            terrain_normal: case.normal,
-        });
+        let solution = solve_case(&mut mpc, case);
         assert_eq!(solution.status, MpcStatus::Solved, "{}", case.name);
         let mut problem = osqp_qp::osqp_problem(mpc.last_qp(), 1e-7).expect("OSQP setup");
         let status = problem.solve();
@@ -284,16 +282,7 @@ fn osqp_finds_the_same_forces_as_clarabel() {
 #[test]
 fn repeated_and_interleaved_solves_are_deterministic() {
     let (mut mpc, cases) = setup();
-    let solve = |mpc: &mut ConvexMpc, case: &Case| {
-        mpc.solve(&MpcInput {
-            x0: case.x0,
-            reference: &case.reference,
-            contacts: &case.contacts,
-            foot_offsets: &case.offsets,
-            terrain_normal: case.normal,
-        })
-        .forces
-    };
+    let solve = |mpc: &mut ConvexMpc, case: &Case| solve_case(mpc, case).forces;
     let first: Vec<_> = cases.iter().map(|c| solve(&mut mpc, c)).collect();
     // Cached solvers (updated in place) give bit-identical answers to fresh ones.
     for _ in 0..2 {
