@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 from pfnav_harness.metrics import TraversabilityField, path_cost
-from pfnav_harness.planner_client import Plan
+from pfnav_harness.planner_client import ROBOT_FOOTPRINT_RADIUS, Plan
 from pfnav_harness.scenario import Scenario
 
 
@@ -34,7 +34,7 @@ def test_c_shape_plans_over_lcm(
     )
     # The planner's own ∫p ds and the harness's re-evaluation of it on the same map agree: the metric
     # the report compares executed against planned paths with is the planner's metric.
-    field = TraversabilityField(scenario.terrain, scenario.traversability)
+    field = TraversabilityField(scenario.terrain, {**scenario.traversability, "footprint_radius_m": ROBOT_FOOTPRINT_RADIUS})
     cost, length = path_cost(field, plan.x, plan.y)
     assert length == pytest.approx(plan.metrics["length"], rel=0.02)
     assert cost == pytest.approx(plan.metrics["cost"], rel=0.03)

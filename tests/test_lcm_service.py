@@ -467,3 +467,16 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
             math.isnan(new.metrics.objective) and math.isnan(old.metrics.objective)
         )
     assert original[4].status == plan_reply_t.STATUS_START_INVALID
+
+
+@pytest.mark.parametrize("radius", ["-0.1", "nan", "inf"])
+def test_an_invalid_footprint_radius_stops_the_service_with_a_reason(radius: str, tmp_path: Path) -> None:
+    result = subprocess.run(
+        [str(binary("PFNAV_PLANNER_SERVICE", "pf-planner-service")), "--lcm-url", "memq://", f"--footprint-radius={radius}"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
+    assert result.returncode != 0
+    assert "footprint_radius_m" in result.stderr and "panicked" not in result.stderr, result.stderr

@@ -126,6 +126,22 @@ def test_traversability_matches_the_documented_formula() -> None:
         TraversabilityField(flat, {"height_weight": 0.0})
 
 
+def test_footprint_takes_the_largest_p_within_the_radius() -> None:
+    heights = np.zeros((7, 9))
+    heights[3, 4] = 1.0
+    heights[6, 8] = 0.5
+    terrain = Terrain((0.0, 0.0), 0.5, heights)
+    point = TraversabilityField(terrain, {}).values
+    for radius in (0.0, 0.4, 0.5, 0.75, 1.0, 1.2, 2.0):
+        values = TraversabilityField(terrain, {"footprint_radius_m": radius}).values
+        for iy, ix in np.ndindex(heights.shape):
+            sy, sx = np.indices(heights.shape)
+            within = np.hypot(sx - ix, sy - iy) * 0.5 <= radius + 1e-12
+            assert values[iy, ix] == point[within].max(), (radius, ix, iy)
+    with pytest.raises(ValueError):
+        TraversabilityField(terrain, {"footprint_radius_m": -0.1})
+
+
 def test_angle_helpers() -> None:
     np.testing.assert_allclose(wrap_angle(np.array([3 * math.pi / 2, -3 * math.pi / 2, 0.1])), [-math.pi / 2, math.pi / 2, 0.1])
     q = np.array([quat_from_rpy(0.1, -0.2, 2.5)])

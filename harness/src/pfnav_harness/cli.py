@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -13,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from . import paths
 from .errors import HarnessError
-from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, Plan, PlannerClient
+from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, Plan, PlannerClient
 
 if TYPE_CHECKING:
     from .cosim import CoSimConfig
@@ -58,6 +59,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lcm-url", default=os.environ.get("LCM_DEFAULT_URL", DEFAULT_LCM_URL), help=f"LCM URL (default {DEFAULT_LCM_URL})")
     p.add_argument("--channel-prefix", default=DEFAULT_CHANNEL_PREFIX, help=f"planner channel prefix (default {DEFAULT_CHANNEL_PREFIX})")
     p.add_argument("--connect", action="store_true", help="use an already running pf-planner-service instead of starting one")
+    p.add_argument(
+        "--footprint-radius",
+        type=float,
+        default=ROBOT_FOOTPRINT_RADIUS,
+        help=f"footprint radius the started service plans with, m (default {ROBOT_FOOTPRINT_RADIUS}; 0 = the paper's point robot)",
+    )
     p.add_argument("--plan-timeout", type=float, default=300.0, help="seconds to wait for each plan reply (default 300)")
     p.add_argument("--max-solve-time", type=float, default=240.0, help="solver time limit asked of the service, s (default 240)")
     p.add_argument("--service-timeout", type=float, default=15.0, help="seconds to wait for the started service's first status (default 15)")
@@ -98,9 +105,13 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
 
 def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods: Sequence[str], out: Path) -> dict[str, dict[str, Plan]]:
     binary = None if args.connect else paths.planner_service_path()
+    if not (math.isfinite(args.footprint_radius) and args.footprint_radius >= 0.0):
+        raise HarnessError(f"--footprint-radius must be finite and >= 0, got {args.footprint_radius}")
     plans: dict[str, dict[str, Plan]] = {}
     log = out / "logs" / "pf-planner-service.log"
-    with PlannerClient(args.lcm_url, args.channel_prefix, binary, service_log=log, startup_timeout=args.service_timeout) as client:
+    with PlannerClient(
+        args.lcm_url, args.channel_prefix, binary, service_log=log, startup_timeout=args.service_timeout, footprint_radius=args.footprint_radius
+    ) as client:
         if args.connect:
             client.wait_for_service(timeout=args.service_timeout)
         for name, scenario in scenarios.items():
@@ -155,6 +166,10 @@ def execute(args: argparse.Namespace) -> int:
 
     config = _config(args)
     scenarios = {name: export_scenario(pf_plan, name, out / "scenarios") for name in names}
+    if not args.connect:
+        # ∫p ds on the field the started service plans with (a running service's is unknown).
+        for scenario in scenarios.values():
+            scenario.traversability["footprint_radius_m"] = args.footprint_radius
     _check_lcm_url(args.lcm_url, args.allow_host_network)
     plans = _plan_all(args, scenarios, methods, out)
     plan_time = time.perf_counter() - started
@@ -178,6 +193,13 @@ def execute(args: argparse.Namespace) -> int:
     header = [
         f"Command: `pfnav-demo {' '.join(sys.argv[1:]) if sys.argv[1:] else args.command}`; FMU `{fmu.name}`, "
         f"communication step {config.comm_step * 1000:.0f} ms, physics 1 kHz (DART, ODE collision).",
+        "",
+        (
+            "Plans from a running service (`--connect`); ∫p ds on the scenarios' own traversability model."
+            if args.connect
+            else f"Robot footprint radius {args.footprint_radius:.2f} m: the service plans on p maximised over that radius "
+            "(0 = the paper's point robot), and every ∫p ds below uses the same field."
+        ),
         "",
         f"Total wall time {total:.1f} s (planning incl. service start {plan_time:.1f} s); "
         f"{sim_seconds:.1f} simulated seconds in {sim_wall:.1f} s wall = {sim_wall / max(sim_seconds, 1e-9):.3f} wall s per simulated s.",

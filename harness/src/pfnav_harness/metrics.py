@@ -3,7 +3,8 @@
 The traversability p is re-evaluated here from the scenario's own weights with the formula the
 planner documents (planner/core/src/traversability.rs): p = clamp((w_h·h/h_max + w_s·min(slope/
 slope_ref, 1) + w_r·min(rough/rough_ref, 1)) / (w_h + w_s + w_r), p_floor, 1) per cell centre,
-bilinear in between. Planned and executed paths are integrated with the same field, so their
+bilinear in between; with `footprint_radius_m` > 0 each cell takes the largest p within that
+radius first (the robot footprint the planner service is started with). Planned and executed paths are integrated with the same field, so their
 ∫p ds are comparable; a test checks it against the planner's own figure for the planned path.
 """
 
@@ -53,9 +54,28 @@ class TraversabilityField:
             total = total + w_s * np.minimum(self._slope_deg(h, terrain.resolution) / slope_ref, 1.0)
         if w_r > 0:
             total = total + w_r * np.minimum(self._roughness(h) / rough_ref, 1.0)
-        self.values = np.clip(total / (w_h + w_s + w_r), p_floor, 1.0)
+        values = np.clip(total / (w_h + w_s + w_r), p_floor, 1.0)
+        footprint = float(params.get("footprint_radius_m", 0.0))
+        if not (math.isfinite(footprint) and footprint >= 0.0):
+            raise ValueError(f"footprint_radius_m must be finite and >= 0, got {footprint}")
+        self.values = self._disc_max(values, footprint / terrain.resolution) if footprint > 0 else values
         self.origin = terrain.origin
         self.resolution = terrain.resolution
+
+    @staticmethod
+    def _disc_max(values: FloatArray, radius_cells: float) -> FloatArray:
+        """Largest value among the cells whose centres lie within `radius_cells` (the planner's filter)."""
+        r2 = radius_cells * radius_cells + 1e-9
+        reach = math.floor(math.sqrt(r2))
+        rows, cols = values.shape
+        padded = np.full((rows + 2 * reach, cols + 2 * reach), -np.inf)
+        padded[reach : reach + rows, reach : reach + cols] = values
+        out = values.copy()
+        for dy in range(-reach, reach + 1):
+            for dx in range(-reach, reach + 1):
+                if dx * dx + dy * dy <= r2:
+                    np.maximum(out, padded[reach + dy : reach + dy + rows, reach + dx : reach + dx + cols], out=out)
+        return out
 
     @staticmethod
     def _slope_deg(h: FloatArray, res: float) -> FloatArray:

@@ -29,6 +29,11 @@ from .scenario import Scenario, Terrain
 DEFAULT_LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 DEFAULT_CHANNEL_PREFIX = "PFNAV_"
 METHODS = ("pf", "astar", "dijkstra")
+# Footprint radius the harness starts the service with (m). The robot's feet stand 0.13 m beside
+# its centre line and its controller keeps them 5 cm off edges; a path closer than ~0.25 m to the
+# foot of a steep flank makes it pull the uphill feet in under the body, and the narrowed trot
+# support tips over (mountain_pass). 0.25 m is two cells of the scenario maps.
+ROBOT_FOOTPRINT_RADIUS = 0.25
 
 
 def _import_types() -> Any:
@@ -150,8 +155,10 @@ class PlannerClient:
         service_binary: Path | None = None,
         service_log: Path | None = None,
         startup_timeout: float = 10.0,
+        footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
     ) -> None:
         self._pfnav = _import_types()
+        self.footprint_radius = footprint_radius
         lcm = _import_lcm()
         self.lcm_url = lcm_url
         self.prefix = channel_prefix
@@ -205,7 +212,7 @@ class PlannerClient:
 
     # --- service process ----------------------------------------------------------------------
     def _start_service(self, binary: Path, timeout: float) -> None:
-        args = [str(binary), "--lcm-url", self.lcm_url, "--channel-prefix", self.prefix]
+        args = [str(binary), "--lcm-url", self.lcm_url, "--channel-prefix", self.prefix, f"--footprint-radius={self.footprint_radius!r}"]
         if self._service_log_path is not None:
             self._service_log_path.parent.mkdir(parents=True, exist_ok=True)
             self._service_log = open(self._service_log_path, "wb")  # noqa: SIM115 (closed in close())
@@ -353,9 +360,10 @@ def plan_scenario(
     speed: float = 0.0,
     timeout: float = 60.0,
     retries: int = 3,
+    footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
 ) -> dict[str, Plan]:
     """Publishes the scenario's map once and requests one plan per method."""
-    with PlannerClient(lcm_url, channel_prefix, service_binary, service_log) as client:
+    with PlannerClient(lcm_url, channel_prefix, service_binary, service_log, footprint_radius=footprint_radius) as client:
         if service_binary is None:
             client.wait_for_service(timeout=min(timeout, 5.0))
         seq = client.publish_map(scenario.terrain)

@@ -15,6 +15,13 @@
 //!   undetermined) and keeps graph edge weights positive.
 //!
 //! Defaults (`w_h = 1`, `w_s = w_r = 0`) give exactly the paper's p = h/h_max (floored).
+//!
+//! **Robot footprint** (`footprint_radius_m`, default 0 = the paper's point robot): the planners
+//! move a particle, but a legged robot stands on feet up to ~0.25 m from its centre. With a
+//! radius r > 0 each cell's p becomes the largest p of the cells whose centres lie within r
+//! (a disc max filter, the configuration-space cost): a path along the foot of a steep flank
+//! then keeps about r away from it instead of putting the uphill feet on the flank. Hard
+//! obstacles are not inflated by it (the planning grid pads them by half a cell diagonal).
 
 use serde::{Deserialize, Serialize};
 
@@ -39,7 +46,13 @@ pub struct TraversabilityParams {
     pub p_floor: f64,
     /// Height that maps to p = 1; `None` uses the highest cell of the map.
     pub h_max: Option<f64>,
+    /// Radius of the robot's footprint, metres: p of a cell is the largest p within this radius
+    /// (0 = the paper's point robot).
+    pub footprint_radius_m: f64,
 }
+
+/// Largest footprint radius in cells; bounds the filter's cost (cells × (2R + 1)).
+pub const MAX_FOOTPRINT_CELLS: usize = 64;
 
 impl Default for TraversabilityParams {
     fn default() -> Self {
@@ -51,6 +64,7 @@ impl Default for TraversabilityParams {
             roughness_ref_m: 0.1,
             p_floor: 0.05,
             h_max: None,
+            footprint_radius_m: 0.0,
         }
     }
 }
@@ -94,6 +108,12 @@ impl TraversabilityParams {
             return bad(
                 "traversability.p_floor",
                 format!("must lie in (0, 1], got {}", self.p_floor),
+            );
+        }
+        if !(self.footprint_radius_m.is_finite() && self.footprint_radius_m >= 0.0) {
+            return bad(
+                "traversability.footprint_radius_m",
+                format!("must be finite and >= 0, got {}", self.footprint_radius_m),
             );
         }
         if let Some(h) = self.h_max {
@@ -166,6 +186,22 @@ impl TraversabilityField {
                 values.push(p.clamp(params.p_floor, 1.0));
             }
         }
+        let values = if params.footprint_radius_m > 0.0 {
+            let radius_cells = params.footprint_radius_m / map.resolution;
+            if radius_cells > MAX_FOOTPRINT_CELLS as f64 {
+                return Err(PlanError::InvalidOption {
+                    name: "traversability.footprint_radius_m",
+                    reason: format!(
+                        "{} m is {radius_cells:.0} cells of {} m; at most {MAX_FOOTPRINT_CELLS} \
+                         cells are supported",
+                        params.footprint_radius_m, map.resolution
+                    ),
+                });
+            }
+            disc_max_filter(&values, map.width, map.height, radius_cells)
+        } else {
+            values
+        };
         Ok(Self {
             origin: map.origin,
             resolution: map.resolution,
@@ -203,6 +239,50 @@ impl TraversabilityField {
         let top = v(x0, y1) * (1.0 - tx) + v(x1, y1) * tx;
         bottom * (1.0 - ty) + top * ty
     }
+}
+
+/// Largest value among the cells whose centres lie within `radius_cells` (cell units) of each
+/// cell centre, inside the grid. Row by row: every row offset dy of the disc contributes a window
+/// of half-width ⌊√(r² − dy²)⌋ on row iy + dy, whose maximum a monotone deque gives in one pass.
+fn disc_max_filter(values: &[f64], width: usize, height: usize, radius_cells: f64) -> Vec<f64> {
+    // A centre exactly on the circle counts as inside despite rounding of radius / resolution.
+    let r2 = radius_cells * radius_cells + 1e-9;
+    let reach = r2.sqrt().floor() as usize;
+    let mut out = values.to_vec();
+    let mut window: std::collections::VecDeque<usize> = std::collections::VecDeque::new();
+    for dy in 0..=reach {
+        let half = (r2 - (dy * dy) as f64).sqrt().floor() as usize;
+        for iy in 0..height {
+            let rows = if dy == 0 {
+                [Some(iy), None]
+            } else {
+                [iy.checked_sub(dy), Some(iy + dy).filter(|&r| r < height)]
+            };
+            for source_row in rows.into_iter().flatten() {
+                let row = &values[source_row * width..(source_row + 1) * width];
+                window.clear();
+                let mut next = 0;
+                for ix in 0..width {
+                    // Admit cells up to ix + half, drop those left of ix − half.
+                    while next < width && next <= ix + half {
+                        while window.back().is_some_and(|&j| row[j] <= row[next]) {
+                            window.pop_back();
+                        }
+                        window.push_back(next);
+                        next += 1;
+                    }
+                    while window.front().is_some_and(|&j| j + half < ix) {
+                        window.pop_front();
+                    }
+                    if let Some(&j) = window.front() {
+                        let cell = &mut out[iy * width + ix];
+                        *cell = cell.max(row[j]);
+                    }
+                }
+            }
+        }
+    }
+    out
 }
 
 /// Terrain inclination at a cell centre in degrees (central differences, one-sided at the edge).
@@ -294,6 +374,60 @@ mod tests {
             TraversabilityField::from_map(&ramp(1.0), &params),
             Err(PlanError::InvalidOption { .. })
         ));
+    }
+
+    #[test]
+    fn footprint_takes_the_largest_p_within_the_radius() {
+        let (w, h) = (9, 7);
+        let mut heights = vec![0.0; w * h];
+        heights[3 * w + 4] = 1.0; // one high cell at (4, 3)
+        heights[6 * w + 8] = 0.5; // and a lower one in the corner
+        let map = GridMap::new([0.0, 0.0], 0.5, w, h, heights, None).expect("map");
+        let point =
+            TraversabilityField::from_map(&map, &TraversabilityParams::default()).expect("field");
+        for radius in [0.0, 0.4, 0.5, 0.75, 1.0, 1.2, 2.0] {
+            let params = TraversabilityParams {
+                footprint_radius_m: radius,
+                ..Default::default()
+            };
+            let f = TraversabilityField::from_map(&map, &params).expect("field");
+            // Brute force: the max over all cells within the radius (centre distances).
+            for iy in 0..h {
+                for ix in 0..w {
+                    let mut expected: f64 = 0.0;
+                    for sy in 0..h {
+                        for sx in 0..w {
+                            let d = (ix as f64 - sx as f64).hypot(iy as f64 - sy as f64) * 0.5;
+                            if d <= radius + 1e-12 {
+                                expected = expected.max(point.values[sy * w + sx]);
+                            }
+                        }
+                    }
+                    assert_eq!(
+                        f.values[iy * w + ix],
+                        expected,
+                        "r {radius} cell ({ix}, {iy})"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn footprint_radius_is_validated() {
+        for radius in [-0.1, f64::NAN, f64::INFINITY, 100.0] {
+            let params = TraversabilityParams {
+                footprint_radius_m: radius,
+                ..Default::default()
+            };
+            assert!(
+                matches!(
+                    TraversabilityField::from_map(&ramp(1.0), &params),
+                    Err(PlanError::InvalidOption { .. })
+                ),
+                "radius {radius}"
+            );
+        }
     }
 
     #[test]

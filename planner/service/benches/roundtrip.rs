@@ -14,6 +14,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use lcm_transport::Lcm;
 use lcm_types::pfnav::{Header, PlanReply, PlanRequest, TerrainMap};
 use lcm_types::Message;
+use pf_planner::traversability::TraversabilityParams;
 use pf_planner_service::convert::{validate_request, MapSource, OptionDefaults};
 use pf_planner_service::planning::{self, GeneratorCache};
 use pf_planner_service::ServiceConfig;
@@ -90,7 +91,9 @@ fn bench(c: &mut Criterion) {
         let validated =
             validate_request(&msg, &NoMaps, 1 << 20, &OptionDefaults::default()).expect("valid");
         group.bench_function(format!("{name}/bare_planner"), |b| {
-            b.iter(|| planning::plan(&validated, &cache).expect("plans"))
+            b.iter(|| {
+                planning::plan(&validated, &cache, &TraversabilityParams::default()).expect("plans")
+            })
         });
         let mut id = 0;
         group.bench_function(format!("{name}/service_roundtrip_memq"), |b| {

@@ -46,6 +46,10 @@ struct Args {
     /// Default solve-time limit in seconds for requests that leave options.max_solve_time at 0.
     #[arg(long, default_value_t = 30.0)]
     max_solve_time: f64,
+    /// Robot footprint radius in metres: each cell costs the largest traversability p within
+    /// it, so paths keep that far from steep ground (0 = the paper's point robot).
+    #[arg(long, default_value_t = 0.0)]
+    footprint_radius: f64,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -64,6 +68,11 @@ fn main() -> anyhow::Result<()> {
         args.max_solve_time.is_finite() && args.max_solve_time > 0.0,
         "--max-solve-time must be finite and > 0"
     );
+    anyhow::ensure!(
+        args.footprint_radius.is_finite() && args.footprint_radius >= 0.0,
+        "--footprint-radius (traversability.footprint_radius_m) must be finite and >= 0, got {}",
+        args.footprint_radius
+    );
     let mut config = ServiceConfig::with_prefix(&args.channel_prefix)?;
     config.max_map_cells = args.max_map_cells;
     config.workers = args.workers;
@@ -72,6 +81,7 @@ fn main() -> anyhow::Result<()> {
     config.stored_maps = args.stored_maps;
     config.status_period = Duration::from_secs_f64(args.status_period);
     config.defaults.max_solve_time = args.max_solve_time;
+    config.traversability.footprint_radius_m = args.footprint_radius;
 
     let url = args.lcm_url.unwrap_or_else(lcm_transport::default_url);
     let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);

@@ -145,14 +145,17 @@ fn lp_status_code(status: &str) -> i8 {
     }
 }
 
-/// Plans `request`. Traversability uses the planner's default weights (the wire contract has no
-/// field for them).
-pub fn plan(request: &ValidatedRequest, cache: &GeneratorCache) -> Result<PlanOutcome, Rejection> {
+/// Plans `request` on the traversability model `traversability` (the service's configuration:
+/// the wire contract has no field for it).
+pub fn plan(
+    request: &ValidatedRequest,
+    cache: &GeneratorCache,
+    traversability: &TraversabilityParams,
+) -> Result<PlanOutcome, Rejection> {
     let map = &*request.map;
     let opts = &request.options;
     let reject = |e: PlanError| rejection_of(&e);
-    let field =
-        TraversabilityField::from_map(map, &TraversabilityParams::default()).map_err(reject)?;
+    let field = TraversabilityField::from_map(map, traversability).map_err(reject)?;
     let grid = PlanningGrid::from_field(map, &field, opts.grid_size).map_err(reject)?;
     let mut metrics = PlanMetrics {
         lp_status: PlanMetrics::LP_NOT_APPLICABLE,

@@ -13,6 +13,7 @@ use lcm_transport::Lcm;
 use lcm_types::pfnav::{Header, PlanMetrics, PlanReply, PlanRequest, ServiceStatus, TerrainMap};
 use lcm_types::{DecodeLimits, Message};
 use pf_planner::map::GridMap;
+use pf_planner::traversability::TraversabilityParams;
 use tracing::{debug, error, info, warn};
 
 use crate::convert::{self, MapSource, OptionDefaults, Rejection, ValidatedRequest};
@@ -78,6 +79,9 @@ pub struct ServiceConfig {
     pub status_period: Duration,
     /// Defaults for request options left at 0.
     pub defaults: OptionDefaults,
+    /// Traversability model of every plan (the wire contract has no field for it): the paper's
+    /// p = h/h_max by default; `--footprint-radius` sets the robot's footprint.
+    pub traversability: TraversabilityParams,
 }
 
 impl ServiceConfig {
@@ -92,6 +96,7 @@ impl ServiceConfig {
             stored_maps: 8,
             status_period: Duration::from_secs(1),
             defaults: OptionDefaults::default(),
+            traversability: TraversabilityParams::default(),
         })
     }
 
@@ -103,6 +108,9 @@ impl ServiceConfig {
             "--max-map-cells must be at least 1"
         );
         anyhow::ensure!(!self.status_period.is_zero(), "status period must be > 0");
+        self.traversability
+            .validate()
+            .map_err(|e| anyhow::anyhow!("traversability model: {e}"))?;
         Ok(())
     }
 }
@@ -447,7 +455,7 @@ impl Shared {
                 continue;
             }
             let started = Instant::now();
-            let outcome = planning::plan(request, &self.cache);
+            let outcome = planning::plan(request, &self.cache, &self.config.traversability);
             let solve_time = started.elapsed().as_secs_f64();
             self.stats
                 .last_solve_time_bits

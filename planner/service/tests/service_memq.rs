@@ -417,3 +417,70 @@ fn status_is_published_every_period_with_counters() {
     assert!(status.last_solve_time > 0.0);
     service.stop();
 }
+
+/// Distance from (x, y) to the nearest cell centre of `map` whose inclination exceeds 30°.
+fn distance_to_steep_ground(map: &pf_planner::map::GridMap, x: f64, y: f64) -> f64 {
+    let mut nearest = f64::INFINITY;
+    for iy in 0..map.height {
+        for ix in 0..map.width {
+            if pf_planner::traversability::slope_deg(map, ix, iy) > 30.0 {
+                let c = map.cell_center(ix, iy);
+                nearest = nearest.min((c[0] - x).hypot(c[1] - y));
+            }
+        }
+    }
+    nearest
+}
+
+#[test]
+fn a_footprint_radius_keeps_the_mountain_pass_plan_off_the_flanks() {
+    let scenario = scenarios::by_name("mountain_pass").unwrap();
+    let mut clearance = Vec::new();
+    for (id, radius) in [(61, 0.0), (62, 0.25)] {
+        let mut cfg = config(&format!("T6{id}_"));
+        cfg.traversability.footprint_radius_m = radius;
+        let service = TestService::start(cfg);
+        let mut request = inline_request(
+            id,
+            PlanRequest::METHOD_DIJKSTRA,
+            &scenario.map,
+            scenario.start,
+            scenario.goal.center,
+        );
+        request.goal_radius = scenario.goal.radius;
+        service.publish_request(&request);
+        let reply = service.reply_to(id, WAIT);
+        assert_eq!(reply.status, PlanReply::STATUS_OK, "{}", reply.error);
+        // The reply is the library's plan on the footprint field.
+        let params = TraversabilityParams {
+            footprint_radius_m: radius,
+            ..Default::default()
+        };
+        let field = TraversabilityField::from_map(&scenario.map, &params).unwrap();
+        let grid = PlanningGrid::from_field(&scenario.map, &field, scenario.map.width).unwrap();
+        let path = graph::dijkstra_path(&grid, scenario.start, &scenario.goal, Connectivity::Eight)
+            .unwrap();
+        assert_eq!(reply.metrics.objective, path.cost);
+        clearance.push(
+            reply
+                .samples
+                .iter()
+                .map(|s| distance_to_steep_ground(&scenario.map, s.x, s.y))
+                .fold(f64::INFINITY, f64::min),
+        );
+        service.stop();
+    }
+    // The point robot's path touches the flank; with the footprint it keeps its radius off it
+    // (less half a cell diagonal: distances are to cell centres).
+    eprintln!("clearance of the plan from ground steeper than 30°: {clearance:?}");
+    assert!(
+        clearance[0] < 0.15,
+        "point-robot clearance {}",
+        clearance[0]
+    );
+    assert!(
+        clearance[1] >= 0.25 - 0.09,
+        "footprint clearance {}",
+        clearance[1]
+    );
+}
