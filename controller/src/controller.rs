@@ -89,6 +89,8 @@ pub struct Controller {
     /// Nominal foot position under each hip, base frame (xy used for footholds).
     nominal_feet_body: [Vector3<f64>; NUM_LEGS],
     com_offset_body: Vector3<f64>,
+    /// How long each state given to `step` stays in force (0: a fresh state every tick).
+    input_period_s: f64,
     fsm: FsmState,
     state_time: f64,
     stand_up_start: [f64; NUM_JOINTS],
@@ -170,6 +172,11 @@ const BODY_SHIFT_GAIN: f64 = 1.0;
 const MAX_BODY_SHIFT: f64 = 0.1;
 /// Clearance the swing foot keeps above the terrain between lift-off and touchdown, m.
 const SWING_TERRAIN_MARGIN: f64 = 0.06;
+/// Joint damping per inertia and input period at most (k_d·T/M_ii): a held velocity feedback with
+/// k_d·T/M_ii above 2 reverses the joint's velocity every period, and the joint chatters.
+const HELD_KD_LIMIT: f64 = 1.0;
+/// Joint stiffness per inertia and squared input period at most (k_p·T²/M_ii).
+const HELD_KP_LIMIT: f64 = 0.25;
 /// Highest swing apex (above the lift-off/touchdown line) the clearance logic may ask for, m.
 const MAX_SWING_HEIGHT: f64 = 0.2;
 
@@ -353,6 +360,7 @@ impl Controller {
                 yaw_rate: 0.0,
             },
             gait_time: 0.0,
+            input_period_s: 0.0,
             ticks_since_mpc: 0,
             forces: [[0.0; 3]; NUM_LEGS],
             mpc_contacts: [false; NUM_LEGS],
@@ -392,6 +400,33 @@ impl Controller {
         self.fsm
     }
 
+    /// Declares that each state given to [`Controller::step`] stays in force for `seconds` (a
+    /// co-simulation master that exchanges data every `seconds` while the controller ticks
+    /// faster; 0, the default, means a fresh state every tick). Joint PD gains are then capped at
+    /// `k_d ≤ 1.0·M_ii/T` and `k_p ≤ 0.25·M_ii/T²` (M_ii the joint's inertia in its leg), which a
+    /// held feedback needs to stay stable; at T = 1 ms no default gain reaches its cap.
+    pub fn set_input_period(&mut self, seconds: f64) -> Result<(), ControllerError> {
+        if !(seconds.is_finite() && seconds >= 0.0) {
+            return Err(ControllerError::Config(format!(
+                "input period {seconds} s must be finite and >= 0"
+            )));
+        }
+        self.input_period_s = seconds;
+        Ok(())
+    }
+
+    /// PD gains for a joint of inertia `inertia` under the declared input period.
+    fn held_gains(&self, kp: f64, kd: f64, inertia: f64) -> (f64, f64) {
+        let period = self.input_period_s;
+        if period <= 0.0 || !(inertia.is_finite() && inertia > 0.0) {
+            return (kp, kd);
+        }
+        (
+            kp.min(HELD_KP_LIMIT * inertia / (period * period)),
+            kd.min(HELD_KD_LIMIT * inertia / period),
+        )
+    }
+
     /// The robot model.
     pub fn model(&self) -> &RobotModel {
         &self.model
@@ -423,8 +458,14 @@ impl Controller {
         for (i, tau) in torques.iter_mut().enumerate() {
             let dq = state.joint_velocities[i];
             if dq.is_finite() {
+                // The state may be invalid: the joint inertia is taken at the standing pose.
+                let leg = Leg::ALL[i / 3];
+                let mass = self
+                    .model
+                    .mass_matrix(leg, leg_slice(&self.stand_joint_positions, leg));
+                let (_, kd) = self.held_gains(0.0, self.config.damping_kd, mass[(i % 3, i % 3)]);
                 let limit = self.effort_limits[i];
-                *tau = (-self.config.damping_kd * dq).clamp(-limit, limit);
+                *tau = (-kd * dq).clamp(-limit, limit);
             }
         }
         Command {
@@ -641,8 +682,10 @@ impl Controller {
         self.contacts = [false; NUM_LEGS];
         let mut torques = [0.0; NUM_JOINTS];
         for leg in Leg::ALL {
+            let mass = self.model.mass_matrix(leg, sense.q[leg.index()]);
             for j in 0..3 {
-                torques[3 * leg.index() + j] = -self.config.damping_kd * sense.dq[leg.index()][j];
+                let (_, kd) = self.held_gains(0.0, self.config.damping_kd, mass[(j, j)]);
+                torques[3 * leg.index() + j] = -kd * sense.dq[leg.index()][j];
             }
         }
         Actuation {
@@ -665,13 +708,17 @@ impl Controller {
             let foot_force_body = sense.rotation.transpose() * (-ground_force);
             let jac = Matrix3::from(self.model.foot_jacobian_body(leg, sense.q[l])).transpose();
             let feed_forward = jac.transpose() * foot_force_body;
+            let mass = self.model.mass_matrix(leg, sense.q[l]);
             for j in 0..3 {
                 let i = 3 * l + j;
                 let q_ref = self.stand_up_start[i]
                     + (self.stand_joint_positions[i] - self.stand_up_start[i]) * s;
-                torques[i] = self.config.kp_stand[j] * (q_ref - sense.q[l][j])
-                    - self.config.kd_stand[j] * sense.dq[l][j]
-                    + feed_forward[j];
+                let (kp, kd) = self.held_gains(
+                    self.config.kp_stand[j],
+                    self.config.kd_stand[j],
+                    mass[(j, j)],
+                );
+                torques[i] = kp * (q_ref - sense.q[l][j]) - kd * sense.dq[l][j] + feed_forward[j];
             }
             forces[l] = [0.0, 0.0, weight_share];
         }
@@ -1218,10 +1265,15 @@ impl Controller {
             .leg_bias(leg, sense.q[l], sense.dq[l], sense.gravity_body);
         let inertial = mass * ddq_ref;
         for j in 0..3 {
+            let (kp, kd) = self.held_gains(
+                self.config.kp_swing[j],
+                self.config.kd_swing[j],
+                mass[(j, j)],
+            );
             torques[3 * l + j] = inertial[j]
                 + bias[j]
-                + self.config.kp_swing[j] * (q_ref[j] - sense.q[l][j])
-                + self.config.kd_swing[j] * (dq_ref[j] - sense.dq[l][j]);
+                + kp * (q_ref[j] - sense.q[l][j])
+                + kd * (dq_ref[j] - sense.dq[l][j]);
         }
     }
 

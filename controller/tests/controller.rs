@@ -402,3 +402,73 @@ fn config_round_trips_through_json() {
     );
     assert_eq!(FsmState::from_code(7), None);
 }
+
+/// Stand-up torques of the first tick with every joint moving at `velocity` rad/s.
+fn stand_up_torques(ctrl: &mut Controller, velocity: f64) -> [f64; 12] {
+    let mut state = standing_state(ctrl, 0.28);
+    state.joint_velocities = [velocity; 12];
+    step(ctrl, &state, ModeRequest::Stand).joint_torques
+}
+
+#[test]
+fn joint_feedback_is_capped_for_a_held_input_period() {
+    let baseline = stand_up_torques(&mut controller(), 0.5);
+    for period in [0.0, 0.001] {
+        let mut ctrl = controller();
+        ctrl.set_input_period(period).expect("valid period");
+        // At the controller's own rate no default gain reaches its cap: bit for bit the same.
+        assert_eq!(
+            stand_up_torques(&mut ctrl, 0.5),
+            baseline,
+            "period {period}"
+        );
+    }
+    let period = 0.005;
+    let damping = |ctrl_of: &dyn Fn() -> Controller| {
+        let plus = stand_up_torques(&mut ctrl_of(), 0.5);
+        let minus = stand_up_torques(&mut ctrl_of(), -0.5);
+        let mut kd = [0.0; 12];
+        for i in 0..12 {
+            kd[i] = (minus[i] - plus[i]) / (2.0 * 0.5); // τ = … − k_d q̇
+        }
+        kd
+    };
+    let fresh = damping(&controller);
+    let held = damping(&|| {
+        let mut ctrl = controller();
+        ctrl.set_input_period(period).expect("valid period");
+        ctrl
+    });
+    let ctrl = controller();
+    let q = ctrl.stand_joint_positions();
+    for leg in Leg::ALL {
+        let l = leg.index();
+        let mass = ctrl
+            .model()
+            .leg_mass_matrix(leg, [q[3 * l], q[3 * l + 1], q[3 * l + 2]]);
+        for j in 0..3 {
+            let i = 3 * l + j;
+            let cap = mass[j][j] / period;
+            assert!(
+                held[i] <= cap * (1.0 + 1e-9),
+                "joint {i}: k_d {} > {cap}",
+                held[i]
+            );
+            assert!(held[i] <= fresh[i] + 1e-9, "joint {i}");
+        }
+    }
+    // The knee (lightest joint) is the one the cap lowers at 5 ms.
+    assert!(
+        held[2] < 0.5 * fresh[2],
+        "knee k_d {} vs {}",
+        held[2],
+        fresh[2]
+    );
+    let mut ctrl = controller();
+    for bad in [-0.001, f64::NAN, f64::INFINITY] {
+        assert!(matches!(
+            ctrl.set_input_period(bad),
+            Err(ControllerError::Config(_))
+        ));
+    }
+}

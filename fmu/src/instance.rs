@@ -300,6 +300,10 @@ impl Instance {
             ));
         };
         let fsm_before = self.command.fsm_state;
+        // The inputs stay in force for the whole step and the outputs for the next one.
+        controller
+            .set_input_period(step.max(dt))
+            .map_err(|e| FmuError::InvalidArgument(e.to_string()))?;
         if let Err(e) = controller.set_height_map(&self.height_map) {
             self.command = controller.safe_command(&self.state);
             self.phase = Phase::StepFailed;

@@ -20,12 +20,13 @@ from .state_log import write_state_log
 PAPER_SCENARIOS = ("mountain_pass", "pits", "c_shape")
 
 
-def export_scenario(pf_plan: Path, name: str, out_dir: Path, timeout: float = 120.0) -> Scenario:
-    """Runs `pf-plan scenario export NAME --out DIR` and loads the result."""
+def export_scenario(pf_plan: Path, name: str, out_dir: Path, timeout: float = 120.0, seed: int | None = None) -> Scenario:
+    """Runs `pf-plan scenario export NAME --out DIR [--seed SEED]` and loads the result (seed None: the scenario's own)."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    seed_args = [] if seed is None else ["--seed", str(seed)]
     try:
         proc = subprocess.run(
-            [str(pf_plan), "scenario", "export", name, "--out", str(out_dir)],
+            [str(pf_plan), "scenario", "export", name, "--out", str(out_dir), *seed_args],
             capture_output=True,
             text=True,
             timeout=timeout,
