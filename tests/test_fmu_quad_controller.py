@@ -199,8 +199,9 @@ class Inputs:
         }
 
 
-def run_direct(binary: Path, segments: list[tuple[Inputs, int]]) -> dict[str, Any]:
-    request = {"segments": [dict(i.direct_json(), ticks=n) for i, n in segments]}
+def run_direct(binary: Path, segments: list[tuple[Inputs, int, float]]) -> dict[str, Any]:
+    """Segments of (inputs, ticks, communication step h of the FMU run it mirrors)."""
+    request = {"segments": [dict(i.direct_json(), ticks=n, comm_step=h) for i, n, h in segments]}
     done = subprocess.run(
         [str(binary)], input=json.dumps(request), capture_output=True, text=True, timeout=120, check=False
     )
@@ -414,7 +415,7 @@ def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
         t += 0.0015
     second = outputs(s, value_refs)
     total_ticks = round(t / 0.001)
-    direct = run_direct(direct_reference, [(inputs, 1200), (inputs, total_ticks - 1200)])
+    direct = run_direct(direct_reference, [(inputs, 1200, 0.01), (inputs, total_ticks - 1200, 0.0015)])
     assert_matches_direct(first, direct["commands"][0])
     assert_matches_direct(second, direct["commands"][1])
     assert second["fsm"] == FSM_CODES["Stand"] and second["contacts"] == [True] * 4
@@ -593,7 +594,7 @@ def test_two_instances_in_one_process_are_independent(
         b.slave.doStep(t, 0.02)
         t += 0.02
     for logged, inputs in ((a, inputs_a), (b, inputs_b)):
-        direct = run_direct(direct_reference, [(inputs, 1000)])
+        direct = run_direct(direct_reference, [(inputs, 1000, 0.02)])
         assert_matches_direct(outputs(logged.slave, value_refs), direct["commands"][0])
         logged.slave.terminate()
     a.slave.freeInstance()

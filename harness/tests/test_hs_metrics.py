@@ -140,6 +140,14 @@ def test_footprint_takes_the_largest_p_within_the_radius() -> None:
             assert values[iy, ix] == point[within].max(), (radius, ix, iy)
     with pytest.raises(ValueError):
         TraversabilityField(terrain, {"footprint_radius_m": -0.1})
+    # Obstacle cells count as p = 1 around them and keep their own p.
+    pit = np.zeros((5, 7), dtype=bool)
+    pit[2, 3] = True
+    flat = Terrain((0.0, 0.0), 1.0, np.full((5, 7), 0.5), pit)
+    values = TraversabilityField(flat, {"footprint_radius_m": 1.0, "h_max": 1.0}).values
+    for iy, ix in np.ndindex(pit.shape):
+        near = math.hypot(ix - 3, iy - 2) <= 1.0 and (ix, iy) != (3, 2)
+        assert values[iy, ix] == (1.0 if near else 0.5), (ix, iy)
 
 
 def test_angle_helpers() -> None:

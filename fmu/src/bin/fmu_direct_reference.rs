@@ -2,8 +2,10 @@
 //! feeds the FMU, and prints the commands as JSON. The FMU tests compare against it to 1e-12.
 //!
 //! Reads from stdin:
-//! `{"segments": [{"state": RobotState, "reference": Reference, "ticks": n}, ...]}`
-//! (serde layout of the controller types) and prints
+//! `{"segments": [{"state": RobotState, "reference": Reference, "ticks": n, "comm_step": h},
+//! ...]}` (serde layout of the controller types; `comm_step`, optional, is the communication step
+//! of the FMU run being mirrored: the controller then gets the FMU's input period max(h, control
+//! dt); without it, a fresh state every tick) and prints
 //! `{"total_mass": m, "stand_joint_positions": [..12], "control_dt": dt,
 //! "commands": [Command after each segment, ...]}` (an empty segment list gives the model data only).
 //! Options: `--urdf PATH` (default `robot/quadruped.urdf`), `--config PATH` (JSON
@@ -25,6 +27,8 @@ struct Segment {
     state: RobotState,
     reference: Reference,
     ticks: u64,
+    #[serde(default)]
+    comm_step: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -79,6 +83,9 @@ fn main() -> Result<()> {
     let mut commands = Vec::with_capacity(request.segments.len());
     for (index, segment) in request.segments.iter().enumerate() {
         let mut last = None;
+        controller
+            .set_input_period(segment.comm_step.map_or(0.0, |h| h.max(dt)))
+            .with_context(|| format!("segment {index}"))?;
         for tick in 0..segment.ticks {
             let command = controller
                 .step(&segment.state, &segment.reference, dt)

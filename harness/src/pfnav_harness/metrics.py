@@ -4,7 +4,8 @@ The traversability p is re-evaluated here from the scenario's own weights with t
 planner documents (planner/core/src/traversability.rs): p = clamp((w_h·h/h_max + w_s·min(slope/
 slope_ref, 1) + w_r·min(rough/rough_ref, 1)) / (w_h + w_s + w_r), p_floor, 1) per cell centre,
 bilinear in between; with `footprint_radius_m` > 0 each cell takes the largest p within that
-radius first (the robot footprint the planner service is started with). Planned and executed paths are integrated with the same field, so their
+radius first, obstacle cells counting as p = 1 (the robot footprint the planner service is started
+with). Planned and executed paths are integrated with the same field, so their
 ∫p ds are comparable; a test checks it against the planner's own figure for the planned path.
 """
 
@@ -58,7 +59,12 @@ class TraversabilityField:
         footprint = float(params.get("footprint_radius_m", 0.0))
         if not (math.isfinite(footprint) and footprint >= 0.0):
             raise ValueError(f"footprint_radius_m must be finite and >= 0, got {footprint}")
-        self.values = self._disc_max(values, footprint / terrain.resolution) if footprint > 0 else values
+        if footprint > 0:
+            # As the planner: obstacle cells count as p = 1 within the footprint and keep their own p.
+            worst = values if terrain.obstacles is None else np.where(terrain.obstacles, 1.0, values)
+            dilated = self._disc_max(worst, footprint / terrain.resolution)
+            values = dilated if terrain.obstacles is None else np.where(terrain.obstacles, values, dilated)
+        self.values = values
         self.origin = terrain.origin
         self.resolution = terrain.resolution
 

@@ -21,7 +21,8 @@
 //! radius r > 0 each cell's p becomes the largest p of the cells whose centres lie within r
 //! (a disc max filter, the configuration-space cost): a path along the foot of a steep flank
 //! then keeps about r away from it instead of putting the uphill feet on the flank. Hard
-//! obstacles are not inflated by it (the planning grid pads them by half a cell diagonal).
+//! obstacle cells count as p = 1 within the footprint (a foot in a pit is the worst case), so
+//! paths also keep r off pit rims where there is room; the obstacle constraint is unchanged.
 
 use serde::{Deserialize, Serialize};
 
@@ -198,7 +199,28 @@ impl TraversabilityField {
                     ),
                 });
             }
-            disc_max_filter(&values, map.width, map.height, radius_cells)
+            // A foot in a hard obstacle (a pit) is as bad as it gets: obstacle cells count as
+            // p = 1 within the footprint, so paths keep r off pit rims where there is room
+            // (the obstacle constraint itself is unchanged).
+            let mut worst = values.clone();
+            if let Some(mask) = &map.obstacles {
+                for (p, &blocked) in worst.iter_mut().zip(mask) {
+                    if blocked {
+                        *p = 1.0;
+                    }
+                }
+            }
+            let dilated = disc_max_filter(&worst, map.width, map.height, radius_cells);
+            // Obstacle cells keep their own p (they are never entered anyway).
+            match &map.obstacles {
+                Some(mask) => dilated
+                    .iter()
+                    .zip(mask)
+                    .zip(&values)
+                    .map(|((&d, &blocked), &own)| if blocked { own } else { d })
+                    .collect(),
+                None => dilated,
+            }
         } else {
             values
         };
@@ -409,6 +431,28 @@ mod tests {
                         "r {radius} cell ({ix}, {iy})"
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn footprint_counts_obstacle_cells_as_untraversable() {
+        let (w, h) = (7, 5);
+        let mut obstacles = vec![false; w * h];
+        obstacles[2 * w + 3] = true; // a pit cell at (3, 2), as low as the rest
+        let map =
+            GridMap::new([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], Some(obstacles)).expect("map");
+        let params = TraversabilityParams {
+            footprint_radius_m: 1.0,
+            h_max: Some(1.0),
+            ..Default::default()
+        };
+        let f = TraversabilityField::from_map(&map, &params).expect("field");
+        for iy in 0..h {
+            for ix in 0..w {
+                let near = (ix as f64 - 3.0).hypot(iy as f64 - 2.0) <= 1.0 && (ix, iy) != (3, 2);
+                let expected = if near { 1.0 } else { 0.5 };
+                assert_eq!(f.values[iy * w + ix], expected, "cell ({ix}, {iy})");
             }
         }
     }
