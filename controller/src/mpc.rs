@@ -8,8 +8,8 @@
 //! `Θ̇ = R_z(ψ_k)ᵀ ω`, `ṗ = v`, `ω̇ = I_w⁻¹ Σ r_i × f_i` with `I_w = R_z I_b R_zᵀ`,
 //! `v̇ = Σ f_i / m − g e_z`. The discretisation is exact for this model (A³ = 0, zero-order hold).
 //!
-//! Decision variables: the world-frame ground reaction forces (acting on the robot) of the legs
-//! in stance at each step; swing legs are eliminated from the QP, which is the `D_k u = 0`
+//! Decision variables: the ground reaction forces (acting on the robot) of the legs in stance at
+//! each step; swing legs are eliminated from the QP, which is the `D_k u = 0`
 //! constraint of the paper applied by construction (their forces are exactly zero). Constraints
 //! per stance foot: friction pyramid about the terrain normal n with tangents t₁, t₂
 //! (`|f·tⱼ| ≤ μ f·n`) and `f_min ≤ f·n ≤ f_max`.
@@ -18,11 +18,21 @@
 //!
 //! Formulation (sparse, not condensed): the predicted states x_1..x_N (first 12 components; the
 //! constant g is folded into an offset) are QP variables next to the forces, and the dynamics
-//! `x_{k+1} = A_k x_k + B_k u_k` are equality constraints. P is then diagonal and the KKT matrix
-//! is banded (stage-wise), so Clarabel's sparse LDL costs O(N) per iteration instead of the
-//! O(n_u³) of the dense condensed Hessian (which also made every KKT product O(n_u²)). Forces are
-//! scaled to units of m·g inside the QP. The optimum is the one of the condensed QP
-//! ([`ConvexMpc::last_qp`]), which the tests check.
+//! are equality constraints. P is then diagonal and the KKT matrix is banded (stage-wise), so
+//! Clarabel's sparse LDL costs O(N) per iteration instead of the O(n_u³) of the dense condensed
+//! Hessian (which also made every KKT product O(n_u²)). The optimum is the one of the condensed
+//! QP ([`ConvexMpc::last_qp`]), which the tests check. Two choices keep the KKT factor small,
+//! since its numeric factorisation and triangular solves are most of the solve time:
+//!
+//! - The dynamics rows are written in trapezoidal form,
+//!   `(I − dt/2 A_c) x_{k+1} = (I + dt/2 A_c) x_k + dt B_c u_k` (gravity on the right-hand side).
+//!   Because A_c³ = 0 and A_c² B_c = 0 this is `(I − dt/2 A_c)` times the exact discretisation
+//!   `x_{k+1} = A_k x_k + B_k u_k`, so the feasible set is the same; but the forces only enter the
+//!   ω and v rows instead of also Θ and p through the dt²/2 terms, which halves the rows each
+//!   force block couples and the fill-in they cause.
+//! - The forces are QP variables in the terrain frame (t₁, t₂, n), in units of m·g. The friction
+//!   pyramid rows then have two entries and the normal-force bounds one (instead of three each,
+//!   whatever the normal); R is isotropic, so the cost is unchanged.
 //!
 //! Reuse: all work buffers are allocated once; Clarabel solvers are cached per contact schedule
 //! over the horizon (which fixes the sparsity of P and A), and later solves with the same
@@ -47,13 +57,6 @@ pub const MPC_STATES: usize = 13;
 const NX: usize = 12;
 const ROWS_PER_FOOT: usize = 6;
 const MAX_CACHED_SOLVERS: usize = 32;
-/// Rows of the discrete B_k (per leg) that may be nonzero in column `axis`: Θ and ω rows are
-/// dense (`I_w⁻¹ [r]×`), p and v rows only see their own axis.
-const B_ROWS: [[usize; 8]; 3] = [
-    [0, 1, 2, 3, 6, 7, 8, 9],
-    [0, 1, 2, 4, 6, 7, 8, 10],
-    [0, 1, 2, 5, 6, 7, 8, 11],
-];
 /// Off-diagonal rows of the discrete A_k that may be nonzero in column j (the diagonal is 1):
 /// `Θ += dt R_zᵀ ω` (R_zᵀ has the pattern of a yaw rotation) and `p += dt v`.
 const A_OFFDIAG_ROWS: [&[usize]; NX] = [
@@ -182,8 +185,12 @@ pub struct ConvexMpc {
     settings: DefaultSettings<f64>,
     /// Force unit inside the QP (m·g), N.
     force_scale: f64,
-    a_mats: Vec<Mat13>,
-    b_mats: Vec<[Mat13x3; NUM_LEGS]>,
+    /// `R_z(ψ_k)ᵀ` of each step.
+    rz_t: Vec<Matrix3<f64>>,
+    /// `dt I_w⁻¹ [r]×` of each step and leg.
+    b_omega: Vec<[Matrix3<f64>; NUM_LEGS]>,
+    /// Columns t₁, t₂, n of the last solve's terrain frame (the QP's force coordinates).
+    terrain_frame: Matrix3<f64>,
     /// (step, leg) of each 3-column force block, in column order.
     blocks: Vec<(usize, usize)>,
     p_colptr: Vec<usize>,
@@ -219,6 +226,13 @@ pub fn terrain_tangents(normal: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let t1 = (helper - normal * normal.dot(&helper)).normalize();
     let t2 = normal.cross(&t1);
     (t1, t2)
+}
+
+/// The terrain frame `[t₁ t₂ n]` (columns) of a normal.
+fn terrain_frame(normal: [f64; 3]) -> Matrix3<f64> {
+    let normal = Vector3::from(normal).normalize();
+    let (t1, t2) = terrain_tangents(&normal);
+    Matrix3::from_columns(&[t1, t2, normal])
 }
 
 /// Rows `a` of the per-foot constraints `a·f ≤ b`: friction pyramid, then −f·n ≤ −f_min and
@@ -268,6 +282,27 @@ fn discrete_model(
             b_c.fixed_view_mut::<3, 3>(9, 0)
                 .copy_from(&(Matrix3::identity() * inv_mass));
             *b_leg = b_c * dt + a_c * b_c * (dt * dt * 0.5);
+        }
+    }
+}
+
+/// What the sparse QP's dynamics rows need per step: `R_z(ψ_k)ᵀ` and, per leg,
+/// `dt I_w⁻¹ [r]×` (the angular-velocity rows of B_k).
+fn stage_model(
+    params: &MpcParams,
+    inertia_body: &Matrix3<f64>,
+    input: &MpcInput<'_>,
+    rz_t: &mut [Matrix3<f64>],
+    b_omega: &mut [[Matrix3<f64>; NUM_LEGS]],
+) {
+    for k in 0..params.horizon {
+        let rz = rot_z(input.reference[k][2]);
+        let inertia_world_inv = (rz * inertia_body * rz.transpose())
+            .try_inverse()
+            .unwrap_or_else(Matrix3::identity);
+        rz_t[k] = rz.transpose();
+        for (b, offset) in b_omega[k].iter_mut().zip(&input.foot_offsets[k]) {
+            *b = (inertia_world_inv * skew(&Vector3::from(*offset))) * params.dt;
         }
     }
 }
@@ -325,14 +360,17 @@ impl ConvexMpc {
             .map_err(|e| format!("clarabel settings: {e:?}"))?;
         let n = params.horizon;
         let max_vars = 3 * NUM_LEGS * n + NX * n;
-        let max_a_nnz = 3 * NUM_LEGS * n * (8 + ROWS_PER_FOOT) + NX * n * 3;
+        // Per force block: 3 columns × 6 dynamics rows + 10 inequality entries; per state: ≤ 3
+        // entries in each of two steps.
+        let max_a_nnz = NUM_LEGS * n * (18 + 10) + NX * n * 6;
         let max_rows = NX * n + ROWS_PER_FOOT * NUM_LEGS * n;
         Ok(ConvexMpc {
             inertia_body,
             settings,
             force_scale: params.mass * crate::GRAVITY,
-            a_mats: vec![Mat13::zeros(); n],
-            b_mats: vec![[Mat13x3::zeros(); NUM_LEGS]; n],
+            rz_t: vec![Matrix3::zeros(); n],
+            terrain_frame: Matrix3::identity(),
+            b_omega: vec![[Matrix3::zeros(); NUM_LEGS]; n],
             blocks: Vec::with_capacity(NUM_LEGS * n),
             p_colptr: Vec::with_capacity(max_vars + 1),
             p_rowval: Vec::with_capacity(max_vars),
@@ -402,14 +440,19 @@ impl ConvexMpc {
     }
 
     /// Fill the sparse QP (CSC pattern and values of P and A, q, b) for the current model and
-    /// `self.blocks`. Variables, stage by stage: the stance forces of step k (in units of m·g),
-    /// then x_{k+1} (12 states). Rows: the dynamics of steps 0..N−1 (12 each, zero cone), then
-    /// 6 inequality rows per force block (nonnegative cone).
+    /// `self.blocks`. Variables, stage by stage: the stance forces of step k (terrain frame
+    /// t₁, t₂, n, in units of m·g), then x_{k+1} (12 states). Rows: the dynamics of steps
+    /// 0..N−1 (12 each, zero cone), then 6 inequality rows per force block (nonnegative cone).
     fn assemble_sparse(&mut self, input: &MpcInput<'_>) {
         let n = self.params.horizon;
+        let dt = self.params.dt;
+        let half_dt = 0.5 * dt;
         let scale = self.force_scale;
+        let force_to_v = dt / self.params.mass * scale;
         let n_eq = NX * n;
-        let rows_of_block = foot_constraint_rows(input.terrain_normal, self.params.mu);
+        let frame = terrain_frame(input.terrain_normal);
+        self.terrain_frame = frame;
+        let mu = self.params.mu;
         let (r_diag, q_w) = (
             2.0 * self.params.r_weight * scale * scale,
             self.params.q_weights,
@@ -426,16 +469,30 @@ impl ConvexMpc {
         let mut col = 0;
         let mut block = 0;
         for k in 0..n {
+            let row0 = NX * k;
             while block < self.blocks.len() && self.blocks[block].0 == k {
-                let bm = &self.b_mats[k][self.blocks[block].1];
-                for (axis, b_rows) in B_ROWS.iter().enumerate() {
-                    for &i in b_rows {
-                        self.a_rowval.push(NX * k + i);
-                        self.a_values.push(-bm[(i, axis)] * scale);
+                let b_omega = self.b_omega[k][self.blocks[block].1] * frame;
+                let ineq0 = n_eq + ROWS_PER_FOOT * block;
+                for axis in 0..3 {
+                    // −dt B_c: the ω rows (`I_w⁻¹ [r]×`) and the v rows (1/m), rotated from the
+                    // terrain frame.
+                    for i in 0..3 {
+                        self.a_rowval.push(row0 + 6 + i);
+                        self.a_values.push(-b_omega[(i, axis)] * scale);
                     }
-                    for (r, row) in rows_of_block.iter().enumerate() {
-                        self.a_rowval.push(n_eq + ROWS_PER_FOOT * block + r);
-                        self.a_values.push(row[axis]);
+                    for i in 0..3 {
+                        self.a_rowval.push(row0 + 9 + i);
+                        self.a_values.push(-force_to_v * frame[(i, axis)]);
+                    }
+                    // Pyramid `±f_tⱼ − μ f_n ≤ 0`, then `−f_n ≤ −f_min` and `f_n ≤ f_max`.
+                    let rows: &[(usize, f64)] = match axis {
+                        0 => &[(0, 1.0), (1, -1.0)],
+                        1 => &[(2, 1.0), (3, -1.0)],
+                        _ => &[(0, -mu), (1, -mu), (2, -mu), (3, -mu), (4, -1.0), (5, 1.0)],
+                    };
+                    for &(r, value) in rows {
+                        self.a_rowval.push(ineq0 + r);
+                        self.a_values.push(value);
                     }
                     self.a_colptr.push(self.a_rowval.len());
                     self.p_rowval.push(col);
@@ -446,17 +503,25 @@ impl ConvexMpc {
                 }
                 block += 1;
             }
+            // x_{k+1}: `I − dt/2 A_c,k` in the rows of step k and `−(I + dt/2 A_c,k+1)` in those
+            // of step k + 1; both carry −dt/2 A_c off the diagonal (ω into Θ via R_zᵀ, v into p).
             for j in 0..NX {
-                self.a_rowval.push(NX * k + j);
-                self.a_values.push(1.0);
-                if k + 1 < n {
-                    let a = &self.a_mats[k + 1];
-                    for &i in A_OFFDIAG_ROWS[j] {
-                        self.a_rowval.push(NX * (k + 1) + i);
-                        self.a_values.push(-a[(i, j)]);
+                for (step, diagonal) in [(k, 1.0), (k + 1, -1.0)] {
+                    if step == n {
+                        break;
                     }
-                    self.a_rowval.push(NX * (k + 1) + j);
-                    self.a_values.push(-a[(j, j)]);
+                    let row = NX * step;
+                    for &i in A_OFFDIAG_ROWS[j] {
+                        let a_c = if j < 9 {
+                            self.rz_t[step][(i, j - 6)]
+                        } else {
+                            1.0
+                        };
+                        self.a_rowval.push(row + i);
+                        self.a_values.push(-half_dt * a_c);
+                    }
+                    self.a_rowval.push(row + j);
+                    self.a_values.push(diagonal);
                 }
                 self.a_colptr.push(self.a_rowval.len());
                 self.p_rowval.push(col);
@@ -466,15 +531,21 @@ impl ConvexMpc {
                 col += 1;
             }
         }
-        // b: x_1 − B_0 u_0 = A_0 x_0, x_{k+1} − A_k x_k − B_k u_k = A_k[:, g] g for k ≥ 1.
+        // b: the gravity column of A_c (−dt/2 g from each side, on v_z) in every step, and
+        // `(I + dt/2 A_c,0) x_0` in step 0.
         self.b_values.clear();
-        let x0 = SMatrix::<f64, 13, 1>::from(input.x0);
-        let first = self.a_mats[0] * x0;
-        self.b_values.extend(first.iter().take(NX));
         let g = input.x0[MPC_STATES - 1];
-        for a in &self.a_mats[1..] {
-            self.b_values
-                .extend((0..NX).map(|i| a[(i, MPC_STATES - 1)] * g));
+        for _ in 0..n {
+            self.b_values.extend_from_slice(&[0.0; NX - 1]);
+            self.b_values.push(-dt * g);
+        }
+        let x0 = &input.x0;
+        let theta_rate = self.rz_t[0] * Vector3::new(x0[6], x0[7], x0[8]);
+        for i in 0..3 {
+            self.b_values[i] += x0[i] + half_dt * theta_rate[i];
+            self.b_values[3 + i] += x0[3 + i] + half_dt * x0[9 + i];
+            self.b_values[6 + i] += x0[6 + i];
+            self.b_values[9 + i] += x0[9 + i];
         }
         let (f_min, f_max) = (self.params.f_min / scale, self.params.f_max / scale);
         for _ in 0..self.blocks.len() {
@@ -501,12 +572,12 @@ impl ConvexMpc {
             return solution;
         }
         let n = self.params.horizon;
-        discrete_model(
+        stage_model(
             &self.params,
             &self.inertia_body,
             input,
-            &mut self.a_mats,
-            &mut self.b_mats,
+            &mut self.rz_t,
+            &mut self.b_omega,
         );
 
         self.blocks.clear();
@@ -604,12 +675,9 @@ impl ConvexMpc {
                 if step != 0 {
                     break;
                 }
-                let f = &result.x[3 * b..3 * b + 3];
-                solution.forces[leg] = [
-                    f[0] * self.force_scale,
-                    f[1] * self.force_scale,
-                    f[2] * self.force_scale,
-                ];
+                let f =
+                    self.terrain_frame * Vector3::from_column_slice(&result.x[3 * b..3 * b + 3]);
+                solution.forces[leg] = (f * self.force_scale).into();
             }
             solution.status = MpcStatus::Solved;
         } else {
@@ -719,11 +787,8 @@ impl ConvexMpc {
 mod tests {
     use super::*;
 
-    /// The sparse QP's constraint pattern (`A_OFFDIAG_ROWS`, `B_ROWS`) covers every entry of
-    /// the discrete model that can be nonzero, for arbitrary yaw, feet and inertia.
-    #[test]
-    fn discrete_model_fits_the_sparse_pattern() {
-        let params = MpcParams {
+    fn test_params() -> MpcParams {
+        MpcParams {
             horizon: 3,
             dt: 0.03,
             mass: 12.0,
@@ -737,34 +802,42 @@ mod tests {
             mu: 0.6,
             f_min: 5.0,
             f_max: 150.0,
-        };
+        }
+    }
+
+    const REFERENCE: [[f64; 13]; 3] = [
+        [0.0; 13],
+        [
+            0.0, 0.0, 0.7, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.81,
+        ],
+        [
+            0.1, -0.2, -2.3, 1.0, 2.0, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.81,
+        ],
+    ];
+    const FEET: [[[f64; 3]; NUM_LEGS]; 3] = [[
+        [0.2, 0.15, -0.3],
+        [0.21, -0.14, -0.28],
+        [-0.2, 0.16, -0.31],
+        [-0.19, -0.15, -0.27],
+    ]; 3];
+
+    /// `A_OFFDIAG_ROWS` covers every off-diagonal entry of the discrete A_k that can be
+    /// nonzero, for arbitrary yaw (the sparse rows use the same pattern for A_c).
+    #[test]
+    fn discrete_model_fits_the_sparse_pattern() {
+        let params = test_params();
         let inertia = Matrix3::from_fn(|r, c| params.inertia_body[r][c]);
-        let reference = [
-            [0.0; 13],
-            [
-                0.0, 0.0, 0.7, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.81,
-            ],
-            [
-                0.1, -0.2, -2.3, 1.0, 2.0, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.81,
-            ],
-        ];
-        let feet = [[
-            [0.2, 0.15, -0.3],
-            [0.21, -0.14, -0.28],
-            [-0.2, 0.16, -0.31],
-            [-0.19, -0.15, -0.27],
-        ]; 3];
         let input = MpcInput {
             x0: [0.0; 13],
-            reference: &reference,
+            reference: &REFERENCE,
             contacts: &[[true; 4]; 3],
-            foot_offsets: &feet,
+            foot_offsets: &FEET,
             terrain_normal: [0.0, 0.0, 1.0],
         };
         let mut a_mats = vec![Mat13::zeros(); 3];
         let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
         discrete_model(&params, &inertia, &input, &mut a_mats, &mut b_mats);
-        for (a, b) in a_mats.iter().zip(&b_mats) {
+        for a in &a_mats {
             for j in 0..NX {
                 for i in 0..MPC_STATES {
                     let in_pattern = i == j || A_OFFDIAG_ROWS[j].contains(&i);
@@ -773,13 +846,79 @@ mod tests {
             }
             // The gravity column only acts on rows of x (and g itself).
             assert_eq!(a[(MPC_STATES - 1, MPC_STATES - 1)], 1.0);
-            for leg in b {
-                for (axis, rows) in B_ROWS.iter().enumerate() {
-                    for i in 0..MPC_STATES {
-                        assert!(rows.contains(&i) || leg[(i, axis)] == 0.0, "B[{i},{axis}]");
-                    }
-                }
+        }
+    }
+
+    /// The sparse QP's rows describe the same problem as the exact discrete model: a trajectory
+    /// rolled out with `x_{k+1} = A_k x_k + B_k u_k` satisfies the (trapezoidal) dynamics rows,
+    /// and the terrain-frame force rows equal the world-frame foot constraints.
+    #[test]
+    fn sparse_rows_match_the_discrete_model() {
+        let params = test_params();
+        let mut mpc = ConvexMpc::new(params.clone()).expect("MPC");
+        let contacts = [
+            [true, false, false, true],
+            [true, true, true, true],
+            [false, true, true, false],
+        ];
+        let normal = Vector3::new(-0.15, 0.1, 1.0).normalize();
+        let mut x0 = [0.0; 13];
+        for (i, v) in x0.iter_mut().enumerate() {
+            *v = 0.1 * (i as f64 * 1.7).sin();
+        }
+        x0[12] = 9.81;
+        let input = MpcInput {
+            x0,
+            reference: &REFERENCE,
+            contacts: &contacts,
+            foot_offsets: &FEET,
+            terrain_normal: normal.into(),
+        };
+        stage_model(
+            &params,
+            &mpc.inertia_body,
+            &input,
+            &mut mpc.rz_t,
+            &mut mpc.b_omega,
+        );
+        mpc.blocks = (0..3)
+            .flat_map(|k| (0..NUM_LEGS).map(move |leg| (k, leg)))
+            .filter(|&(k, leg)| contacts[k][leg])
+            .collect();
+        mpc.assemble_sparse(&input);
+
+        let mut a_mats = vec![Mat13::zeros(); 3];
+        let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
+        discrete_model(&params, &mpc.inertia_body, &input, &mut a_mats, &mut b_mats);
+        let frame = terrain_frame(input.terrain_normal);
+        let foot_rows = foot_constraint_rows(input.terrain_normal, params.mu);
+        let mut z: Vec<f64> = Vec::new();
+        let mut world_rows: Vec<f64> = Vec::new();
+        let mut x = SMatrix::<f64, 13, 1>::from(x0);
+        for k in 0..3 {
+            let mut next = a_mats[k] * x;
+            for (b, &(_, leg)) in mpc.blocks.iter().enumerate().filter(|(_, bl)| bl.0 == k) {
+                let f = Vector3::new(30.0 + b as f64, -4.0 * b as f64, 60.0 - 3.0 * b as f64);
+                next += b_mats[k][leg] * f;
+                z.extend((frame.transpose() * f / mpc.force_scale).iter());
+                world_rows.extend(foot_rows.iter().map(|row| row.dot(&f) / mpc.force_scale));
             }
+            x = next;
+            z.extend(x.iter().take(NX));
+        }
+        let mut ax = vec![0.0; mpc.b_values.len()];
+        for (c, zc) in z.iter().enumerate() {
+            for idx in mpc.a_colptr[c]..mpc.a_colptr[c + 1] {
+                ax[mpc.a_rowval[idx]] += mpc.a_values[idx] * zc;
+            }
+        }
+        let (dynamics, force_rows) = ax.split_at(NX * 3);
+        for (r, (lhs, rhs)) in dynamics.iter().zip(&mpc.b_values).enumerate() {
+            assert!((lhs - rhs).abs() < 1e-12, "dynamics row {r}");
+        }
+        assert_eq!(force_rows.len(), world_rows.len());
+        for (r, (lhs, expected)) in force_rows.iter().zip(&world_rows).enumerate() {
+            assert!((lhs - expected).abs() < 1e-12, "force row {r}");
         }
     }
 }
