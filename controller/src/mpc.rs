@@ -34,6 +34,10 @@
 //!   pyramid rows then have two entries and the normal-force bounds one (instead of three each,
 //!   whatever the normal); R is isotropic, so the cost is unchanged.
 //!
+//! The cost is multiplied by a constant (`COST_SCALE`) inside the QP: it does not move the
+//! optimum but puts Clarabel's starting point closer to the central path, which saves about one
+//! interior-point iteration and lands nearer the exact optimum.
+//!
 //! Reuse: all work buffers are allocated once; Clarabel solvers are cached per contact schedule
 //! over the horizon (which fixes the sparsity of P and A), and later solves with the same
 //! schedule only update the numeric values (`update_q/A/b`; P only depends on the schedule),
@@ -57,6 +61,14 @@ pub const MPC_STATES: usize = 13;
 const NX: usize = 12;
 const ROWS_PER_FOOT: usize = 6;
 const MAX_CACHED_SOLVERS: usize = 32;
+/// Factor on the whole cost inside the QP (the optimum does not change). Clarabel starts by
+/// shifting slacks and duals into the cone by at least 1 in absolute terms, so the size of the
+/// duals (proportional to the cost) relative to the slacks (forces in m·g) steers the
+/// interior-point path. On 300 random trot/stand problems (perturbed states, yaw, slopes) a factor
+/// of 20..30 took 4.3 instead of 5.4 iterations on average and moved the step-0 forces closer to
+/// the exact optimum (95th percentile 0.07 instead of 0.23 N trotting, 0.11 instead of 0.35 N
+/// standing); larger factors improve the accuracy further but need more iterations again.
+const COST_SCALE: f64 = 30.0;
 /// Off-diagonal rows of the discrete A_k that may be nonzero in column j (the diagonal is 1):
 /// `Θ += dt R_zᵀ ω` (R_zᵀ has the pattern of a yaw rotation) and `p += dt v`.
 const A_OFFDIAG_ROWS: [&[usize]; NX] = [
@@ -340,12 +352,12 @@ impl ConvexMpc {
             return Err("body inertia is not positive definite".into());
         }
         // Tolerances 1e-6 (in the scaled units) as before: the step-0 forces then match the exact
-        // optimum as closely as the condensed formulation did (≤ ~0.06 N on a perturbed standing
-        // problem, where the internal force distribution only has the curvature of R; 1e-5 would
-        // save one iteration but allows ~0.4 N there). Equilibration and iterative refinement
-        // are off: the QP is already scaled (forces in m·g, states O(1)); refinement cost ~35 %
-        // of the solve time without changing the forces measurably, and equilibration cost
-        // iterations.
+        // optimum closely even on a perturbed standing problem, where the internal force
+        // distribution only has the curvature of R (1e-5 allowed ~0.4 N there). With
+        // COST_SCALE the feasibility tolerance is the one that ends the solve; loosening the gap
+        // tolerances saves nothing. Equilibration and iterative refinement are off: the QP is
+        // already scaled (forces in m·g, states O(1)); refinement cost ~35 % of the solve time
+        // without changing the forces measurably, and equilibration cost iterations.
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .presolve_enable(false)
@@ -453,10 +465,8 @@ impl ConvexMpc {
         let frame = terrain_frame(input.terrain_normal);
         self.terrain_frame = frame;
         let mu = self.params.mu;
-        let (r_diag, q_w) = (
-            2.0 * self.params.r_weight * scale * scale,
-            self.params.q_weights,
-        );
+        let r_diag = 2.0 * COST_SCALE * self.params.r_weight * scale * scale;
+        let q_w = self.params.q_weights.map(|w| COST_SCALE * w);
         self.p_colptr.clear();
         self.p_rowval.clear();
         self.p_values.clear();
