@@ -16,13 +16,14 @@
 //!
 //! Cost: `Σ_k (x_k − x_ref,k)ᵀ Q (x_k − x_ref,k) + Σ_k u_kᵀ R u_k`.
 //!
-//! Formulation (sparse, not condensed): the predicted states x_1..x_N (first 12 components; the
-//! constant g is folded into an offset) are QP variables next to the forces, and the dynamics
-//! are equality constraints. P is then diagonal and the KKT matrix is banded (stage-wise), so
-//! Clarabel's sparse LDL costs O(N) per iteration instead of the O(n_u³) of the dense condensed
-//! Hessian (which also made every KKT product O(n_u²)). The optimum is the one of the condensed
-//! QP ([`ConvexMpc::last_qp`]), which the tests check. Two choices keep the KKT factor small,
-//! since its numeric factorisation and triangular solves are most of the solve time:
+//! Formulation (sparse, not condensed): the predicted states are QP variables next to the
+//! forces (the constant g is folded into an offset), and the dynamics are equality constraints.
+//! P is then (block-)diagonal and the KKT matrix is banded (stage-wise), so Clarabel's sparse
+//! LDL costs O(N) per iteration instead of the O(n_u³) of the dense condensed Hessian (which also
+//! made every KKT product O(n_u²)). The optimum is the one of the condensed QP
+//! ([`ConvexMpc::last_qp`]), which the tests check. The KKT factorisation and its triangular
+//! solves are most of the solve time, so the formulation keeps the KKT small and its factor
+//! sparse:
 //!
 //! - The dynamics rows are written in trapezoidal form,
 //!   `(I − dt/2 A_c) x_{k+1} = (I + dt/2 A_c) x_k + dt B_c u_k` (gravity on the right-hand side).
@@ -30,6 +31,12 @@
 //!   `x_{k+1} = A_k x_k + B_k u_k`, so the feasible set is the same; but the forces only enter the
 //!   ω and v rows instead of also Θ and p through the dt²/2 terms, which halves the rows each
 //!   force block couples and the fill-in they cause.
+//! - The translational states are `a_k = p_k + dt/2 v_k` instead of p_k and v_k: the trapezoidal
+//!   p rows say `p_{k+1} − dt/2 v_{k+1} = a_k`, so `p_k = (a_k + a_{k−1})/2` and
+//!   `v_k = (a_k − a_{k−1})/dt`, and 3 variables and 3 rows per step drop out. The v rows become
+//!   second differences of a, and the p and v costs couple consecutive a_k (a tridiagonal block of
+//!   P per axis). Per step that leaves 9 state variables (Θ, a, ω) and 9 rows (Θ, ω, v) instead of
+//!   12 and 12. (The same substitution for Θ and ω would mix R_z of two steps into every variable.)
 //! - The forces are QP variables in the terrain frame (t₁, t₂, n), in units of m·g. The friction
 //!   pyramid rows then have two entries and the normal-force bounds one (instead of three each,
 //!   whatever the normal); R is isotropic, so the cost is unchanged.
@@ -57,18 +64,22 @@ use crate::api::NUM_LEGS;
 
 /// Number of MPC states.
 pub const MPC_STATES: usize = 13;
-/// MPC states that are QP variables: the constant gravity state is folded into the dynamics.
+/// States of the rigid-body model without the constant g (which the QP folds into offsets).
 const NX: usize = 12;
+/// State variables and dynamics rows of the QP per step: Θ, a = p + dt/2 v and ω (variables);
+/// Θ, ω and v rows (see the module documentation).
+const NS: usize = 9;
 const ROWS_PER_FOOT: usize = 6;
 const MAX_CACHED_SOLVERS: usize = 32;
 /// Factor on the whole cost inside the QP (the optimum does not change). Clarabel starts by
 /// shifting slacks and duals into the cone by at least 1 in absolute terms, so the size of the
 /// duals (proportional to the cost) relative to the slacks (forces in m·g) steers the
-/// interior-point path. On 300 random trot/stand problems (perturbed states, yaw, slopes) a factor
-/// of 20..30 took 4.3 instead of 5.4 iterations on average and moved the step-0 forces closer to
-/// the exact optimum (95th percentile 0.07 instead of 0.23 N trotting, 0.11 instead of 0.35 N
-/// standing); larger factors improve the accuracy further but need more iterations again.
-const COST_SCALE: f64 = 30.0;
+/// interior-point path. On 300 random trot/stand problems (perturbed states, yaw, slopes) this
+/// factor took 4.4 instead of 5.4 iterations on average and moved the step-0 forces closer to the
+/// exact optimum (95th percentile 0.10 instead of 0.23 N trotting and 0.35 N standing, worst
+/// 0.30 instead of 1.0 N); smaller factors save little more, larger ones are more accurate but
+/// need more iterations again.
+const COST_SCALE: f64 = 50.0;
 /// Off-diagonal rows of the discrete A_k that may be nonzero in column j (the diagonal is 1):
 /// `Θ += dt R_zᵀ ω` (R_zᵀ has the pattern of a yaw rotation) and `p += dt v`.
 const A_OFFDIAG_ROWS: [&[usize]; NX] = [
@@ -353,11 +364,10 @@ impl ConvexMpc {
         }
         // Tolerances 1e-6 (in the scaled units) as before: the step-0 forces then match the exact
         // optimum closely even on a perturbed standing problem, where the internal force
-        // distribution only has the curvature of R (1e-5 allowed ~0.4 N there). With
-        // COST_SCALE the feasibility tolerance is the one that ends the solve; loosening the gap
-        // tolerances saves nothing. Equilibration and iterative refinement are off: the QP is
-        // already scaled (forces in m·g, states O(1)); refinement cost ~35 % of the solve time
-        // without changing the forces measurably, and equilibration cost iterations.
+        // distribution only has the curvature of R (1e-5 allowed ~0.4 N there). Equilibration
+        // and iterative refinement are off: the QP is already scaled (forces in m·g, states
+        // O(1)); refinement cost ~35 % of the solve time without changing the forces
+        // measurably, and equilibration cost iterations.
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .presolve_enable(false)
@@ -371,11 +381,11 @@ impl ConvexMpc {
             .build()
             .map_err(|e| format!("clarabel settings: {e:?}"))?;
         let n = params.horizon;
-        let max_vars = 3 * NUM_LEGS * n + NX * n;
+        let max_vars = 3 * NUM_LEGS * n + NS * n;
         // Per force block: 3 columns × 6 dynamics rows + 10 inequality entries; per state: ≤ 3
         // entries in each of two steps.
-        let max_a_nnz = NUM_LEGS * n * (18 + 10) + NX * n * 6;
-        let max_rows = NX * n + ROWS_PER_FOOT * NUM_LEGS * n;
+        let max_a_nnz = NUM_LEGS * n * (18 + 10) + NS * n * 6;
+        let max_rows = NS * n + ROWS_PER_FOOT * NUM_LEGS * n;
         Ok(ConvexMpc {
             inertia_body,
             settings,
@@ -385,8 +395,8 @@ impl ConvexMpc {
             b_omega: vec![[Matrix3::zeros(); NUM_LEGS]; n],
             blocks: Vec::with_capacity(NUM_LEGS * n),
             p_colptr: Vec::with_capacity(max_vars + 1),
-            p_rowval: Vec::with_capacity(max_vars),
-            p_values: Vec::with_capacity(max_vars),
+            p_rowval: Vec::with_capacity(max_vars + 3 * n),
+            p_values: Vec::with_capacity(max_vars + 3 * n),
             q_values: Vec::with_capacity(max_vars),
             a_colptr: Vec::with_capacity(max_vars + 1),
             a_rowval: Vec::with_capacity(max_a_nnz),
@@ -453,15 +463,15 @@ impl ConvexMpc {
 
     /// Fill the sparse QP (CSC pattern and values of P and A, q, b) for the current model and
     /// `self.blocks`. Variables, stage by stage: the stance forces of step k (terrain frame
-    /// t₁, t₂, n, in units of m·g), then x_{k+1} (12 states). Rows: the dynamics of steps
-    /// 0..N−1 (12 each, zero cone), then 6 inequality rows per force block (nonnegative cone).
+    /// t₁, t₂, n, in units of m·g), then Θ, a and ω of step k + 1. Rows: the Θ, ω and v dynamics
+    /// of steps 0..N−1 (zero cone), then 6 inequality rows per force block (nonnegative cone).
     fn assemble_sparse(&mut self, input: &MpcInput<'_>) {
         let n = self.params.horizon;
         let dt = self.params.dt;
         let half_dt = 0.5 * dt;
         let scale = self.force_scale;
         let force_to_v = dt / self.params.mass * scale;
-        let n_eq = NX * n;
+        let n_eq = NS * n;
         let frame = terrain_frame(input.terrain_normal);
         self.terrain_frame = frame;
         let mu = self.params.mu;
@@ -476,25 +486,25 @@ impl ConvexMpc {
         self.a_values.clear();
         self.p_colptr.push(0);
         self.a_colptr.push(0);
+        let x0 = &input.x0;
+        let a0 = [0, 1, 2].map(|j| x0[3 + j] + half_dt * x0[9 + j]);
         let mut col = 0;
         let mut block = 0;
+        let mut prev_a_col = 0;
         for k in 0..n {
-            let row0 = NX * k;
+            let row0 = NS * k;
             while block < self.blocks.len() && self.blocks[block].0 == k {
                 let b_omega = self.b_omega[k][self.blocks[block].1] * frame;
                 let ineq0 = n_eq + ROWS_PER_FOOT * block;
                 for axis in 0..3 {
-                    // −dt B_c: the ω rows (`I_w⁻¹ [r]×`) and the v rows (1/m), rotated from the
-                    // terrain frame.
                     for i in 0..3 {
-                        self.a_rowval.push(row0 + 6 + i);
+                        self.a_rowval.push(row0 + 3 + i);
                         self.a_values.push(-b_omega[(i, axis)] * scale);
                     }
                     for i in 0..3 {
-                        self.a_rowval.push(row0 + 9 + i);
+                        self.a_rowval.push(row0 + 6 + i);
                         self.a_values.push(-force_to_v * frame[(i, axis)]);
                     }
-                    // Pyramid `±f_tⱼ − μ f_n ≤ 0`, then `−f_n ≤ −f_min` and `f_n ≤ f_max`.
                     let rows: &[(usize, f64)] = match axis {
                         0 => &[(0, 1.0), (1, -1.0)],
                         1 => &[(2, 1.0), (3, -1.0)],
@@ -507,61 +517,109 @@ impl ConvexMpc {
                     self.a_colptr.push(self.a_rowval.len());
                     self.p_rowval.push(col);
                     self.p_values.push(r_diag);
-                    self.p_colptr.push(col + 1);
+                    self.p_colptr.push(self.p_rowval.len());
                     self.q_values.push(0.0);
                     col += 1;
                 }
                 block += 1;
             }
-            // x_{k+1}: `I − dt/2 A_c,k` in the rows of step k and `−(I + dt/2 A_c,k+1)` in those
-            // of step k + 1; both carry −dt/2 A_c off the diagonal (ω into Θ via R_zᵀ, v into p).
-            for j in 0..NX {
+            let reference = &input.reference[k];
+            // Θ_{k+1}: rows Θ of steps k (+1) and k + 1 (−1).
+            for j in 0..3 {
+                self.a_rowval.push(row0 + j);
+                self.a_values.push(1.0);
+                if k + 1 < n {
+                    self.a_rowval.push(row0 + NS + j);
+                    self.a_values.push(-1.0);
+                }
+                self.push_diagonal_cost(&mut col, 2.0 * q_w[j], reference[j]);
+            }
+            // a_{k+1}: v rows of steps k, k + 1, k + 2 (second difference / dt).
+            let this_a_col = col;
+            for j in 0..3 {
+                for (step, c) in [(k, 1.0), (k + 1, -2.0), (k + 2, 1.0)] {
+                    if step < n {
+                        self.a_rowval.push(NS * step + 6 + j);
+                        self.a_values.push(c / dt);
+                    }
+                }
+                self.a_colptr.push(self.a_rowval.len());
+                // Cost of p_s = (a_s + a_{s−1})/2 and v_s = (a_s − a_{s−1})/dt for s = k + 1
+                // and s = k + 2.
+                let (qp, qv) = (q_w[3 + j], q_w[9 + j]);
+                let same = 2.0 * (0.25 * qp + qv / (dt * dt));
+                let cross = 2.0 * (0.25 * qp - qv / (dt * dt));
+                if k > 0 {
+                    self.p_rowval.push(prev_a_col + j);
+                    self.p_values.push(cross);
+                }
+                self.p_rowval.push(col);
+                self.p_values
+                    .push(if k + 1 < n { 2.0 * same } else { same });
+                self.p_colptr.push(self.p_rowval.len());
+                let (p_ref, v_ref) = (reference[3 + j], reference[9 + j]);
+                let mut linear = -qp * p_ref - 2.0 * qv / dt * v_ref;
+                if k == 0 {
+                    linear += qp * 0.5 * a0[j] - 2.0 * qv / (dt * dt) * a0[j];
+                }
+                if k + 1 < n {
+                    let next = &input.reference[k + 1];
+                    linear += -qp * next[3 + j] + 2.0 * qv / dt * next[9 + j];
+                }
+                self.q_values.push(linear);
+                col += 1;
+            }
+            prev_a_col = this_a_col;
+            // ω_{k+1}: `I − dt/2 A_c,k` in the Θ/ω rows of step k, `−(I + dt/2 A_c,k+1)` in
+            // those of step k + 1 (ω into Θ via R_zᵀ).
+            for j in 0..3 {
                 for (step, diagonal) in [(k, 1.0), (k + 1, -1.0)] {
                     if step == n {
                         break;
                     }
-                    let row = NX * step;
-                    for &i in A_OFFDIAG_ROWS[j] {
-                        let a_c = if j < 9 {
-                            self.rz_t[step][(i, j - 6)]
-                        } else {
-                            1.0
-                        };
+                    let row = NS * step;
+                    for &i in A_OFFDIAG_ROWS[6 + j] {
                         self.a_rowval.push(row + i);
-                        self.a_values.push(-half_dt * a_c);
+                        self.a_values.push(-half_dt * self.rz_t[step][(i, j)]);
                     }
-                    self.a_rowval.push(row + j);
+                    self.a_rowval.push(row + 3 + j);
                     self.a_values.push(diagonal);
                 }
-                self.a_colptr.push(self.a_rowval.len());
-                self.p_rowval.push(col);
-                self.p_values.push(2.0 * q_w[j]);
-                self.p_colptr.push(col + 1);
-                self.q_values.push(-2.0 * q_w[j] * input.reference[k][j]);
-                col += 1;
+                self.push_diagonal_cost(&mut col, 2.0 * q_w[6 + j], reference[6 + j]);
             }
         }
-        // b: the gravity column of A_c (−dt/2 g from each side, on v_z) in every step, and
-        // `(I + dt/2 A_c,0) x_0` in step 0.
+        // b: gravity in the v rows; step 0 gets `Θ_0 + dt/2 R_zᵀ ω_0`, ω_0 and `v_0 + a_0/dt`,
+        // step 1 `−a_0/dt` (the known a_0 of the second differences).
         self.b_values.clear();
         let g = input.x0[MPC_STATES - 1];
         for _ in 0..n {
-            self.b_values.extend_from_slice(&[0.0; NX - 1]);
+            self.b_values.extend_from_slice(&[0.0; NS - 1]);
             self.b_values.push(-dt * g);
         }
-        let x0 = &input.x0;
         let theta_rate = self.rz_t[0] * Vector3::new(x0[6], x0[7], x0[8]);
         for i in 0..3 {
             self.b_values[i] += x0[i] + half_dt * theta_rate[i];
-            self.b_values[3 + i] += x0[3 + i] + half_dt * x0[9 + i];
-            self.b_values[6 + i] += x0[6 + i];
-            self.b_values[9 + i] += x0[9 + i];
+            self.b_values[3 + i] += x0[6 + i];
+            self.b_values[6 + i] += x0[9 + i] + a0[i] / dt;
+            if n > 1 {
+                self.b_values[NS + 6 + i] -= a0[i] / dt;
+            }
         }
         let (f_min, f_max) = (self.params.f_min / scale, self.params.f_max / scale);
         for _ in 0..self.blocks.len() {
             self.b_values
                 .extend_from_slice(&[0.0, 0.0, 0.0, 0.0, -f_min, f_max]);
         }
+    }
+
+    /// Close the current A column and add a state variable with cost `½ p x² − p x_ref x`.
+    fn push_diagonal_cost(&mut self, col: &mut usize, p: f64, reference: f64) {
+        self.a_colptr.push(self.a_rowval.len());
+        self.p_rowval.push(*col);
+        self.p_values.push(p);
+        self.p_colptr.push(self.p_rowval.len());
+        self.q_values.push(-p * reference);
+        *col += 1;
     }
 
     /// Solve one MPC problem. Never panics; invalid input or solver failure is reported in the
@@ -644,8 +702,8 @@ impl ConvexMpc {
                 self.a_values.clone(),
             );
             let cones = [
-                SupportedConeT::ZeroConeT(NX * n),
-                SupportedConeT::NonnegativeConeT(m - NX * n),
+                SupportedConeT::ZeroConeT(NS * n),
+                SupportedConeT::NonnegativeConeT(m - NS * n),
             ];
             match DefaultSolver::new(
                 &p,
@@ -914,7 +972,9 @@ mod tests {
                 world_rows.extend(foot_rows.iter().map(|row| row.dot(&f) / mpc.force_scale));
             }
             x = next;
-            z.extend(x.iter().take(NX));
+            z.extend_from_slice(&[x[0], x[1], x[2]]);
+            z.extend((3..6).map(|i| x[i] + 0.5 * params.dt * x[i + 6]));
+            z.extend_from_slice(&[x[6], x[7], x[8]]);
         }
         let mut ax = vec![0.0; mpc.b_values.len()];
         for (c, zc) in z.iter().enumerate() {
@@ -922,7 +982,7 @@ mod tests {
                 ax[mpc.a_rowval[idx]] += mpc.a_values[idx] * zc;
             }
         }
-        let (dynamics, force_rows) = ax.split_at(NX * 3);
+        let (dynamics, force_rows) = ax.split_at(NS * 3);
         for (r, (lhs, rhs)) in dynamics.iter().zip(&mpc.b_values).enumerate() {
             assert!((lhs - rhs).abs() < 1e-12, "dynamics row {r}");
         }
