@@ -100,13 +100,13 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
         duration = min(duration, SHORT_DURATION) if duration is not None else SHORT_DURATION
     if duration is not None and not duration > 0:
         raise HarnessError(f"--duration must be positive, got {duration}")
+    if not (math.isfinite(args.footprint_radius) and args.footprint_radius >= 0.0):
+        raise HarnessError(f"--footprint-radius must be finite and >= 0, got {args.footprint_radius}")
     return CoSimConfig(comm_step=args.comm_step, max_duration=duration, fall=FallThresholds())
 
 
 def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods: Sequence[str], out: Path) -> dict[str, dict[str, Plan]]:
     binary = None if args.connect else paths.planner_service_path()
-    if not (math.isfinite(args.footprint_radius) and args.footprint_radius >= 0.0):
-        raise HarnessError(f"--footprint-radius must be finite and >= 0, got {args.footprint_radius}")
     plans: dict[str, dict[str, Plan]] = {}
     log = out / "logs" / "pf-planner-service.log"
     with PlannerClient(
