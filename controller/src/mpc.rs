@@ -33,10 +33,23 @@
 //!   force block couples and the fill-in they cause.
 //! - The translational states are `a_k = p_k + dt/2 v_k` instead of p_k and v_k: the trapezoidal
 //!   p rows say `p_{k+1} − dt/2 v_{k+1} = a_k`, so `p_k = (a_k + a_{k−1})/2` and
-//!   `v_k = (a_k − a_{k−1})/dt`, and 3 variables and 3 rows per step drop out. The v rows become
+//!   `v_k = (a_k − a_{k−1})/dt`, and the p rows and the v variables drop out. The v rows become
 //!   second differences of a, and the p and v costs couple consecutive a_k (a tridiagonal block of
-//!   P per axis). Per step that leaves 9 state variables (Θ, a, ω) and 9 rows (Θ, ω, v) instead of
-//!   12 and 12. (The same substitution for Θ and ω would mix R_z of two steps into every variable.)
+//!   P per axis).
+//! - The rotational states get the same treatment with the step's own yaw:
+//!   `c_k = Θ_k + dt/2 R_kᵀ ω_k` (R_k = R_z(ψ_k), and R_N := R_{N−1} for the last state). The Θ
+//!   rows `Θ_{k+1} − dt/2 R_kᵀ ω_{k+1} = c_k` give `ω_{k+1} = N_k (c_{k+1} − c_k)` with
+//!   `N_k = (dt/2 (R_k + R_{k+1})ᵀ)⁻¹` (invertible while the reference yaw turns by less than π
+//!   per step; [`ConvexMpc::solve`] accepts at most π/2) and
+//!   `Θ_{k+1} = (I − G_k) c_k + G_k c_{k+1}` with `G_k = dt/2 R_kᵀ N_k` (½ I when the yaw is
+//!   constant). The Θ rows and the Θ and ω variables drop out, the ω rows couple c_{k−1}, c_k
+//!   and c_{k+1}, and the Θ and ω costs become 3×3 blocks of P on (c_k, c_{k+1}). N_k and G_k
+//!   have the pattern of a yaw rotation (x and y mix, z stays apart), which P and A keep.
+//!
+//!   Per step that leaves 6 state variables (c, a) and 6 rows (ω, v), against 12 and 12 for
+//!   (Θ, p, ω, v): the KKT matrix of a trot has 300 rows and its LDL factor 1 924 nonzeros (360
+//!   and 2 146 with a alone), and a factorisation costs about a quarter less. Both substitutions
+//!   are invertible linear changes of variables, so the optimum is the condensed QP's.
 //! - The forces are QP variables in the terrain frame (t₁, t₂, n), in units of m·g. The friction
 //!   pyramid rows then have two entries and the normal-force bounds one (instead of three each,
 //!   whatever the normal); R is isotropic, so the cost is unchanged.
@@ -48,7 +61,8 @@
 //! Reuse: all work buffers are allocated once; Clarabel solvers are cached per contact schedule
 //! over the horizon (which fixes the sparsity of P and A), and later solves with the same
 //! schedule only update the numeric values (`update_q/A/b`; P only depends on the schedule),
-//! skipping symbolic setup.
+//! skipping symbolic setup (P depends on the reference yaw through N_k and G_k, so it is updated
+//! too).
 
 use std::cell::OnceCell;
 use std::collections::HashMap;
@@ -64,11 +78,14 @@ use crate::api::NUM_LEGS;
 
 /// Number of MPC states.
 pub const MPC_STATES: usize = 13;
-/// States of the rigid-body model without the constant g (which the QP folds into offsets).
-const NX: usize = 12;
-/// State variables and dynamics rows of the QP per step: Θ, a = p + dt/2 v and ω (variables);
-/// Θ, ω and v rows (see the module documentation).
-const NS: usize = 9;
+/// State variables and dynamics rows of the QP per step: c = Θ + dt/2 R_zᵀ ω and
+/// a = p + dt/2 v (variables); ω and v rows (see the module documentation).
+const NS: usize = 6;
+/// Components of a rotational 3-vector that a yaw rotation mixes with component j: x and y mix,
+/// z stays apart. N_k, G_k and hence the c blocks of P and A have this pattern.
+const YAW_GROUP: [&[usize]; 3] = [&[0, 1], &[0, 1], &[2]];
+/// Largest change of the reference yaw between two MPC steps, rad (N_k is singular at π).
+const MAX_YAW_STEP: f64 = std::f64::consts::FRAC_PI_2;
 const ROWS_PER_FOOT: usize = 6;
 const MAX_CACHED_SOLVERS: usize = 32;
 /// Factor on the whole cost inside the QP (the optimum does not change). Clarabel starts by
@@ -80,22 +97,6 @@ const MAX_CACHED_SOLVERS: usize = 32;
 /// 0.30 instead of 1.0 N); smaller factors save little more, larger ones are more accurate but
 /// need more iterations again.
 const COST_SCALE: f64 = 50.0;
-/// Off-diagonal rows of the discrete A_k that may be nonzero in column j (the diagonal is 1):
-/// `Θ += dt R_zᵀ ω` (R_zᵀ has the pattern of a yaw rotation) and `p += dt v`.
-const A_OFFDIAG_ROWS: [&[usize]; NX] = [
-    &[],
-    &[],
-    &[],
-    &[],
-    &[],
-    &[],
-    &[0, 1],
-    &[0, 1],
-    &[2],
-    &[3],
-    &[4],
-    &[5],
-];
 
 type Mat13 = SMatrix<f64, 13, 13>;
 type Mat13x3 = SMatrix<f64, 13, 3>;
@@ -208,10 +209,14 @@ pub struct ConvexMpc {
     settings: DefaultSettings<f64>,
     /// Force unit inside the QP (m·g), N.
     force_scale: f64,
-    /// `R_z(ψ_k)ᵀ` of each step.
-    rz_t: Vec<Matrix3<f64>>,
-    /// `dt I_w⁻¹ [r]×` of each step and leg.
-    b_omega: Vec<[Matrix3<f64>; NUM_LEGS]>,
+    /// Per-step matrices of the dynamics rows.
+    stages: StageModel,
+    /// The Θ and ω costs as blocks on the c variables: `c_diag[j]` on (c_{j+1}, c_{j+1}),
+    /// `c_off[j]` on (c_j, c_{j+1}) (unused for j = 0, c_0 is known), `c_linear[j]` the linear
+    /// term of c_{j+1}. Scaled like the rest of the cost.
+    c_diag: Vec<Matrix3<f64>>,
+    c_off: Vec<Matrix3<f64>>,
+    c_linear: Vec<Vector3<f64>>,
     /// Columns t₁, t₂, n of the last solve's terrain frame (the QP's force coordinates).
     terrain_frame: Matrix3<f64>,
     /// (step, leg) of each 3-column force block, in column order.
@@ -309,24 +314,77 @@ fn discrete_model(
     }
 }
 
-/// What the sparse QP's dynamics rows need per step: `R_z(ψ_k)ᵀ` and, per leg,
-/// `dt I_w⁻¹ [r]×` (the angular-velocity rows of B_k).
-fn stage_model(
-    params: &MpcParams,
-    inertia_body: &Matrix3<f64>,
-    input: &MpcInput<'_>,
-    rz_t: &mut [Matrix3<f64>],
-    b_omega: &mut [[Matrix3<f64>; NUM_LEGS]],
-) {
-    for k in 0..params.horizon {
-        let rz = rot_z(input.reference[k][2]);
-        let inertia_world_inv = (rz * inertia_body * rz.transpose())
-            .try_inverse()
-            .unwrap_or_else(Matrix3::identity);
-        rz_t[k] = rz.transpose();
-        for (b, offset) in b_omega[k].iter_mut().zip(&input.foot_offsets[k]) {
-            *b = (inertia_world_inv * skew(&Vector3::from(*offset))) * params.dt;
+/// What the sparse QP's dynamics rows need per step.
+#[derive(Clone, Debug)]
+struct StageModel {
+    /// `R_z(ψ_k)ᵀ`.
+    rz_t: Vec<Matrix3<f64>>,
+    /// `dt I_w⁻¹ [r]×` of each leg (the angular-velocity rows of B_k).
+    b_omega: Vec<[Matrix3<f64>; NUM_LEGS]>,
+    /// `N_k = (dt/2 (R_k + R_{k+1})ᵀ)⁻¹`: `ω_{k+1} = N_k (c_{k+1} − c_k)`.
+    omega_of_c: Vec<Matrix3<f64>>,
+    /// `G_k = dt/2 R_kᵀ N_k`: `Θ_{k+1} = (I − G_k) c_k + G_k c_{k+1}`.
+    theta_of_c: Vec<Matrix3<f64>>,
+}
+
+impl StageModel {
+    fn new(horizon: usize) -> Self {
+        StageModel {
+            rz_t: vec![Matrix3::zeros(); horizon],
+            b_omega: vec![[Matrix3::zeros(); NUM_LEGS]; horizon],
+            omega_of_c: vec![Matrix3::zeros(); horizon],
+            theta_of_c: vec![Matrix3::zeros(); horizon],
         }
+    }
+
+    /// Fill every step's matrices for this input (reference yaw per step, foot offsets).
+    fn update(&mut self, params: &MpcParams, inertia_body: &Matrix3<f64>, input: &MpcInput<'_>) {
+        let n = params.horizon;
+        let half_dt = 0.5 * params.dt;
+        for k in 0..n {
+            let rz = rot_z(input.reference[k][2]);
+            let inertia_world_inv = (rz * inertia_body * rz.transpose())
+                .try_inverse()
+                .unwrap_or_else(Matrix3::identity);
+            self.rz_t[k] = rz.transpose();
+            for (b, offset) in self.b_omega[k].iter_mut().zip(&input.foot_offsets[k]) {
+                *b = (inertia_world_inv * skew(&Vector3::from(*offset))) * params.dt;
+            }
+        }
+        for k in 0..n {
+            let next = self.rz_t[(k + 1).min(n - 1)];
+            let m = (self.rz_t[k] + next) * half_dt;
+            self.omega_of_c[k] = yaw_pattern_inverse(&m);
+            self.theta_of_c[k] = self.rz_t[k] * self.omega_of_c[k] * half_dt;
+        }
+    }
+}
+
+/// Inverse of a matrix with the pattern of a yaw rotation (an xy block and a z entry), computed
+/// blockwise so that the entries outside the pattern stay exactly zero. The caller guarantees
+/// invertibility (see `MAX_YAW_STEP`).
+fn yaw_pattern_inverse(m: &Matrix3<f64>) -> Matrix3<f64> {
+    let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
+    Matrix3::new(
+        m[(1, 1)] / det,
+        -m[(0, 1)] / det,
+        0.0,
+        -m[(1, 0)] / det,
+        m[(0, 0)] / det,
+        0.0,
+        0.0,
+        0.0,
+        1.0 / m[(2, 2)],
+    )
+}
+
+/// Wrap an angle to (−π, π].
+fn wrap_angle(angle: f64) -> f64 {
+    let wrapped = angle.rem_euclid(std::f64::consts::TAU);
+    if wrapped > std::f64::consts::PI {
+        wrapped - std::f64::consts::TAU
+    } else {
+        wrapped
     }
 }
 
@@ -382,21 +440,26 @@ impl ConvexMpc {
             .map_err(|e| format!("clarabel settings: {e:?}"))?;
         let n = params.horizon;
         let max_vars = 3 * NUM_LEGS * n + NS * n;
-        // Per force block: 3 columns × 6 dynamics rows + 10 inequality entries; per state: ≤ 3
-        // entries in each of two steps.
+        // Per force block: 3 columns × 6 dynamics rows + 10 inequality entries; per state
+        // column: ≤ 2 entries in each of three steps.
         let max_a_nnz = NUM_LEGS * n * (18 + 10) + NS * n * 6;
+        // P: one entry per force; per c column ≤ 2 of the previous step and ≤ 2 of its own, per
+        // a column 2.
+        let max_p_nnz = 3 * NUM_LEGS * n + 4 * 3 * n + 2 * 3 * n;
         let max_rows = NS * n + ROWS_PER_FOOT * NUM_LEGS * n;
         Ok(ConvexMpc {
             inertia_body,
             settings,
             force_scale: params.mass * crate::GRAVITY,
-            rz_t: vec![Matrix3::zeros(); n],
+            stages: StageModel::new(n),
+            c_diag: vec![Matrix3::zeros(); n],
+            c_off: vec![Matrix3::zeros(); n],
+            c_linear: vec![Vector3::zeros(); n],
             terrain_frame: Matrix3::identity(),
-            b_omega: vec![[Matrix3::zeros(); NUM_LEGS]; n],
             blocks: Vec::with_capacity(NUM_LEGS * n),
             p_colptr: Vec::with_capacity(max_vars + 1),
-            p_rowval: Vec::with_capacity(max_vars + 3 * n),
-            p_values: Vec::with_capacity(max_vars + 3 * n),
+            p_rowval: Vec::with_capacity(max_p_nnz),
+            p_values: Vec::with_capacity(max_p_nnz),
             q_values: Vec::with_capacity(max_vars),
             a_colptr: Vec::with_capacity(max_vars + 1),
             a_rowval: Vec::with_capacity(max_a_nnz),
@@ -443,6 +506,10 @@ impl ConvexMpc {
                 .all(|v| v.is_finite())
             && input.terrain_normal.iter().all(|v| v.is_finite())
             && Vector3::from(input.terrain_normal).norm() > 0.5
+            && input
+                .reference
+                .windows(2)
+                .all(|pair| wrap_angle(pair[1][2] - pair[0][2]).abs() <= MAX_YAW_STEP)
     }
 
     fn remember_input(&mut self, input: &MpcInput<'_>, valid: bool) {
@@ -461,10 +528,46 @@ impl ConvexMpc {
         }
     }
 
+    /// The Θ and ω costs as blocks on the c variables (`c_diag`, `c_off`, `c_linear`): per step
+    /// k, `Θ_{k+1} = E_k [c_k; c_{k+1}]` with `E_k = [I − G_k, G_k]` and
+    /// `ω_{k+1} = F_k [c_k; c_{k+1}]` with `F_k = [−N_k, N_k]`, so the cost
+    /// `(Θ_{k+1} − Θ_ref)ᵀ Q_Θ (…) + (ω_{k+1} − ω_ref)ᵀ Q_ω (…)` adds `2(EᵀQ_ΘE + FᵀQ_ωF)` to P and
+    /// `−2(EᵀQ_Θ Θ_ref + FᵀQ_ω ω_ref)` to q; the known c_0 moves its part into q of c_1.
+    fn rotational_cost(&mut self, input: &MpcInput<'_>, c0: &Vector3<f64>) {
+        let n = self.params.horizon;
+        let w = self.params.q_weights.map(|w| COST_SCALE * w);
+        let q_theta = Matrix3::from_diagonal(&Vector3::new(w[0], w[1], w[2]));
+        let q_omega = Matrix3::from_diagonal(&Vector3::new(w[6], w[7], w[8]));
+        for k in 0..n {
+            let g = self.stages.theta_of_c[k];
+            let nk = self.stages.omega_of_c[k];
+            let keep = Matrix3::identity() - g;
+            let omega_part = nk.transpose() * q_omega * nk;
+            let h00 = (keep.transpose() * q_theta * keep + omega_part) * 2.0;
+            let h01 = (keep.transpose() * q_theta * g - omega_part) * 2.0;
+            let h11 = (g.transpose() * q_theta * g + omega_part) * 2.0;
+            let reference = &input.reference[k];
+            let theta_ref = q_theta * Vector3::new(reference[0], reference[1], reference[2]);
+            let omega_ref = q_omega * Vector3::new(reference[6], reference[7], reference[8]);
+            let linear_k = (keep.transpose() * theta_ref - nk.transpose() * omega_ref) * -2.0;
+            let linear_next = (g.transpose() * theta_ref + nk.transpose() * omega_ref) * -2.0;
+            // c_{k+1} is variable j = k; c_k is variable j = k − 1 (known for k = 0).
+            self.c_diag[k] = h11;
+            self.c_linear[k] = linear_next;
+            if k == 0 {
+                self.c_linear[0] += h01.transpose() * c0;
+            } else {
+                self.c_diag[k - 1] += h00;
+                self.c_linear[k - 1] += linear_k;
+                self.c_off[k] = h01;
+            }
+        }
+    }
+
     /// Fill the sparse QP (CSC pattern and values of P and A, q, b) for the current model and
     /// `self.blocks`. Variables, stage by stage: the stance forces of step k (terrain frame
-    /// t₁, t₂, n, in units of m·g), then Θ, a and ω of step k + 1. Rows: the Θ, ω and v dynamics
-    /// of steps 0..N−1 (zero cone), then 6 inequality rows per force block (nonnegative cone).
+    /// t₁, t₂, n, in units of m·g), then c and a of step k + 1. Rows: the ω and v dynamics of
+    /// steps 0..N−1 (zero cone), then 6 inequality rows per force block (nonnegative cone).
     fn assemble_sparse(&mut self, input: &MpcInput<'_>) {
         let n = self.params.horizon;
         let dt = self.params.dt;
@@ -477,6 +580,11 @@ impl ConvexMpc {
         let mu = self.params.mu;
         let r_diag = 2.0 * COST_SCALE * self.params.r_weight * scale * scale;
         let q_w = self.params.q_weights.map(|w| COST_SCALE * w);
+        let x0 = &input.x0;
+        let a0 = [0, 1, 2].map(|j| x0[3 + j] + half_dt * x0[9 + j]);
+        let omega0 = Vector3::new(x0[6], x0[7], x0[8]);
+        let c0 = Vector3::new(x0[0], x0[1], x0[2]) + self.stages.rz_t[0] * omega0 * half_dt;
+        self.rotational_cost(input, &c0);
         self.p_colptr.clear();
         self.p_rowval.clear();
         self.p_values.clear();
@@ -486,23 +594,22 @@ impl ConvexMpc {
         self.a_values.clear();
         self.p_colptr.push(0);
         self.a_colptr.push(0);
-        let x0 = &input.x0;
-        let a0 = [0, 1, 2].map(|j| x0[3 + j] + half_dt * x0[9 + j]);
         let mut col = 0;
         let mut block = 0;
+        let mut prev_c_col = 0;
         let mut prev_a_col = 0;
         for k in 0..n {
             let row0 = NS * k;
             while block < self.blocks.len() && self.blocks[block].0 == k {
-                let b_omega = self.b_omega[k][self.blocks[block].1] * frame;
+                let b_omega = self.stages.b_omega[k][self.blocks[block].1] * frame;
                 let ineq0 = n_eq + ROWS_PER_FOOT * block;
                 for axis in 0..3 {
                     for i in 0..3 {
-                        self.a_rowval.push(row0 + 3 + i);
+                        self.a_rowval.push(row0 + i);
                         self.a_values.push(-b_omega[(i, axis)] * scale);
                     }
                     for i in 0..3 {
-                        self.a_rowval.push(row0 + 6 + i);
+                        self.a_rowval.push(row0 + 3 + i);
                         self.a_values.push(-force_to_v * frame[(i, axis)]);
                     }
                     let rows: &[(usize, f64)] = match axis {
@@ -523,23 +630,42 @@ impl ConvexMpc {
                 }
                 block += 1;
             }
-            let reference = &input.reference[k];
-            // Θ_{k+1}: rows Θ of steps k (+1) and k + 1 (−1).
+            // c_{k+1}: ω rows of step k (N_k), k + 1 (−N_k − N_{k+1}) and k + 2 (N_{k+1}).
+            let this_c_col = col;
             for j in 0..3 {
-                self.a_rowval.push(row0 + j);
-                self.a_values.push(1.0);
-                if k + 1 < n {
-                    self.a_rowval.push(row0 + NS + j);
-                    self.a_values.push(-1.0);
+                for step in k..(k + 3).min(n) {
+                    let coefficient = match step - k {
+                        0 => self.stages.omega_of_c[k],
+                        1 => -(self.stages.omega_of_c[k] + self.stages.omega_of_c[k + 1]),
+                        _ => self.stages.omega_of_c[k + 1],
+                    };
+                    for &i in YAW_GROUP[j] {
+                        self.a_rowval.push(NS * step + i);
+                        self.a_values.push(coefficient[(i, j)]);
+                    }
                 }
-                self.push_diagonal_cost(&mut col, 2.0 * q_w[j], reference[j]);
+                self.a_colptr.push(self.a_rowval.len());
+                if k > 0 {
+                    for &i in YAW_GROUP[j] {
+                        self.p_rowval.push(prev_c_col + i);
+                        self.p_values.push(self.c_off[k][(i, j)]);
+                    }
+                }
+                for &i in YAW_GROUP[j].iter().filter(|&&i| i <= j) {
+                    self.p_rowval.push(this_c_col + i);
+                    self.p_values.push(self.c_diag[k][(i, j)]);
+                }
+                self.p_colptr.push(self.p_rowval.len());
+                self.q_values.push(self.c_linear[k][j]);
+                col += 1;
             }
+            prev_c_col = this_c_col;
             // a_{k+1}: v rows of steps k, k + 1, k + 2 (second difference / dt).
             let this_a_col = col;
             for j in 0..3 {
                 for (step, c) in [(k, 1.0), (k + 1, -2.0), (k + 2, 1.0)] {
                     if step < n {
-                        self.a_rowval.push(NS * step + 6 + j);
+                        self.a_rowval.push(NS * step + 3 + j);
                         self.a_values.push(c / dt);
                     }
                 }
@@ -557,6 +683,7 @@ impl ConvexMpc {
                 self.p_values
                     .push(if k + 1 < n { 2.0 * same } else { same });
                 self.p_colptr.push(self.p_rowval.len());
+                let reference = &input.reference[k];
                 let (p_ref, v_ref) = (reference[3 + j], reference[9 + j]);
                 let mut linear = -qp * p_ref - 2.0 * qv / dt * v_ref;
                 if k == 0 {
@@ -570,39 +697,22 @@ impl ConvexMpc {
                 col += 1;
             }
             prev_a_col = this_a_col;
-            // ω_{k+1}: `I − dt/2 A_c,k` in the Θ/ω rows of step k, `−(I + dt/2 A_c,k+1)` in
-            // those of step k + 1 (ω into Θ via R_zᵀ).
-            for j in 0..3 {
-                for (step, diagonal) in [(k, 1.0), (k + 1, -1.0)] {
-                    if step == n {
-                        break;
-                    }
-                    let row = NS * step;
-                    for &i in A_OFFDIAG_ROWS[6 + j] {
-                        self.a_rowval.push(row + i);
-                        self.a_values.push(-half_dt * self.rz_t[step][(i, j)]);
-                    }
-                    self.a_rowval.push(row + 3 + j);
-                    self.a_values.push(diagonal);
-                }
-                self.push_diagonal_cost(&mut col, 2.0 * q_w[6 + j], reference[6 + j]);
-            }
         }
-        // b: gravity in the v rows; step 0 gets `Θ_0 + dt/2 R_zᵀ ω_0`, ω_0 and `v_0 + a_0/dt`,
-        // step 1 `−a_0/dt` (the known a_0 of the second differences).
+        // b: gravity in the v rows; step 0 gets `ω_0 + N_0 c_0` and `v_0 + a_0/dt`, step 1
+        // `−N_0 c_0` and `−a_0/dt` (the known c_0 and a_0 of the differences).
         self.b_values.clear();
         let g = input.x0[MPC_STATES - 1];
         for _ in 0..n {
             self.b_values.extend_from_slice(&[0.0; NS - 1]);
             self.b_values.push(-dt * g);
         }
-        let theta_rate = self.rz_t[0] * Vector3::new(x0[6], x0[7], x0[8]);
+        let omega_from_c0 = self.stages.omega_of_c[0] * c0;
         for i in 0..3 {
-            self.b_values[i] += x0[i] + half_dt * theta_rate[i];
-            self.b_values[3 + i] += x0[6 + i];
-            self.b_values[6 + i] += x0[9 + i] + a0[i] / dt;
+            self.b_values[i] += omega0[i] + omega_from_c0[i];
+            self.b_values[3 + i] += x0[9 + i] + a0[i] / dt;
             if n > 1 {
-                self.b_values[NS + 6 + i] -= a0[i] / dt;
+                self.b_values[NS + i] -= omega_from_c0[i];
+                self.b_values[NS + 3 + i] -= a0[i] / dt;
             }
         }
         let (f_min, f_max) = (self.params.f_min / scale, self.params.f_max / scale);
@@ -610,16 +720,6 @@ impl ConvexMpc {
             self.b_values
                 .extend_from_slice(&[0.0, 0.0, 0.0, 0.0, -f_min, f_max]);
         }
-    }
-
-    /// Close the current A column and add a state variable with cost `½ p x² − p x_ref x`.
-    fn push_diagonal_cost(&mut self, col: &mut usize, p: f64, reference: f64) {
-        self.a_colptr.push(self.a_rowval.len());
-        self.p_rowval.push(*col);
-        self.p_values.push(p);
-        self.p_colptr.push(self.p_rowval.len());
-        self.q_values.push(-p * reference);
-        *col += 1;
     }
 
     /// Solve one MPC problem. Never panics; invalid input or solver failure is reported in the
@@ -640,13 +740,7 @@ impl ConvexMpc {
             return solution;
         }
         let n = self.params.horizon;
-        stage_model(
-            &self.params,
-            &self.inertia_body,
-            input,
-            &mut self.rz_t,
-            &mut self.b_omega,
-        );
+        self.stages.update(&self.params, &self.inertia_body, input);
 
         self.blocks.clear();
         for (k, contacts) in input.contacts.iter().enumerate() {
@@ -673,10 +767,11 @@ impl ConvexMpc {
                 .enumerate()
                 .fold(0u8, |acc, (i, &s)| acc | ((s as u8) << i))
         }));
-        // P only depends on the schedule, so a cached solver needs q, A and b.
+        // The schedule fixes the sparsity of P and A, so a cached solver only needs new values.
         let reused = match self.solvers.get_mut(self.key.as_slice()) {
             Some(solver) => {
-                solver.update_q(&self.q_values).is_ok()
+                solver.update_P(&self.p_values).is_ok()
+                    && solver.update_q(&self.q_values).is_ok()
                     && solver.update_A(&self.a_values).is_ok()
                     && solver.update_b(&self.b_values).is_ok()
             }
@@ -889,93 +984,142 @@ mod tests {
         [-0.19, -0.15, -0.27],
     ]; 3];
 
-    /// `A_OFFDIAG_ROWS` covers every off-diagonal entry of the discrete A_k that can be
-    /// nonzero, for arbitrary yaw (the sparse rows use the same pattern for A_c).
-    #[test]
-    fn discrete_model_fits_the_sparse_pattern() {
-        let params = test_params();
-        let inertia = Matrix3::from_fn(|r, c| params.inertia_body[r][c]);
-        let input = MpcInput {
-            x0: [0.0; 13],
-            reference: &REFERENCE,
-            contacts: &[[true; 4]; 3],
-            foot_offsets: &FEET,
-            terrain_normal: [0.0, 0.0, 1.0],
-        };
-        let mut a_mats = vec![Mat13::zeros(); 3];
-        let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
-        discrete_model(&params, &inertia, &input, &mut a_mats, &mut b_mats);
-        for a in &a_mats {
-            for j in 0..NX {
-                for i in 0..MPC_STATES {
-                    let in_pattern = i == j || A_OFFDIAG_ROWS[j].contains(&i);
-                    assert!(in_pattern || a[(i, j)] == 0.0, "A[{i},{j}] = {}", a[(i, j)]);
+    /// A problem with turning reference yaw, mixed contacts and a sloped terrain normal, and
+    /// trajectories rolled out with the exact discrete model from random forces.
+    struct Rollout {
+        mpc: ConvexMpc,
+        input_x0: [f64; 13],
+        contacts: [[bool; NUM_LEGS]; 3],
+        normal: [f64; 3],
+    }
+
+    impl Rollout {
+        fn new() -> Self {
+            let mut x0 = [0.0; 13];
+            for (i, v) in x0.iter_mut().enumerate() {
+                *v = 0.1 * (i as f64 * 1.7).sin();
+            }
+            x0[12] = 9.81;
+            Rollout {
+                mpc: ConvexMpc::new(test_params()).expect("MPC"),
+                input_x0: x0,
+                contacts: [
+                    [true, false, false, true],
+                    [true, true, true, true],
+                    [false, true, true, false],
+                ],
+                normal: Vector3::new(-0.15, 0.1, 1.0).normalize().into(),
+            }
+        }
+
+        fn input(&self) -> MpcInput<'_> {
+            MpcInput {
+                x0: self.input_x0,
+                reference: &REFERENCE,
+                contacts: &self.contacts,
+                foot_offsets: &FEET,
+                terrain_normal: self.normal,
+            }
+        }
+
+        /// Assemble the sparse QP of this input into `self.mpc`.
+        fn assemble(&mut self) {
+            // Field by field (not `self.input()`) so the borrow of `self.mpc` stays disjoint.
+            let input = MpcInput {
+                x0: self.input_x0,
+                reference: &REFERENCE,
+                contacts: &self.contacts,
+                foot_offsets: &FEET,
+                terrain_normal: self.normal,
+            };
+            let mpc = &mut self.mpc;
+            mpc.stages.update(&mpc.params, &mpc.inertia_body, &input);
+            mpc.blocks = (0..3)
+                .flat_map(|k| (0..NUM_LEGS).map(move |leg| (k, leg)))
+                .filter(|&(k, leg)| input.contacts[k][leg])
+                .collect();
+            mpc.assemble_sparse(&input);
+        }
+
+        /// Roll out forces (world frame, N; one per force block, in block order) with the exact
+        /// discrete model. Returns the QP variables of that trajectory, the world-frame
+        /// constraint rows of the forces (in units of m·g) and the MPC cost (with the QP's
+        /// scale factor).
+        fn roll_out(&self, forces: &[Vector3<f64>]) -> (Vec<f64>, Vec<f64>, f64) {
+            let mpc = &self.mpc;
+            let params = &mpc.params;
+            let input = self.input();
+            let mut a_mats = vec![Mat13::zeros(); 3];
+            let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
+            discrete_model(params, &mpc.inertia_body, &input, &mut a_mats, &mut b_mats);
+            let frame = terrain_frame(input.terrain_normal);
+            let foot_rows = foot_constraint_rows(input.terrain_normal, params.mu);
+            let mut z: Vec<f64> = Vec::new();
+            let mut world_rows: Vec<f64> = Vec::new();
+            let mut cost = 0.0;
+            let mut x = SMatrix::<f64, 13, 1>::from(input.x0);
+            for k in 0..3 {
+                let mut next = a_mats[k] * x;
+                for (b, &(_, leg)) in mpc.blocks.iter().enumerate().filter(|(_, bl)| bl.0 == k) {
+                    let f = forces[b];
+                    next += b_mats[k][leg] * f;
+                    z.extend((frame.transpose() * f / mpc.force_scale).iter());
+                    world_rows.extend(foot_rows.iter().map(|row| row.dot(&f) / mpc.force_scale));
+                    cost += params.r_weight * f.norm_squared();
+                }
+                x = next;
+                for i in 0..12 {
+                    cost += params.q_weights[i] * (x[i] - REFERENCE[k][i]).powi(2);
+                }
+                // c_{k+1} uses R_{k+1}, and R_N := R_{N−1} for the last step.
+                let rz_t = mpc.stages.rz_t[(k + 1).min(2)];
+                let c = Vector3::new(x[0], x[1], x[2])
+                    + rz_t * Vector3::new(x[6], x[7], x[8]) * (0.5 * params.dt);
+                z.extend(c.iter());
+                z.extend((3..6).map(|i| x[i] + 0.5 * params.dt * x[i + 6]));
+            }
+            (z, world_rows, COST_SCALE * cost)
+        }
+
+        /// `½ zᵀPz + qᵀz` of the assembled QP (P stored as its upper triangle).
+        fn objective(&self, z: &[f64]) -> f64 {
+            let mpc = &self.mpc;
+            let mut value = 0.0;
+            for c in 0..z.len() {
+                value += mpc.q_values[c] * z[c];
+                for idx in mpc.p_colptr[c]..mpc.p_colptr[c + 1] {
+                    let r = mpc.p_rowval[idx];
+                    let weight = if r == c { 0.5 } else { 1.0 };
+                    value += weight * mpc.p_values[idx] * z[r] * z[c];
                 }
             }
-            // The gravity column only acts on rows of x (and g itself).
-            assert_eq!(a[(MPC_STATES - 1, MPC_STATES - 1)], 1.0);
+            value
         }
     }
 
+    fn random_forces(count: usize, seed: usize) -> Vec<Vector3<f64>> {
+        (0..count)
+            .map(|b| {
+                let s = (seed * 31 + b) as f64;
+                Vector3::new(
+                    30.0 * (1.3 * s).sin(),
+                    -25.0 * (0.7 * s + 1.0).cos(),
+                    60.0 + 20.0 * (2.1 * s).sin(),
+                )
+            })
+            .collect()
+    }
+
     /// The sparse QP's rows describe the same problem as the exact discrete model: a trajectory
-    /// rolled out with `x_{k+1} = A_k x_k + B_k u_k` satisfies the (trapezoidal) dynamics rows,
-    /// and the terrain-frame force rows equal the world-frame foot constraints.
+    /// rolled out with `x_{k+1} = A_k x_k + B_k u_k` satisfies the dynamics rows in the (c, a)
+    /// variables, and the terrain-frame force rows equal the world-frame foot constraints.
     #[test]
     fn sparse_rows_match_the_discrete_model() {
-        let params = test_params();
-        let mut mpc = ConvexMpc::new(params.clone()).expect("MPC");
-        let contacts = [
-            [true, false, false, true],
-            [true, true, true, true],
-            [false, true, true, false],
-        ];
-        let normal = Vector3::new(-0.15, 0.1, 1.0).normalize();
-        let mut x0 = [0.0; 13];
-        for (i, v) in x0.iter_mut().enumerate() {
-            *v = 0.1 * (i as f64 * 1.7).sin();
-        }
-        x0[12] = 9.81;
-        let input = MpcInput {
-            x0,
-            reference: &REFERENCE,
-            contacts: &contacts,
-            foot_offsets: &FEET,
-            terrain_normal: normal.into(),
-        };
-        stage_model(
-            &params,
-            &mpc.inertia_body,
-            &input,
-            &mut mpc.rz_t,
-            &mut mpc.b_omega,
-        );
-        mpc.blocks = (0..3)
-            .flat_map(|k| (0..NUM_LEGS).map(move |leg| (k, leg)))
-            .filter(|&(k, leg)| contacts[k][leg])
-            .collect();
-        mpc.assemble_sparse(&input);
-
-        let mut a_mats = vec![Mat13::zeros(); 3];
-        let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
-        discrete_model(&params, &mpc.inertia_body, &input, &mut a_mats, &mut b_mats);
-        let frame = terrain_frame(input.terrain_normal);
-        let foot_rows = foot_constraint_rows(input.terrain_normal, params.mu);
-        let mut z: Vec<f64> = Vec::new();
-        let mut world_rows: Vec<f64> = Vec::new();
-        let mut x = SMatrix::<f64, 13, 1>::from(x0);
-        for k in 0..3 {
-            let mut next = a_mats[k] * x;
-            for (b, &(_, leg)) in mpc.blocks.iter().enumerate().filter(|(_, bl)| bl.0 == k) {
-                let f = Vector3::new(30.0 + b as f64, -4.0 * b as f64, 60.0 - 3.0 * b as f64);
-                next += b_mats[k][leg] * f;
-                z.extend((frame.transpose() * f / mpc.force_scale).iter());
-                world_rows.extend(foot_rows.iter().map(|row| row.dot(&f) / mpc.force_scale));
-            }
-            x = next;
-            z.extend_from_slice(&[x[0], x[1], x[2]]);
-            z.extend((3..6).map(|i| x[i] + 0.5 * params.dt * x[i + 6]));
-            z.extend_from_slice(&[x[6], x[7], x[8]]);
-        }
+        let mut rollout = Rollout::new();
+        rollout.assemble();
+        let mpc = &rollout.mpc;
+        let (z, world_rows, _) = rollout.roll_out(&random_forces(mpc.blocks.len(), 1));
+        assert_eq!(z.len(), mpc.q_values.len());
         let mut ax = vec![0.0; mpc.b_values.len()];
         for (c, zc) in z.iter().enumerate() {
             for idx in mpc.a_colptr[c]..mpc.a_colptr[c + 1] {
@@ -984,11 +1128,65 @@ mod tests {
         }
         let (dynamics, force_rows) = ax.split_at(NS * 3);
         for (r, (lhs, rhs)) in dynamics.iter().zip(&mpc.b_values).enumerate() {
-            assert!((lhs - rhs).abs() < 1e-12, "dynamics row {r}");
+            assert!((lhs - rhs).abs() < 1e-10, "dynamics row {r}: {lhs} vs {rhs}");
         }
         assert_eq!(force_rows.len(), world_rows.len());
         for (r, (lhs, expected)) in force_rows.iter().zip(&world_rows).enumerate() {
             assert!((lhs - expected).abs() < 1e-12, "force row {r}");
         }
+    }
+
+    /// The QP objective is the MPC cost up to a constant: over several rolled-out trajectories
+    /// the two differ by the same amount (so they have the same minimiser on the feasible set).
+    #[test]
+    fn sparse_objective_equals_the_mpc_cost_up_to_a_constant() {
+        let mut rollout = Rollout::new();
+        rollout.assemble();
+        let blocks = rollout.mpc.blocks.len();
+        let offsets: Vec<(f64, f64)> = (0..4)
+            .map(|seed| {
+                let (z, _, cost) = rollout.roll_out(&random_forces(blocks, seed));
+                (cost, rollout.objective(&z) - cost)
+            })
+            .collect();
+        for &(cost, offset) in &offsets[1..] {
+            assert!(
+                (offset - offsets[0].1).abs() < 1e-9 * cost.max(1.0),
+                "objective − cost: {offset} vs {} (cost {cost})",
+                offsets[0].1
+            );
+        }
+    }
+
+    /// A reference yaw that turns by more than `MAX_YAW_STEP` between two steps is refused
+    /// (N_k would be near-singular), and a wrap-around of ±π between steps is not a turn.
+    #[test]
+    fn yaw_jumps_between_steps_are_refused_but_wrapping_is_not() {
+        let mut mpc = ConvexMpc::new(test_params()).expect("MPC");
+        let contacts = [[true; NUM_LEGS]; 3];
+        let mut reference = [[0.0; 13]; 3];
+        for r in &mut reference {
+            r[5] = 0.3;
+            r[12] = 9.81;
+        }
+        let mut x0 = reference[0];
+        x0[5] = 0.3;
+        let mut solve = |yaws: [f64; 3]| {
+            for (r, yaw) in reference.iter_mut().zip(yaws) {
+                r[2] = yaw;
+            }
+            let input = MpcInput {
+                x0,
+                reference: &reference,
+                contacts: &contacts,
+                foot_offsets: &FEET,
+                terrain_normal: [0.0, 0.0, 1.0],
+            };
+            mpc.solve(&input).status
+        };
+        assert_eq!(solve([0.0, 0.1, 0.2]), MpcStatus::Solved);
+        let pi = std::f64::consts::PI;
+        assert_eq!(solve([pi - 0.05, -pi + 0.05, -pi + 0.1]), MpcStatus::Solved);
+        assert_eq!(solve([0.0, 2.0, 2.1]), MpcStatus::InvalidInput);
     }
 }
