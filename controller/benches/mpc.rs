@@ -1,8 +1,12 @@
 //! MPC solve time at horizon 10 (Clarabel on the sparse QP, incl. model building and assembly),
 //! median and p99, on a trotting and a standing problem; the same problem, as the condensed QP of
-//! `ConvexMpc::last_qp`, is also solved by OSQP for comparison.
+//! `ConvexMpc::last_qp`, is also solved by OSQP for comparison. Then 300 seeded random trot and
+//! stand problems: interior-point iterations, solve time and the step-0 force error against the
+//! exact optimum of each problem (one benchmark instance says little about the spread).
 use std::time::Instant;
 
+#[path = "../tests/support/mpc_cases.rs"]
+mod mpc_cases;
 #[path = "../tests/support/osqp_qp.rs"]
 mod osqp_qp;
 
@@ -179,5 +183,51 @@ mod osqp_compare {
     }
 }
 
-criterion_group!(benches, bench_mpc);
+/// Iterations, time and accuracy over seeded random problems (`CaseSpec::random`).
+fn random_problems(_: &mut Criterion) {
+    const PROBLEMS: u64 = 300;
+    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
+    let model = RobotModel::from_urdf_file(&urdf).expect("URDF");
+    let (mut mpc, builder) = mpc_cases::mpc_and_cases(&model);
+    for trot in [true, false] {
+        let mut iterations = Vec::new();
+        let mut times = Vec::new();
+        let mut errors = Vec::new();
+        let mut failures = 0;
+        for seed in 0..PROBLEMS {
+            let spec = mpc_cases::CaseSpec::random(trot, seed, builder.config.gait_period);
+            let case = builder.build(format!("random {seed}"), &spec);
+            let mut samples = Vec::with_capacity(11);
+            let mut solution = mpc.solve(&case.input());
+            for _ in 0..11 {
+                let start = Instant::now();
+                solution = mpc.solve(&case.input());
+                samples.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            if solution.status != MpcStatus::Solved {
+                failures += 1;
+                continue;
+            }
+            let exact = mpc_cases::reference_solution(mpc.last_qp());
+            errors.push(mpc_cases::step0_force_error(&solution, &case, &exact));
+            iterations.push(f64::from(solution.iterations));
+            times.push(percentiles(samples).0);
+        }
+        let mean_iterations = iterations.iter().sum::<f64>() / iterations.len().max(1) as f64;
+        let max_iterations = iterations.iter().fold(0.0f64, |a, &b| a.max(b));
+        let (median_time, p99_time) = percentiles(times);
+        errors.sort_by(f64::total_cmp);
+        let p95_error = errors[(errors.len() - 1) * 95 / 100];
+        let max_error = errors[errors.len() - 1];
+        println!(
+            "{PROBLEMS} random {} problems: {mean_iterations:.2} iterations on average (max \
+             {max_iterations}), solve time median {median_time:.3} ms / p99 {p99_time:.3} ms over \
+             the problems, step-0 force error vs the exact optimum p95 {p95_error:.3} N / max \
+             {max_error:.3} N, {failures} failed",
+            if trot { "trot" } else { "stand" }
+        );
+    }
+}
+
+criterion_group!(benches, bench_mpc, random_problems);
 criterion_main!(benches);

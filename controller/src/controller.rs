@@ -274,7 +274,7 @@ fn validate_state(state: &RobotState) -> Result<(), ControllerError> {
     Ok(())
 }
 
-fn validate_reference(reference: &Reference) -> Result<(), ControllerError> {
+fn validate_reference(reference: &Reference, mpc_dt: f64) -> Result<(), ControllerError> {
     let values = [
         reference.x,
         reference.y,
@@ -288,6 +288,12 @@ fn validate_reference(reference: &Reference) -> Result<(), ControllerError> {
         reference.terrain.slope_y,
     ];
     check_finite(&values, "reference").map_err(ControllerError::InvalidReference)?;
+    if reference.yaw_rate.abs() * mpc_dt > crate::mpc::MAX_YAW_STEP {
+        return Err(ControllerError::InvalidReference(format!(
+            "yaw_rate {} rad/s turns by more than π/2 per MPC step of {mpc_dt} s",
+            reference.yaw_rate
+        )));
+    }
     if reference.body_height > 1.0 {
         return Err(ControllerError::InvalidReference(format!(
             "body_height {} m is not reachable",
@@ -491,7 +497,7 @@ impl Controller {
             return Err(ControllerError::InvalidDt(dt));
         }
         validate_state(state)?;
-        validate_reference(reference)?;
+        validate_reference(reference, self.config.mpc_dt)?;
         let sense = self.sense(state);
 
         if let Some(next) = self.transition(&sense, reference) {

@@ -47,8 +47,8 @@
 //!   have the pattern of a yaw rotation (x and y mix, z stays apart), which P and A keep.
 //!
 //!   Per step that leaves 6 state variables (c, a) and 6 rows (ω, v), against 12 and 12 for
-//!   (Θ, p, ω, v): the KKT matrix of a trot has 300 rows and its LDL factor 1 924 nonzeros (360
-//!   and 2 146 with a alone), and a factorisation costs about a quarter less. Both substitutions
+//!   (Θ, p, ω, v): the KKT matrix of a trot has 300 rows and its LDL factor 1 950 nonzeros (360
+//!   and 2 146 with a alone), and a trot solve takes about a fifth less time. Both substitutions
 //!   are invertible linear changes of variables, so the optimum is the condensed QP's.
 //! - The forces are QP variables in the terrain frame (t₁, t₂, n), in units of m·g. The friction
 //!   pyramid rows then have two entries and the normal-force bounds one (instead of three each,
@@ -60,9 +60,8 @@
 //!
 //! Reuse: all work buffers are allocated once; Clarabel solvers are cached per contact schedule
 //! over the horizon (which fixes the sparsity of P and A), and later solves with the same
-//! schedule only update the numeric values (`update_q/A/b`; P only depends on the schedule),
-//! skipping symbolic setup (P depends on the reference yaw through N_k and G_k, so it is updated
-//! too).
+//! schedule only update the numeric values (`update_P/q/A/b`; P changes with the reference yaw
+//! through N_k and G_k), skipping symbolic setup.
 
 use std::cell::OnceCell;
 use std::collections::HashMap;
@@ -84,8 +83,9 @@ const NS: usize = 6;
 /// Components of a rotational 3-vector that a yaw rotation mixes with component j: x and y mix,
 /// z stays apart. N_k, G_k and hence the c blocks of P and A have this pattern.
 const YAW_GROUP: [&[usize]; 3] = [&[0, 1], &[0, 1], &[2]];
-/// Largest change of the reference yaw between two MPC steps, rad (N_k is singular at π).
-const MAX_YAW_STEP: f64 = std::f64::consts::FRAC_PI_2;
+/// Largest change of the reference yaw between two MPC steps, rad (N_k is singular at π); a
+/// reference turning faster is invalid input.
+pub const MAX_YAW_STEP: f64 = std::f64::consts::FRAC_PI_2;
 const ROWS_PER_FOOT: usize = 6;
 const MAX_CACHED_SOLVERS: usize = 32;
 /// Factor on the whole cost inside the QP (the optimum does not change). Clarabel starts by
@@ -1128,7 +1128,10 @@ mod tests {
         }
         let (dynamics, force_rows) = ax.split_at(NS * 3);
         for (r, (lhs, rhs)) in dynamics.iter().zip(&mpc.b_values).enumerate() {
-            assert!((lhs - rhs).abs() < 1e-10, "dynamics row {r}: {lhs} vs {rhs}");
+            assert!(
+                (lhs - rhs).abs() < 1e-10,
+                "dynamics row {r}: {lhs} vs {rhs}"
+            );
         }
         assert_eq!(force_rows.len(), world_rows.len());
         for (r, (lhs, expected)) in force_rows.iter().zip(&world_rows).enumerate() {

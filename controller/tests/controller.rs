@@ -307,6 +307,11 @@ fn bad_input_is_a_clear_error_and_leaves_the_controller_usable() {
         ctrl.step(&state, &bad_ref, 0.001),
         Err(ControllerError::InvalidReference(_))
     ));
+    // The MPC's prediction cannot represent a turn of more than π/2 per step (0.03 s).
+    let mut spinning = good;
+    spinning.yaw_rate = 60.0;
+    let err = ctrl.step(&state, &spinning, 0.001).expect_err("60 rad/s");
+    assert!(err.to_string().contains("yaw_rate 60"), "{err}");
     // Errors do not change the FSM; safe torques are finite damping even for NaN velocities.
     assert_eq!(ctrl.fsm_state(), FsmState::Locomotion);
     let mut nan_velocity = state;
