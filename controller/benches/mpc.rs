@@ -12,30 +12,24 @@ mod osqp_qp;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use quad_controller::gait::Gait;
-use quad_controller::mpc::{ConvexMpc, MpcInput, MpcParams, MpcStatus};
-use quad_controller::{Controller, ControllerConfig, GaitKind, Leg, RobotModel, GRAVITY};
+use quad_controller::mpc::{ConvexMpc, MpcSolution, MpcStatus};
+use quad_controller::{Controller, GaitKind, Leg, RobotModel, GRAVITY};
 
+/// The benchmark instance: a perturbed start, walking straight at 0.5 m/s (trot) or standing.
 struct Problem {
     mpc: ConvexMpc,
-    x0: [f64; 13],
-    reference: Vec<[f64; 13]>,
-    schedule: Vec<[bool; 4]>,
-    offsets: Vec<[[f64; 3]; 4]>,
+    case: mpc_cases::Case,
 }
 
 impl Problem {
     fn new(trot: bool) -> Self {
         let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
         let model = RobotModel::from_urdf_file(&urdf).expect("URDF");
-        let config = ControllerConfig::default();
+        let (mpc, builder) = mpc_cases::mpc_and_cases(&model);
+        let config = &builder.config;
         let ctrl = Controller::new(model.clone(), config.clone()).expect("controller");
         let q = ctrl.stand_joint_positions();
-        let (inertia, com) = model.composite_inertia(&q);
-        let mpc = ConvexMpc::new(MpcParams {
-            horizon: 10,
-            ..config.mpc_params(model.total_mass(), inertia)
-        })
-        .expect("MPC");
+        let (_, com) = model.composite_inertia(&q);
         let z = config.body_height + com[2];
         let speed = 0.5;
         // Slightly perturbed start so the QP has work to do.
@@ -56,9 +50,9 @@ impl Problem {
         ];
         let gait = Gait::new(GaitKind::Trot, config.gait_period);
         let mut reference = Vec::new();
-        let mut schedule = Vec::new();
+        let mut contacts = Vec::new();
         let mut offsets = Vec::new();
-        for k in 0..10 {
+        for k in 0..mpc_cases::HORIZON {
             let t = (k + 1) as f64 * config.mpc_dt;
             reference.push([
                 0.0,
@@ -75,7 +69,7 @@ impl Problem {
                 0.0,
                 GRAVITY,
             ]);
-            schedule.push(if trot {
+            contacts.push(if trot {
                 gait.contacts(0.05 + k as f64 * config.mpc_dt)
             } else {
                 [true; 4]
@@ -90,24 +84,19 @@ impl Problem {
                 ]
             }));
         }
-        Problem {
-            mpc,
+        let case = mpc_cases::Case {
+            name: if trot { "trot" } else { "stand" }.into(),
             x0,
             reference,
-            schedule,
+            contacts,
             offsets,
-        }
+            normal: [0.0, 0.0, 1.0],
+        };
+        Problem { mpc, case }
     }
 
-    fn solve(&mut self) -> MpcStatus {
-        let input = MpcInput {
-            x0: self.x0,
-            reference: &self.reference,
-            contacts: &self.schedule,
-            foot_offsets: &self.offsets,
-            terrain_normal: [0.0, 0.0, 1.0],
-        };
-        self.mpc.solve(&input).status
+    fn solve(&mut self) -> MpcSolution {
+        self.mpc.solve(&self.case.input())
     }
 }
 
@@ -131,14 +120,7 @@ fn report(name: &str, mut solve: impl FnMut() -> bool) {
 fn bench_mpc(c: &mut Criterion) {
     for (label, trot) in [("trot", true), ("stand", false)] {
         let mut problem = Problem::new(trot);
-        let input = MpcInput {
-            x0: problem.x0,
-            reference: &problem.reference,
-            contacts: &problem.schedule,
-            foot_offsets: &problem.offsets,
-            terrain_normal: [0.0, 0.0, 1.0],
-        };
-        let first = problem.mpc.solve(&input);
+        let first = problem.solve();
         println!(
             "MPC horizon 10, {label}: {} QP variables ({} forces), {} inequality constraints, \
              {} iterations",
@@ -148,10 +130,10 @@ fn bench_mpc(c: &mut Criterion) {
             first.iterations
         );
         report(&format!("clarabel {label}"), || {
-            problem.solve() == MpcStatus::Solved
+            problem.solve().status == MpcStatus::Solved
         });
         c.bench_function(&format!("mpc_clarabel_h10_{label}"), |b| {
-            b.iter(|| problem.solve())
+            b.iter(|| problem.solve().status)
         });
         osqp_compare::run(c, label, problem.mpc.last_qp());
     }
