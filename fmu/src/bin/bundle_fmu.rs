@@ -10,40 +10,40 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
+use clap::Parser;
 use quad_controller_fmu::bundle::{repo_root, shared_library_next_to, write_fmu, BundleInputs};
 use quad_controller_fmu::MODEL_IDENTIFIER;
 
+/// Bundle the controller FMU (modelDescription.xml, the cdylib, the URDF and the default
+/// configuration) into one .fmu archive.
+#[derive(Parser)]
+#[command(name = "bundle-fmu")]
+struct Args {
+    /// The archive to write [default: $PFNAV_FMU_OUT, else <repo>/target/fmu/QuadController.fmu].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// The cdylib to bundle [default: the libquad_controller_fmu.so next to this executable, so
+    /// CARGO_TARGET_DIR and the profile are respected].
+    #[arg(long)]
+    lib: Option<PathBuf>,
+    /// The robot [default: <repo>/robot/quadruped.urdf].
+    #[arg(long)]
+    urdf: Option<PathBuf>,
+}
+
 fn main() -> Result<()> {
     tracing_subscriber::fmt().with_target(false).init();
-    let mut out = std::env::var_os("PFNAV_FMU_OUT")
-        .map(PathBuf::from)
+    let Args { out, lib, urdf } = Args::parse();
+    let out = out
+        .or_else(|| std::env::var_os("PFNAV_FMU_OUT").map(PathBuf::from))
         .unwrap_or_else(|| {
             repo_root()
                 .join("target")
                 .join("fmu")
                 .join(format!("{MODEL_IDENTIFIER}.fmu"))
         });
-    let mut lib = None;
-    let mut urdf = repo_root().join("robot").join("quadruped.urdf");
-    let mut args = std::env::args_os().skip(1);
-    while let Some(arg) = args.next() {
-        let mut value = || {
-            args.next()
-                .map(PathBuf::from)
-                .with_context(|| format!("{} needs a value", arg.to_string_lossy()))
-        };
-        match arg.to_str() {
-            Some("--out") => out = value()?,
-            Some("--lib") => lib = Some(value()?),
-            Some("--urdf") => urdf = value()?,
-            Some("-h" | "--help") => {
-                println!("usage: bundle-fmu [--out FMU] [--lib libquad_controller_fmu.so] [--urdf quadruped.urdf]");
-                return Ok(());
-            }
-            _ => bail!("unknown argument {:?} (see --help)", arg),
-        }
-    }
+    let urdf = urdf.unwrap_or_else(|| repo_root().join("robot").join("quadruped.urdf"));
     let shared_library = match lib {
         Some(lib) => lib,
         None => {

@@ -14,7 +14,8 @@
 use std::io::Read;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
+use clap::Parser;
 use quad_controller::{
     Command, Controller, ControllerConfig, Reference, RobotModel, RobotState, NUM_JOINTS,
 };
@@ -45,22 +46,23 @@ struct Response {
     commands: Vec<Command>,
 }
 
+/// Run the controller directly (no FMU) on the segments read from stdin and print its commands
+/// as JSON (the reference the FMU tests compare against).
+#[derive(Parser)]
+#[command(name = "fmu-direct-reference")]
+struct Args {
+    /// The robot [default: <repo>/robot/quadruped.urdf].
+    #[arg(long)]
+    urdf: Option<PathBuf>,
+    /// A JSON `ControllerConfig` [default: `ControllerConfig::default()`, the FMU's
+    /// resources/controller.json].
+    #[arg(long = "config")]
+    config_path: Option<PathBuf>,
+}
+
 fn main() -> Result<()> {
-    let mut urdf = repo_root().join("robot").join("quadruped.urdf");
-    let mut config_path: Option<PathBuf> = None;
-    let mut args = std::env::args_os().skip(1);
-    while let Some(arg) = args.next() {
-        let mut value = || {
-            args.next()
-                .map(PathBuf::from)
-                .with_context(|| format!("{} needs a value", arg.to_string_lossy()))
-        };
-        match arg.to_str() {
-            Some("--urdf") => urdf = value()?,
-            Some("--config") => config_path = Some(value()?),
-            _ => bail!("unknown argument {:?}; usage: fmu-direct-reference [--urdf P] [--config P] < request.json", arg),
-        }
-    }
+    let Args { urdf, config_path } = Args::parse();
+    let urdf = urdf.unwrap_or_else(|| repo_root().join("robot").join("quadruped.urdf"));
     let config = match config_path {
         Some(path) => {
             let text = std::fs::read_to_string(&path)
