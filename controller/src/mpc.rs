@@ -74,6 +74,7 @@ use clarabel::solver::{
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 
 use crate::api::NUM_LEGS;
+use crate::model::wrap_angle;
 
 /// Number of MPC states.
 pub const MPC_STATES: usize = 13;
@@ -378,16 +379,6 @@ fn yaw_pattern_inverse(m: &Matrix3<f64>) -> Matrix3<f64> {
     )
 }
 
-/// Wrap an angle to (−π, π].
-fn wrap_angle(angle: f64) -> f64 {
-    let wrapped = angle.rem_euclid(std::f64::consts::TAU);
-    if wrapped > std::f64::consts::PI {
-        wrapped - std::f64::consts::TAU
-    } else {
-        wrapped
-    }
-}
-
 impl ConvexMpc {
     /// Create the MPC; fails when a parameter is invalid.
     pub fn new(params: MpcParams) -> Result<Self, String> {
@@ -632,13 +623,11 @@ impl ConvexMpc {
             }
             // c_{k+1}: ω rows of step k (N_k), k + 1 (−N_k − N_{k+1}) and k + 2 (N_{k+1}).
             let this_c_col = col;
+            let omega_of_c = &self.stages.omega_of_c;
+            let next = omega_of_c[(k + 1).min(n - 1)];
+            let coefficients = [omega_of_c[k], -(omega_of_c[k] + next), next];
             for j in 0..3 {
-                for step in k..(k + 3).min(n) {
-                    let coefficient = match step - k {
-                        0 => self.stages.omega_of_c[k],
-                        1 => -(self.stages.omega_of_c[k] + self.stages.omega_of_c[k + 1]),
-                        _ => self.stages.omega_of_c[k + 1],
-                    };
+                for (step, coefficient) in (k..n).zip(&coefficients) {
                     for &i in YAW_GROUP[j] {
                         self.a_rowval.push(NS * step + i);
                         self.a_values.push(coefficient[(i, j)]);
@@ -722,6 +711,25 @@ impl ConvexMpc {
         }
     }
 
+    /// Fill the per-step model, the force blocks (stance legs of each step) and the sparse QP
+    /// for a validated input; false when no leg is in stance over the whole horizon (no QP).
+    fn build_qp(&mut self, input: &MpcInput<'_>) -> bool {
+        self.stages.update(&self.params, &self.inertia_body, input);
+        self.blocks.clear();
+        for (k, contacts) in input.contacts.iter().enumerate() {
+            for (leg, &stance) in contacts.iter().enumerate() {
+                if stance {
+                    self.blocks.push((k, leg));
+                }
+            }
+        }
+        if self.blocks.is_empty() {
+            return false;
+        }
+        self.assemble_sparse(input);
+        true
+    }
+
     /// Solve one MPC problem. Never panics; invalid input or solver failure is reported in the
     /// status (forces are then zero and the caller falls back).
     pub fn solve(&mut self, input: &MpcInput<'_>) -> MpcSolution {
@@ -740,23 +748,12 @@ impl ConvexMpc {
             return solution;
         }
         let n = self.params.horizon;
-        self.stages.update(&self.params, &self.inertia_body, input);
-
-        self.blocks.clear();
-        for (k, contacts) in input.contacts.iter().enumerate() {
-            for (leg, &stance) in contacts.iter().enumerate() {
-                if stance {
-                    self.blocks.push((k, leg));
-                }
-            }
-        }
-        if self.blocks.is_empty() {
+        if !self.build_qp(input) {
             // Flight over the whole horizon: nothing to optimise, zero forces are the answer.
             solution.status = MpcStatus::Solved;
             solution.solve_time_s = start.elapsed().as_secs_f64();
             return solution;
         }
-        self.assemble_sparse(input);
         let nv = self.q_values.len();
         let m = self.b_values.len();
         solution.num_variables = nv;
@@ -984,13 +981,30 @@ mod tests {
         [-0.19, -0.15, -0.27],
     ]; 3];
 
-    /// A problem with turning reference yaw, mixed contacts and a sloped terrain normal, and
-    /// trajectories rolled out with the exact discrete model from random forces.
-    struct Rollout {
-        mpc: ConvexMpc,
-        input_x0: [f64; 13],
+    /// A problem with turning reference yaw, mixed contacts and a sloped terrain normal.
+    struct Problem {
+        x0: [f64; 13],
         contacts: [[bool; NUM_LEGS]; 3],
         normal: [f64; 3],
+    }
+
+    impl Problem {
+        fn input(&self) -> MpcInput<'_> {
+            MpcInput {
+                x0: self.x0,
+                reference: &REFERENCE,
+                contacts: &self.contacts,
+                foot_offsets: &FEET,
+                terrain_normal: self.normal,
+            }
+        }
+    }
+
+    /// The problem's sparse QP, assembled, and trajectories rolled out with the exact discrete
+    /// model from given forces.
+    struct Rollout {
+        mpc: ConvexMpc,
+        problem: Problem,
     }
 
     impl Rollout {
@@ -1000,45 +1014,21 @@ mod tests {
                 *v = 0.1 * (i as f64 * 1.7).sin();
             }
             x0[12] = 9.81;
-            Rollout {
-                mpc: ConvexMpc::new(test_params()).expect("MPC"),
-                input_x0: x0,
+            let problem = Problem {
+                x0,
                 contacts: [
                     [true, false, false, true],
                     [true, true, true, true],
                     [false, true, true, false],
                 ],
                 normal: Vector3::new(-0.15, 0.1, 1.0).normalize().into(),
-            }
-        }
-
-        fn input(&self) -> MpcInput<'_> {
-            MpcInput {
-                x0: self.input_x0,
-                reference: &REFERENCE,
-                contacts: &self.contacts,
-                foot_offsets: &FEET,
-                terrain_normal: self.normal,
-            }
-        }
-
-        /// Assemble the sparse QP of this input into `self.mpc`.
-        fn assemble(&mut self) {
-            // Field by field (not `self.input()`) so the borrow of `self.mpc` stays disjoint.
-            let input = MpcInput {
-                x0: self.input_x0,
-                reference: &REFERENCE,
-                contacts: &self.contacts,
-                foot_offsets: &FEET,
-                terrain_normal: self.normal,
             };
-            let mpc = &mut self.mpc;
-            mpc.stages.update(&mpc.params, &mpc.inertia_body, &input);
-            mpc.blocks = (0..3)
-                .flat_map(|k| (0..NUM_LEGS).map(move |leg| (k, leg)))
-                .filter(|&(k, leg)| input.contacts[k][leg])
-                .collect();
-            mpc.assemble_sparse(&input);
+            let mut mpc = ConvexMpc::new(test_params()).expect("MPC");
+            assert!(
+                mpc.build_qp(&problem.input()),
+                "the problem has stance legs"
+            );
+            Rollout { mpc, problem }
         }
 
         /// Roll out forces (world frame, N; one per force block, in block order) with the exact
@@ -1048,7 +1038,7 @@ mod tests {
         fn roll_out(&self, forces: &[Vector3<f64>]) -> (Vec<f64>, Vec<f64>, f64) {
             let mpc = &self.mpc;
             let params = &mpc.params;
-            let input = self.input();
+            let input = self.problem.input();
             let mut a_mats = vec![Mat13::zeros(); 3];
             let mut b_mats = vec![[Mat13x3::zeros(); NUM_LEGS]; 3];
             discrete_model(params, &mpc.inertia_body, &input, &mut a_mats, &mut b_mats);
@@ -1115,8 +1105,7 @@ mod tests {
     /// variables, and the terrain-frame force rows equal the world-frame foot constraints.
     #[test]
     fn sparse_rows_match_the_discrete_model() {
-        let mut rollout = Rollout::new();
-        rollout.assemble();
+        let rollout = Rollout::new();
         let mpc = &rollout.mpc;
         let (z, world_rows, _) = rollout.roll_out(&random_forces(mpc.blocks.len(), 1));
         assert_eq!(z.len(), mpc.q_values.len());
@@ -1129,7 +1118,7 @@ mod tests {
         let (dynamics, force_rows) = ax.split_at(NS * 3);
         for (r, (lhs, rhs)) in dynamics.iter().zip(&mpc.b_values).enumerate() {
             assert!(
-                (lhs - rhs).abs() < 1e-10,
+                (lhs - rhs).abs() < 1e-12,
                 "dynamics row {r}: {lhs} vs {rhs}"
             );
         }
@@ -1143,8 +1132,7 @@ mod tests {
     /// the two differ by the same amount (so they have the same minimiser on the feasible set).
     #[test]
     fn sparse_objective_equals_the_mpc_cost_up_to_a_constant() {
-        let mut rollout = Rollout::new();
-        rollout.assemble();
+        let rollout = Rollout::new();
         let blocks = rollout.mpc.blocks.len();
         let offsets: Vec<(f64, f64)> = (0..4)
             .map(|seed| {

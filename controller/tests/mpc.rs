@@ -10,7 +10,7 @@ mod mpc_cases;
 mod osqp_qp;
 
 use mpc_cases::{mpc_and_cases, reference_solution, step0_force_error, Case, CaseSpec};
-use quad_controller::mpc::{ConvexMpc, MpcSolution, MpcStatus};
+use quad_controller::mpc::{ConvexMpc, MpcStatus};
 
 fn setup() -> (ConvexMpc, Vec<Case>) {
     let (mpc, builder) = mpc_and_cases(&common::model());
@@ -42,15 +42,11 @@ fn setup() -> (ConvexMpc, Vec<Case>) {
     (mpc, cases)
 }
 
-fn solve_case(mpc: &mut ConvexMpc, case: &Case) -> MpcSolution {
-    mpc.solve(&case.input())
-}
-
 #[test]
 fn sparse_mpc_forces_match_the_condensed_reference_optimum() {
     let (mut mpc, cases) = setup();
     for case in &cases {
-        let solution = solve_case(&mut mpc, case);
+        let solution = mpc.solve(&case.input());
         assert_eq!(solution.status, MpcStatus::Solved, "{}", case.name);
         let qp = mpc.last_qp();
         let exact = reference_solution(qp);
@@ -78,7 +74,7 @@ fn sparse_mpc_forces_match_the_condensed_reference_optimum() {
 fn osqp_finds_the_same_forces_as_clarabel() {
     let (mut mpc, cases) = setup();
     for case in &cases {
-        let solution = solve_case(&mut mpc, case);
+        let solution = mpc.solve(&case.input());
         assert_eq!(solution.status, MpcStatus::Solved, "{}", case.name);
         let mut problem = osqp_qp::osqp_problem(mpc.last_qp(), 1e-7).expect("OSQP setup");
         let status = problem.solve();
@@ -96,7 +92,7 @@ fn osqp_finds_the_same_forces_as_clarabel() {
 #[test]
 fn repeated_and_interleaved_solves_are_deterministic() {
     let (mut mpc, cases) = setup();
-    let solve = |mpc: &mut ConvexMpc, case: &Case| solve_case(mpc, case).forces;
+    let solve = |mpc: &mut ConvexMpc, case: &Case| mpc.solve(&case.input()).forces;
     let first: Vec<_> = cases.iter().map(|c| solve(&mut mpc, c)).collect();
     // Cached solvers (updated in place) give bit-identical answers to fresh ones.
     for _ in 0..2 {

@@ -72,7 +72,7 @@ impl CaseSpec {
 }
 
 /// Deterministic pseudo-random numbers in [-1, 1].
-pub fn noise(seed: u64, i: usize) -> f64 {
+fn noise(seed: u64, i: usize) -> f64 {
     let mut z = seed
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
         .wrapping_add((i as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9));
@@ -86,10 +86,13 @@ pub fn noise(seed: u64, i: usize) -> f64 {
 /// configuration).
 pub struct CaseBuilder {
     pub config: ControllerConfig,
-    body_z: f64,
-    com: [f64; 3],
-    feet: [[f64; 3]; 4],
-    gait: Gait,
+    /// CoM height above flat ground when standing, m.
+    pub body_z: f64,
+    /// CoM in the body frame at the standing pose, m.
+    pub com: [f64; 3],
+    /// Feet in the body frame at the standing pose, m.
+    pub feet: [[f64; 3]; 4],
+    pub gait: Gait,
 }
 
 /// The MPC of the default configuration at horizon 10 for `model`, and a problem builder.
