@@ -1,68 +1,295 @@
-//! Criterion benchmarks of the P-F pipeline on the `c_shape` scenario, generator build and LP
-//! solve measured separately:
-//! - indicator basis, 8 directions, grids 32², 64², 128² (target: 128² LP ≤ 5 s);
-//! - Gaussian RBFs (σ = 0.5 h, 16 samples per function), 8 directions, 16², 24², 32² centres
-//!   (target: 32² generator + LP ≤ 2 s).
+//! Real-time P-F planning, measured side by side in one run on the `c_shape` scenario (8
+//! directions, uniform start density): the graph Dijkstra (full cost-to-go), the exact SSP solver
+//! and Clarabel on the same LP, generator builds, the whole pipeline and replanning on cached
+//! generators. Criterion drives the measurements; a summary table with the medians is printed at
+//! the end.
 //!
-//! Run briefly: `cargo bench -p pf-planner --bench pf -- --warm-up-time 1 --measurement-time 3`.
+//! `cargo bench -p pf-planner --bench pf` (about 3 minutes; Clarabel at 128² dominates).
+//! `PF_BENCH_SKIP_CLARABEL=1` leaves Clarabel out, `PF_BENCH_SKIP_RBF=1` the RBF rows.
 
+use std::cell::RefCell;
 use std::hint::black_box;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use criterion::Criterion;
 use pf_planner::basis::BasisKind;
+use pf_planner::graph::{distances_to_targets, Connectivity};
 use pf_planner::grid::PlanningGrid;
-use pf_planner::lp::{self, LpSettings};
-use pf_planner::pf::{prepare, PfGenerators, StartDensity};
+use pf_planner::io::MapScenario;
+use pf_planner::lp::{self, LpSettings, LpSolver};
+use pf_planner::pf::{self, prepare, PfGenerators, PfOptions, StartDensity};
 use pf_planner::scenarios;
 
 const U_MAX: f64 = 1.0;
 
-fn bench_basis(c: &mut Criterion, label: &str, basis: BasisKind, sizes: &[usize]) {
-    let scenario = scenarios::by_name("c_shape").expect("built-in scenario");
-    let mut group = c.benchmark_group(label);
-    group.sample_size(10);
-    group.warm_up_time(Duration::from_secs(1));
-    for &size in sizes {
-        let grid =
-            PlanningGrid::from_map(&scenario.map, &scenario.traversability, size).expect("grid");
-        group.bench_with_input(BenchmarkId::new("generators", size), &grid, |b, grid| {
-            b.iter(|| PfGenerators::build(black_box(grid), &basis, 8).expect("generators"))
-        });
-        let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
-        let prepared = prepare(
-            &gens,
-            &grid,
-            scenario.start,
-            &scenario.goal,
-            StartDensity::UniformFree,
-        )
-        .expect("prepared");
-        let settings = LpSettings::default();
-        let once = lp::solve(&prepared.problem(&gens, U_MAX), &settings).expect("lp");
-        println!(
-            "{label} {size}: {} functions, generator nnz {}, LP {} variables x {} constraints, {} iterations, status {}",
-            gens.generators().basis.len(),
-            gens.generators().stats.nnz,
-            once.report.variables,
-            once.report.constraints,
-            once.report.iterations,
-            once.report.status
-        );
-        group.bench_with_input(BenchmarkId::new("lp", size), &prepared, |b, prepared| {
-            b.iter(|| lp::solve(black_box(&prepared.problem(&gens, U_MAX)), &settings).expect("lp"))
-        });
+/// Per-iteration times of the samples of the last measurement.
+struct Recorder(RefCell<Vec<f64>>);
+
+impl Recorder {
+    fn new() -> Self {
+        Self(RefCell::new(Vec::new()))
     }
-    group.finish();
+
+    /// Benchmarks `routine` under `name` and returns its median time in seconds.
+    fn measure(&self, c: &mut Criterion, name: &str, mut routine: impl FnMut()) -> f64 {
+        self.0.borrow_mut().clear();
+        c.bench_function(name, |b| {
+            b.iter_custom(|iters| {
+                let started = Instant::now();
+                for _ in 0..iters {
+                    routine();
+                }
+                let elapsed = started.elapsed();
+                self.0
+                    .borrow_mut()
+                    .push(elapsed.as_secs_f64() / iters as f64);
+                elapsed
+            })
+        });
+        let mut times = self.0.borrow().clone();
+        times.sort_by(f64::total_cmp);
+        times.get(times.len() / 2).copied().unwrap_or(f64::NAN)
+    }
 }
 
-fn indicator(c: &mut Criterion) {
-    bench_basis(c, "pf_indicator_8dir", BasisKind::Indicator, &[32, 64, 128]);
+#[derive(Default)]
+struct Row {
+    case: String,
+    dijkstra: Option<f64>,
+    exact: Option<f64>,
+    clarabel: Option<f64>,
+    generators: Option<f64>,
+    pipeline: Option<f64>,
+    target: &'static str,
 }
 
-fn rbf(c: &mut Criterion) {
-    bench_basis(c, "pf_rbf_8dir", BasisKind::DEFAULT_RBF, &[16, 24, 32]);
+fn ms(value: Option<f64>) -> String {
+    match value {
+        Some(v) if v >= 1.0 => format!("{v:.2} s"),
+        Some(v) if v >= 1e-3 => format!("{:.2} ms", v * 1e3),
+        Some(v) => format!("{:.0} µs", v * 1e6),
+        None => "–".into(),
+    }
 }
 
-criterion_group!(benches, indicator, rbf);
-criterion_main!(benches);
+fn grid_of(scenario: &MapScenario, size: usize) -> PlanningGrid {
+    PlanningGrid::from_map(&scenario.map, &scenario.traversability, size).expect("grid")
+}
+
+fn settings(solver: LpSolver) -> LpSettings {
+    LpSettings {
+        solver,
+        ..LpSettings::default()
+    }
+}
+
+fn peak_rss_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+fn indicator_row(
+    c: &mut Criterion,
+    rec: &Recorder,
+    scenario: &MapScenario,
+    size: usize,
+    with_clarabel: bool,
+    target: &'static str,
+) -> Row {
+    let grid = grid_of(scenario, size);
+    let basis = BasisKind::Indicator;
+    let generators = rec.measure(c, &format!("indicator {size}²: generators"), || {
+        black_box(PfGenerators::build(&grid, &basis, 8).expect("generators"));
+    });
+    let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
+    let prepared = prepare(
+        &gens,
+        &grid,
+        scenario.start,
+        &scenario.goal,
+        StartDensity::UniformFree,
+    )
+    .expect("prepared");
+    let problem = prepared.problem(&gens, U_MAX);
+    let exact_settings = settings(LpSolver::Exact);
+    let exact = rec.measure(c, &format!("indicator {size}²: exact solve"), || {
+        black_box(lp::solve(&problem, &exact_settings).expect("exact"));
+    });
+    let dijkstra = rec.measure(c, &format!("indicator {size}²: graph Dijkstra"), || {
+        black_box(distances_to_targets(
+            &grid,
+            &prepared.goal_cells,
+            Connectivity::Eight,
+        ));
+    });
+    let clarabel = with_clarabel.then(|| {
+        let clarabel_settings = settings(LpSolver::Clarabel);
+        rec.measure(c, &format!("indicator {size}²: Clarabel solve"), || {
+            black_box(lp::solve(&problem, &clarabel_settings).expect("clarabel"));
+        })
+    });
+    let opts = PfOptions {
+        u_max: U_MAX,
+        start_density: StartDensity::UniformFree,
+        ..PfOptions::default()
+    };
+    let pipeline = rec.measure(c, &format!("indicator {size}²: generators + plan"), || {
+        let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
+        black_box(pf::solve(&gens, &grid, scenario.start, &scenario.goal, &opts).expect("plan"));
+    });
+    Row {
+        case: format!("indicator {size}²"),
+        dijkstra: Some(dijkstra),
+        exact: Some(exact),
+        clarabel,
+        generators: Some(generators),
+        pipeline: Some(pipeline),
+        target,
+    }
+}
+
+fn rbf_row(
+    c: &mut Criterion,
+    rec: &Recorder,
+    scenario: &MapScenario,
+    size: usize,
+    target: &'static str,
+) -> Row {
+    let grid = grid_of(scenario, size);
+    let basis = BasisKind::DEFAULT_RBF;
+    let generators = rec.measure(c, &format!("RBF {size}²: generators"), || {
+        black_box(PfGenerators::build(&grid, &basis, 8).expect("generators"));
+    });
+    let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
+    let prepared = prepare(
+        &gens,
+        &grid,
+        scenario.start,
+        &scenario.goal,
+        StartDensity::UniformFree,
+    )
+    .expect("prepared");
+    let problem = prepared.problem(&gens, U_MAX);
+    let exact_settings = settings(LpSolver::Exact);
+    let once = lp::solve(&problem, &exact_settings).expect("solve");
+    println!(
+        "RBF {size}²: {} functions, nnz {}, solver {}, {} iterations, certificate holds: {}",
+        gens.generators().basis.len(),
+        gens.generators().stats.nnz,
+        once.report.solver,
+        once.report.iterations,
+        once.report.certificate.holds()
+    );
+    let exact = rec.measure(c, &format!("RBF {size}²: solve"), || {
+        black_box(lp::solve(&problem, &exact_settings).expect("solve"));
+    });
+    Row {
+        case: format!("RBF {size}² centres ({} solver)", once.report.solver),
+        exact: Some(exact),
+        generators: Some(generators),
+        pipeline: Some(generators + exact),
+        target,
+        ..Row::default()
+    }
+}
+
+fn replan_rows(c: &mut Criterion, rec: &Recorder, scenario: &MapScenario) -> Vec<Row> {
+    let grid = grid_of(scenario, 128);
+    let gens = PfGenerators::build(&grid, &BasisKind::Indicator, 8).expect("generators");
+    let opts = PfOptions {
+        u_max: U_MAX,
+        start_density: StartDensity::UniformFree,
+        ..PfOptions::default()
+    };
+    // Same geometry, new traversability: p raised by a bump around the map centre.
+    let mut changed = grid.clone();
+    let (cx, cy) = (grid.width as f64 / 2.0, grid.height as f64 / 2.0);
+    for iy in 0..grid.height {
+        for ix in 0..grid.width {
+            let r2 = ((ix as f64 - cx).powi(2) + (iy as f64 - cy).powi(2)) / 100.0;
+            let i = grid.index(ix, iy);
+            changed.cost[i] = (changed.cost[i] + 0.5 * (-r2).exp()).min(1.0);
+        }
+    }
+    assert!(
+        gens.matches(&changed),
+        "same geometry must reuse the generators"
+    );
+    let new_p = rec.measure(c, "replan 128²: new p, cached generators", || {
+        black_box(pf::solve(&gens, &changed, scenario.start, &scenario.goal, &opts).expect("plan"));
+    });
+    let moved = [scenario.start[0] + 1.0, scenario.start[1] + 0.5];
+    let new_start = rec.measure(c, "replan 128²: new start, cached generators", || {
+        black_box(pf::solve(&gens, &grid, moved, &scenario.goal, &opts).expect("plan"));
+    });
+    vec![
+        Row {
+            case: "replan 128², new p (cached generators)".into(),
+            pipeline: Some(new_p),
+            target: "≤ 30 ms",
+            ..Row::default()
+        },
+        Row {
+            case: "replan 128², new start (cached generators)".into(),
+            pipeline: Some(new_start),
+            target: "≤ 30 ms",
+            ..Row::default()
+        },
+    ]
+}
+
+fn main() {
+    let mut c = Criterion::default()
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2))
+        .configure_from_args();
+    let with_clarabel = std::env::var_os("PF_BENCH_SKIP_CLARABEL").is_none();
+    let scenario = scenarios::by_name("c_shape").expect("built-in scenario");
+    let rec = Recorder::new();
+    let mut rows = vec![
+        indicator_row(&mut c, &rec, &scenario, 128, with_clarabel, "solve ≤ 50 ms"),
+        indicator_row(&mut c, &rec, &scenario, 256, false, "≤ 250 ms"),
+        indicator_row(&mut c, &rec, &scenario, 512, false, "≤ 2 s, ≤ 1 GB"),
+    ];
+    if std::env::var_os("PF_BENCH_SKIP_RBF").is_none() {
+        rows.push(rbf_row(
+            &mut c,
+            &rec,
+            &scenario,
+            32,
+            "generators + solve ≤ 100 ms",
+        ));
+        rows.push(rbf_row(&mut c, &rec, &scenario, 64, "≤ 0.5 s"));
+        rows.push(rbf_row(&mut c, &rec, &scenario, 128, "≤ 3 s"));
+    }
+    rows.extend(replan_rows(&mut c, &rec, &scenario));
+    c.final_summary();
+
+    println!();
+    println!("c_shape, 8 directions, uniform start density; medians of criterion's samples");
+    println!("| case | graph Dijkstra | exact solve | exact / Dijkstra | Clarabel solve | generators | generators + plan | target |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---|");
+    for row in &rows {
+        let ratio = match (row.exact, row.dijkstra) {
+            (Some(e), Some(d)) => format!("{:.1}×", e / d),
+            _ => "–".into(),
+        };
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            row.case,
+            ms(row.dijkstra),
+            ms(row.exact),
+            ratio,
+            ms(row.clarabel),
+            ms(row.generators),
+            ms(row.pipeline),
+            row.target
+        );
+    }
+    if let Some(peak) = peak_rss_mib() {
+        println!("peak RSS of the benchmark process (all cases): {peak:.0} MiB");
+    }
+}

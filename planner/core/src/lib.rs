@@ -4,6 +4,7 @@
 //! → feedback law u = ρ̄/ρ → integrated path → time-parameterised reference trajectory.
 
 pub mod basis;
+pub mod certificate;
 pub mod error;
 pub mod feedback;
 pub mod generators;
@@ -18,5 +19,6 @@ pub mod plan;
 pub mod plot;
 pub mod report;
 pub mod scenarios;
+pub mod ssp;
 pub mod trajectory;
 pub mod traversability;

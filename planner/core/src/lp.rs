@@ -1,4 +1,7 @@
-//! The P-F linear program in coefficient space, solved with Clarabel.
+//! The P-F linear program in coefficient space, solved exactly by the SSP solver
+//! ([`crate::ssp`], the default) or with Clarabel ([`LpSolver::Clarabel`], the cross-check and the
+//! fallback for generators that are not Markov). Every solution carries a duality certificate
+//! ([`crate::certificate`]).
 //!
 //! Rows and variables are the active basis functions outside the target set (mass that reaches
 //! the target leaves the system):
@@ -32,7 +35,9 @@
 //! largest entry. The reported objective is the original one, `Bᵀr + Σ Bᵀzₖ`, evaluated at the
 //! returned solution.
 
-use std::time::Instant;
+use std::fmt;
+use std::str::FromStr;
+use std::time::{Duration, Instant};
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -40,8 +45,51 @@ use clarabel::solver::{
 };
 use tracing::{debug, warn};
 
+use crate::certificate::{certify, Certificate};
 use crate::error::PlanError;
 use crate::generators::Generators;
+use crate::ssp;
+
+/// Which solver handles the LP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum LpSolver {
+    /// The exact SSP solver (Dijkstra or policy iteration, [`crate::ssp`]); falls back to Clarabel
+    /// when the generators are not Markov.
+    #[default]
+    Exact,
+    /// Clarabel's interior-point method on the reduced LP.
+    Clarabel,
+}
+
+impl LpSolver {
+    /// Name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            LpSolver::Exact => "exact",
+            LpSolver::Clarabel => "clarabel",
+        }
+    }
+}
+
+impl fmt::Display for LpSolver {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for LpSolver {
+    type Err = PlanError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "exact" => Ok(LpSolver::Exact),
+            "clarabel" => Ok(LpSolver::Clarabel),
+            other => Err(PlanError::InvalidOption {
+                name: "solver",
+                reason: format!("unknown LP solver {other:?}; use exact or clarabel"),
+            }),
+        }
+    }
+}
 
 /// Solver settings of the LP.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,8 +104,10 @@ pub struct LpSettings {
     pub verbose: bool,
     /// Threads of the sparse factorisation (0: all available).
     pub max_threads: u32,
-    /// Which of the two equivalent programs is solved.
+    /// Which of the two equivalent programs Clarabel solves.
     pub form: LpForm,
+    /// Which solver runs.
+    pub solver: LpSolver,
 }
 
 impl Default for LpSettings {
@@ -69,6 +119,7 @@ impl Default for LpSettings {
             verbose: false,
             max_threads: 0,
             form: LpForm::default(),
+            solver: LpSolver::default(),
         }
     }
 }
@@ -76,17 +127,21 @@ impl Default for LpSettings {
 /// What the solver reports about one LP solve.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LpReport {
-    /// Clarabel's status (`Solved`, `AlmostSolved`, …).
+    /// `Solved` (exact solver, or Clarabel's own status: `Solved`, `AlmostSolved`, …).
     pub status: String,
+    /// The method that produced the solution: `dijkstra`, `policy-iteration` or `clarabel`.
+    pub solver: String,
+    /// Duality certificate of the returned primal-dual pair, checked in the original units.
+    pub certificate: Certificate,
     /// Optimal value of the (unscaled) objective `Bᵀr + Σ Bᵀzₖ`.
     pub objective: f64,
-    /// Clarabel's primal residual (scaled problem).
+    /// The solver's own primal residual (Clarabel: scaled problem; exact: the certificate's).
     pub primal_residual: f64,
-    /// Clarabel's dual residual (scaled problem).
+    /// The solver's own dual residual (Clarabel: scaled problem; exact: the certificate's).
     pub dual_residual: f64,
     /// Largest violation of the mass balance, relative to the largest start coefficient (unscaled).
     pub mass_balance_residual: f64,
-    /// Interior-point iterations.
+    /// Interior-point iterations (Clarabel) or policy evaluations (policy iteration).
     pub iterations: u32,
     /// Wall-clock time of the LP (assembly and solve), seconds.
     pub solve_time_s: f64,
@@ -107,6 +162,9 @@ pub struct LpSolution {
     pub density: Vec<f64>,
     /// Flux coefficients zₖ, one vector per direction.
     pub flux: Vec<Vec<f64>>,
+    /// Optimal dual: the cost-to-go V per active function (0 on targets, `+∞` where the target
+    /// cannot be reached), in the LP's units (c·∫p ds per unit mass, c = 1 + 1/u_max).
+    pub potential: Vec<f64>,
     /// Solver report.
     pub report: LpReport,
 }
@@ -306,8 +364,11 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         return Ok(LpSolution {
             density: vec![0.0; n],
             flux: vec![vec![0.0; n]; k_count],
+            potential: vec![0.0; n],
             report: LpReport {
                 status: "Trivial".into(),
+                solver: settings.solver.name().into(),
+                certificate: Certificate::trivial(),
                 objective: 0.0,
                 primal_residual: 0.0,
                 dual_residual: 0.0,
@@ -319,6 +380,54 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
                 constraints: 0,
             },
         });
+    }
+    let deadline = (settings.time_limit_s.is_finite() && settings.time_limit_s >= 0.0)
+        .then(|| started + Duration::from_secs_f64(settings.time_limit_s.min(1e9)));
+    if settings.solver == LpSolver::Exact {
+        if let Some(exact) = ssp::solve(problem, deadline)? {
+            let density: Vec<f64> = (0..n)
+                .map(|i| exact.flux.iter().map(|z| z[i]).sum::<f64>() / problem.u_max)
+                .collect();
+            let solved_s = started.elapsed().as_secs_f64();
+            let certificate = certify(problem, &exact.flux, &exact.potential);
+            debug!(
+                solved_s,
+                certified_s = started.elapsed().as_secs_f64(),
+                "exact LP phases"
+            );
+            let report = LpReport {
+                status: if certificate.holds() {
+                    "Solved".into()
+                } else {
+                    "Uncertified".into()
+                },
+                solver: exact.method.into(),
+                certificate,
+                objective: certificate.primal_objective,
+                primal_residual: certificate.primal_residual,
+                dual_residual: certificate.dual_residual,
+                mass_balance_residual: certificate.primal_residual,
+                iterations: exact.iterations,
+                solve_time_s: started.elapsed().as_secs_f64(),
+                generator_time_s: gens.stats.build_time_s,
+                variables: n * k_count,
+                constraints: m,
+            };
+            if !certificate.holds() {
+                warn!(
+                    ?certificate,
+                    "exact P-F solution failed its duality certificate"
+                );
+            }
+            debug!(?report, "P-F LP solved exactly");
+            return Ok(LpSolution {
+                density,
+                flux: exact.flux,
+                potential: exact.potential,
+                report,
+            });
+        }
+        debug!("generators are not Markov: solving the LP with Clarabel");
     }
     let h = gens.basis.cell_size();
     let b_max = kept.iter().map(|&i| problem.cost[i]).fold(0.0f64, f64::max);
@@ -446,8 +555,20 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         .map(|&i| (balance[i] - problem.start[i]).abs())
         .fold(0.0f64, f64::max)
         / t_max;
+    // The dual potentials in the original units: V = c·max B·h·ŷ (see `reduce` for the scaling).
+    let y_hat: Vec<f64> = match settings.form {
+        LpForm::Primal => sol.z[..m].iter().map(|&z| -z).collect(),
+        LpForm::Dual => sol.x[..m].to_vec(),
+    };
+    let mut potential = vec![0.0; n];
+    for (r, &i) in red.kept.iter().enumerate() {
+        potential[i] = obj_scale / z_scale * h * y_hat[r];
+    }
+    let certificate = certify(problem, &flux, &potential);
     let report = LpReport {
         status: status_name,
+        solver: "clarabel".into(),
+        certificate,
         objective: objective * obj_scale,
         primal_residual: sol.r_prim,
         dual_residual: sol.r_dual,
@@ -462,6 +583,7 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
     Ok(LpSolution {
         density,
         flux,
+        potential,
         report,
     })
 }

@@ -1,8 +1,10 @@
 //! The P-F pipeline: planning grid → basis and ANSDMD generators → LP → feedback field → path.
 //!
-//! [`PfGenerators::build`] depends only on the grid (cost and obstacles), the basis and the
-//! number of directions, so a service can cache it and reuse it for any start and goal: the
-//! goal's basis functions are removed from the LP at solve time (absorbing target).
+//! [`PfGenerators::build`] depends only on the geometry of the grid (origin, cell size, shape and
+//! blocked cells), the basis and the number of directions, so a service can cache it and reuse it
+//! for any start, goal and traversability p of the same geometry: the cost integrals Bᵢ = ∫ p φᵢ
+//! are computed per solve (O(n)), and the goal's basis functions are removed from the LP at solve
+//! time (absorbing target).
 
 use std::collections::VecDeque;
 use std::time::Instant;
@@ -58,12 +60,13 @@ impl Default for PfOptions {
     }
 }
 
-/// Basis, generators and cost integrals of one grid: build once, solve for many start/goal pairs.
+/// Basis and generators of one grid geometry: build once, solve for many start/goal pairs and
+/// traversability maps.
 #[derive(Debug, Clone)]
 pub struct PfGenerators {
     generators: Generators,
-    /// Bᵢ = ∫ p φᵢ over the plane (p clamped at the grid edge).
-    cost: Vec<f64>,
+    /// Quadrature points per axis per cell of the integrals ∫ p φᵢ.
+    quadrature_per_axis: usize,
     /// ∫ φᵢ, to turn masses into coefficients.
     mass: Vec<f64>,
     /// Identity of the grid the generators were built for.
@@ -77,7 +80,6 @@ struct GridKey {
     width: usize,
     height: usize,
     blocked: Vec<bool>,
-    cost: Vec<f64>,
 }
 
 impl GridKey {
@@ -88,7 +90,6 @@ impl GridKey {
             width: grid.width,
             height: grid.height,
             blocked: grid.blocked.clone(),
-            cost: grid.cost.clone(),
         }
     }
 }
@@ -106,7 +107,6 @@ impl PfGenerators {
             BasisKind::Indicator => 1,
             BasisKind::Rbf { .. } => COST_QUADRATURE_PER_AXIS,
         };
-        let cost = generators.basis.integrals(per_axis, |p| grid.cost_at(p));
         let mass = generators.basis.integrals(per_axis, |_| 1.0);
         info!(
             functions = generators.basis.len(),
@@ -117,7 +117,7 @@ impl PfGenerators {
         );
         Ok(Self {
             generators,
-            cost,
+            quadrature_per_axis: per_axis,
             mass,
             grid_key: GridKey::of(grid),
         })
@@ -128,9 +128,12 @@ impl PfGenerators {
         &self.generators
     }
 
-    /// Bᵢ = ∫ p φᵢ per active function.
-    pub fn cost_integrals(&self) -> &[f64] {
-        &self.cost
+    /// Bᵢ = ∫ p φᵢ per active function, for the traversability of `grid` (same geometry), over
+    /// the plane with p clamped at the grid edge.
+    pub fn cost_integrals(&self, grid: &PlanningGrid) -> Vec<f64> {
+        self.generators
+            .basis
+            .integrals(self.quadrature_per_axis, |p| grid.cost_at(p))
     }
 
     /// ∫ φᵢ per active function.
@@ -138,7 +141,7 @@ impl PfGenerators {
         &self.mass
     }
 
-    /// Whether these generators were built for exactly this grid.
+    /// Whether these generators were built for this grid's geometry (its p may differ).
     pub fn matches(&self, grid: &PlanningGrid) -> bool {
         self.grid_key == GridKey::of(grid)
     }
@@ -160,6 +163,9 @@ pub struct PfSolution {
     pub weighted_length: f64,
     /// Start coefficients t that were used (per active function).
     pub start_coefficients: Vec<f64>,
+    /// The optimal dual: cost-to-go per active function (0 on targets, `+∞` where the goal
+    /// cannot be reached), in LP units (c·∫p ds per unit mass, c = 1 + 1/u_max).
+    pub cost_to_go: Vec<f64>,
     /// Target flags per active function.
     pub targets: Vec<bool>,
 }
@@ -235,6 +241,8 @@ pub struct PreparedLp {
     pub target: Vec<bool>,
     /// Goal cells of the planning grid.
     pub goal_cells: Vec<usize>,
+    /// Bᵢ = ∫ p φᵢ per active function on this grid's traversability.
+    pub cost: Vec<f64>,
 }
 
 impl PreparedLp {
@@ -242,7 +250,7 @@ impl PreparedLp {
     pub fn problem<'a>(&'a self, gens: &'a PfGenerators, u_max: f64) -> LpProblem<'a> {
         LpProblem {
             generators: &gens.generators,
-            cost: &gens.cost,
+            cost: &self.cost,
             start: &self.start,
             target: &self.target,
             u_max,
@@ -327,6 +335,7 @@ pub fn prepare(
         start: t,
         target,
         goal_cells,
+        cost: gens.cost_integrals(grid),
     })
 }
 
@@ -380,6 +389,7 @@ pub fn solve(
         field,
         weighted_length,
         start_coefficients: prepared.start,
+        cost_to_go: solution.potential,
         targets: prepared.target,
     })
 }

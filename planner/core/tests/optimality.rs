@@ -1,76 +1,22 @@
 //! The planner's strongest check: with the indicator basis and one-cell shifts the P-F LP is a
 //! shortest-path problem, so LP optimum / (1 + 1/u_max) = Σ start mass × Dijkstra distance to the
 //! goal on the 4- or 8-connected grid graph with edge weight p(source cell) × step. Equality to
-//! 1e-6 (relative) proves the convex program was solved to global optimality.
+//! 1e-6 (relative) proves the convex program was solved to global optimality. Every case runs
+//! both the exact SSP solver (the default) and Clarabel, and both must carry a duality
+//! certificate that holds.
+
+mod support;
 
 use pf_planner::basis::BasisKind;
 use pf_planner::graph::{distances_to_targets, Connectivity};
 use pf_planner::grid::{GoalRegion, PlanningGrid};
-use pf_planner::lp::{LpForm, LpSettings};
-use pf_planner::pf::{self, PfGenerators, PfOptions, PfSolution, StartDensity};
+use pf_planner::lp::{LpForm, LpSettings, LpSolver};
+use pf_planner::pf::{self, PfGenerators, PfOptions, StartDensity};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use support::{graph_value, random_free_point, random_grid};
 
 const TOLERANCE: f64 = 1e-6;
-
-/// Σᵢ tᵢ ∫φᵢ × dist(cell of i): the graph value the LP must reproduce.
-fn graph_value(
-    gens: &PfGenerators,
-    grid: &PlanningGrid,
-    sol: &PfSolution,
-    directions: usize,
-) -> f64 {
-    let basis = &gens.generators().basis;
-    let targets: Vec<usize> = (0..basis.len())
-        .filter(|&i| sol.targets[i])
-        .map(|i| basis.cell(i))
-        .collect();
-    let conn = Connectivity::from_directions(directions).expect("4 or 8");
-    let dist = distances_to_targets(grid, &targets, conn);
-    let mut value = 0.0;
-    for (i, &t) in sol.start_coefficients.iter().enumerate() {
-        if t > 0.0 {
-            let d = dist[basis.cell(i)];
-            assert!(d.is_finite(), "start mass on a cell the graph cannot route");
-            value += t * gens.mass_integrals()[i] * d;
-        }
-    }
-    value
-}
-
-/// Random terrain: p in [0.05, 1] with some smooth structure, ~12 % blocked cells.
-fn random_grid(rng: &mut ChaCha8Rng) -> PlanningGrid {
-    let width = rng.random_range(12..=20);
-    let height = rng.random_range(12..=20);
-    let cell_size = rng.random_range(0.1..0.6);
-    let (fx, fy, phase) = (
-        rng.random_range(0.1..0.8),
-        rng.random_range(0.1..0.8),
-        rng.random_range(0.0..6.0),
-    );
-    let mut cost = Vec::with_capacity(width * height);
-    let mut blocked = Vec::with_capacity(width * height);
-    for iy in 0..height {
-        for ix in 0..width {
-            let smooth = 0.5 + 0.4 * (fx * ix as f64 + phase).sin() * (fy * iy as f64).cos();
-            let noise: f64 = rng.random_range(-0.1..0.1);
-            cost.push((smooth + noise).clamp(0.05, 1.0));
-            blocked.push(rng.random_bool(0.12));
-        }
-    }
-    PlanningGrid::from_parts([-1.0, 2.0], cell_size, width, height, cost, blocked)
-        .expect("valid random grid")
-}
-
-/// A free cell centre (and its index), drawn at random.
-fn random_free_point(rng: &mut ChaCha8Rng, grid: &PlanningGrid) -> [f64; 2] {
-    loop {
-        let c = rng.random_range(0..grid.len());
-        if !grid.blocked[c] {
-            return grid.center_of_index(c);
-        }
-    }
-}
 
 struct Case {
     relative_error: f64,
@@ -78,6 +24,8 @@ struct Case {
     graph_value: f64,
 }
 
+/// Runs the exact solver and Clarabel (dual form); both must match the graph. Returns the
+/// exact solver's case.
 fn check(
     grid: &PlanningGrid,
     start: [f64; 2],
@@ -86,15 +34,43 @@ fn check(
     density: StartDensity,
     u_max: f64,
 ) -> Option<Case> {
-    check_form(
+    let clarabel = check_with(
         grid,
         start,
         goal,
         directions,
         density,
         u_max,
+        LpSolver::Clarabel,
         LpForm::default(),
-    )
+    );
+    let exact = check_with(
+        grid,
+        start,
+        goal,
+        directions,
+        density,
+        u_max,
+        LpSolver::Exact,
+        LpForm::default(),
+    );
+    assert_eq!(clarabel.is_some(), exact.is_some());
+    if let (Some(c), Some(e)) = (&clarabel, &exact) {
+        assert!(
+            c.relative_error < TOLERANCE,
+            "Clarabel: {} vs Dijkstra {} (rel {:.2e})",
+            c.lp_value,
+            c.graph_value,
+            c.relative_error
+        );
+        assert!(
+            (c.lp_value - e.lp_value).abs() <= TOLERANCE * e.lp_value.abs().max(1e-12),
+            "Clarabel {} vs exact {}",
+            c.lp_value,
+            e.lp_value
+        );
+    }
+    exact
 }
 
 fn check_form(
@@ -106,12 +82,36 @@ fn check_form(
     u_max: f64,
     form: LpForm,
 ) -> Option<Case> {
+    check_with(
+        grid,
+        start,
+        goal,
+        directions,
+        density,
+        u_max,
+        LpSolver::Clarabel,
+        form,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn check_with(
+    grid: &PlanningGrid,
+    start: [f64; 2],
+    goal: &GoalRegion,
+    directions: usize,
+    density: StartDensity,
+    u_max: f64,
+    solver: LpSolver,
+    form: LpForm,
+) -> Option<Case> {
     let gens = PfGenerators::build(grid, &BasisKind::Indicator, directions).expect("generators");
     let opts = PfOptions {
         u_max,
         start_density: density,
         lp: LpSettings {
             form,
+            solver,
             ..LpSettings::default()
         },
         ..PfOptions::default()
@@ -129,10 +129,19 @@ fn check_form(
             );
             return None;
         }
-        Err(e) => panic!("P-F failed: {e}"),
+        Err(e) => panic!("P-F ({solver}) failed: {e}"),
     };
-    assert_eq!(sol.lp.status, "Solved", "{:?}", sol.lp);
-    assert!(sol.lp.mass_balance_residual < 1e-7, "{:?}", sol.lp);
+    assert_eq!(sol.lp.status, "Solved", "{solver}: {:?}", sol.lp);
+    assert!(
+        sol.lp.mass_balance_residual < 1e-7,
+        "{solver}: {:?}",
+        sol.lp
+    );
+    assert!(
+        sol.lp.certificate.holds(),
+        "{solver}: certificate {:?}",
+        sol.lp.certificate
+    );
     let reference = graph_value(&gens, grid, &sol, directions);
     Some(Case {
         relative_error: (sol.weighted_length - reference).abs() / reference,
@@ -297,8 +306,8 @@ fn primal_and_dual_forms_reach_the_same_optimum() {
 
 #[test]
 fn lp_equals_dijkstra_on_the_full_resolution_c_shape() {
-    // The benchmark's largest case (128² cells, 8 directions, uniform start density): the
-    // reduced dual LP must still reproduce the graph value.
+    // The benchmark's largest Clarabel case (128² cells, 8 directions, uniform start density):
+    // the reduced dual LP and the exact solver must still reproduce the graph value.
     let scenario = pf_planner::scenarios::by_name("c_shape").expect("scenario");
     let grid = PlanningGrid::from_map(&scenario.map, &scenario.traversability, 128).expect("grid");
     let case = check(
