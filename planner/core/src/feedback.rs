@@ -175,10 +175,6 @@ pub fn integrate(
         grid.cell_of(p)
             .is_some_and(|(ix, iy)| is_target_cell(grid.index(ix, iy)))
     };
-    let free = |p: Point| {
-        grid.cell_of(p)
-            .is_some_and(|(ix, iy)| !grid.blocked[grid.index(ix, iy)])
-    };
     for step in 0..max_steps {
         if in_target(x) {
             return (path, IntegrationOutcome::ReachedGoal);
@@ -213,16 +209,20 @@ pub fn integrate(
         ];
         // Near an obstacle the RBF field is made of the tails of the neighbouring functions and
         // may point slightly into the (padded) obstacle: keep the tangential component (slide
-        // along the wall) when that stays free; otherwise report the hit honestly.
-        let next = if free(next) {
+        // along the wall) when that stays free; otherwise report the hit honestly. Whole
+        // segments are checked, not only their end points: a step must not cut a corner.
+        let next = if grid.segment_is_free(x, next) {
             next
         } else {
             let slides = [[next[0], x[1]], [x[0], next[1]]];
-            let best = slides.into_iter().filter(|&p| free(p)).max_by(|a, b| {
-                let da = (a[0] - x[0]).hypot(a[1] - x[1]);
-                let db = (b[0] - x[0]).hypot(b[1] - x[1]);
-                da.total_cmp(&db)
-            });
+            let best = slides
+                .into_iter()
+                .filter(|&p| grid.segment_is_free(x, p))
+                .max_by(|a, b| {
+                    let da = (a[0] - x[0]).hypot(a[1] - x[1]);
+                    let db = (b[0] - x[0]).hypot(b[1] - x[1]);
+                    da.total_cmp(&db)
+                });
             match best {
                 Some(p) if (p[0] - x[0]).hypot(p[1] - x[1]) > 0.0 => p,
                 _ => return (path, IntegrationOutcome::HitObstacle { at: next }),

@@ -254,6 +254,19 @@ impl PlanningGrid {
         self.cost[self.index(ix, iy)]
     }
 
+    /// Whether the straight segment `a → b` stays on the grid and out of every blocked cell
+    /// (see [`segment_is_clear`]).
+    pub fn segment_is_free(&self, a: Point, b: Point) -> bool {
+        segment_is_clear(
+            self.origin,
+            self.cell_size,
+            (self.width, self.height),
+            a,
+            b,
+            |ix, iy| self.blocked[self.index(ix, iy)],
+        )
+    }
+
     /// Whether the cell containing `p` is blocked, clamped at the grid edge like [`Self::cost_at`];
     /// use [`Self::contains`] to reject points off the grid.
     pub fn blocked_at(&self, p: Point) -> bool {
@@ -310,6 +323,23 @@ fn overlaps_obstacle(map: &GridMap, corner: Point, size: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn segments_are_checked_cell_by_cell_including_corners() {
+        // 4 x 4 unit cells, blocked: (1, 1) and (2, 2) (touching at a corner).
+        let blocked = |ix: usize, iy: usize| (ix, iy) == (1, 1) || (ix, iy) == (2, 2);
+        let clear = |a: Point, b: Point| segment_is_clear([0.0, 0.0], 1.0, (4, 4), a, b, blocked);
+        assert!(clear([0.5, 0.5], [0.5, 3.5]), "vertical, free column");
+        assert!(clear([0.5, 0.5], [3.5, 0.5]), "horizontal, free row");
+        assert!(!clear([0.5, 1.5], [2.5, 1.5]), "through (1, 1)");
+        // End points free, the segment clips the corner of (1, 1): an end-point check misses it.
+        assert!(!clear([0.9, 0.5], [1.5, 1.05]));
+        // Exactly through the shared corner of the two blocked cells: refused.
+        assert!(!clear([1.5, 2.5], [2.5, 1.5]));
+        assert!(!clear([0.5, 0.5], [5.0, 0.5]), "leaves the grid");
+        assert!(!clear([0.5, f64::NAN], [0.5, 0.5]), "not finite");
+        assert!(clear([3.2, 0.1], [3.2, 0.1]), "a point");
+    }
 
     fn map_with_obstacle() -> GridMap {
         // 8 x 8 map of 0.5 m cells; heights = ix (so p varies along x); one obstacle cell at (3, 4).
@@ -386,4 +416,88 @@ mod tests {
         );
         assert!(PlanningGrid::from_parts([0.0, 0.0], 1.0, 0, 2, vec![], vec![]).is_err());
     }
+}
+
+/// Whether the straight segment `a → b` crosses no cell for which `blocked(ix, iy)` holds, on a
+/// grid of `shape = (width, height)` square cells of side `cell` from `origin`; leaving the grid
+/// counts as blocked. Every cell the segment passes through is visited (grid traversal after
+/// Amanatides and Woo), so a step can never cut an obstacle corner between two checked points.
+/// Where the segment runs exactly through a cell corner, both side cells are checked too
+/// (conservative: touching a blocked cell at a point is refused).
+pub fn segment_is_clear(
+    origin: Point,
+    cell: f64,
+    shape: (usize, usize),
+    a: Point,
+    b: Point,
+    blocked: impl Fn(usize, usize) -> bool,
+) -> bool {
+    let (width, height) = (shape.0 as i64, shape.1 as i64);
+    let to_cell = |p: Point| [(p[0] - origin[0]) / cell, (p[1] - origin[1]) / cell];
+    let (fa, fb) = (to_cell(a), to_cell(b));
+    if !fa.iter().chain(fb.iter()).all(|v| v.is_finite()) {
+        return false;
+    }
+    let is_blocked = |ix: i64, iy: i64| {
+        ix < 0 || iy < 0 || ix >= width || iy >= height || blocked(ix as usize, iy as usize)
+    };
+    let (mut ix, mut iy) = (fa[0].floor() as i64, fa[1].floor() as i64);
+    let (ex, ey) = (fb[0].floor() as i64, fb[1].floor() as i64);
+    let (dx, dy) = (fb[0] - fa[0], fb[1] - fa[1]);
+    let sign = |d: f64| match d.partial_cmp(&0.0) {
+        Some(std::cmp::Ordering::Greater) => 1i64,
+        Some(std::cmp::Ordering::Less) => -1,
+        _ => 0,
+    };
+    let (sx, sy) = (sign(dx), sign(dy));
+    let boundary = |f: f64, i: i64, d: f64| {
+        if d > 0.0 {
+            (i as f64 + 1.0 - f) / d
+        } else if d < 0.0 {
+            (i as f64 - f) / d
+        } else {
+            f64::INFINITY
+        }
+    };
+    let mut t_x = boundary(fa[0], ix, dx);
+    let mut t_y = boundary(fa[1], iy, dy);
+    let delta_x = if dx != 0.0 {
+        1.0 / dx.abs()
+    } else {
+        f64::INFINITY
+    };
+    let delta_y = if dy != 0.0 {
+        1.0 / dy.abs()
+    } else {
+        f64::INFINITY
+    };
+    let steps = (ex - ix).abs() + (ey - iy).abs();
+    for _ in 0..=steps {
+        if is_blocked(ix, iy) {
+            return false;
+        }
+        if ix == ex && iy == ey {
+            return true;
+        }
+        let corner = t_x.is_finite()
+            && t_y.is_finite()
+            && (t_x - t_y).abs() <= 1e-12 * t_x.abs().max(t_y.abs()).max(1.0);
+        if corner {
+            if is_blocked(ix + sx, iy) || is_blocked(ix, iy + sy) {
+                return false;
+            }
+            ix += sx;
+            iy += sy;
+            t_x += delta_x;
+            t_y += delta_y;
+        } else if t_x < t_y {
+            ix += sx;
+            t_x += delta_x;
+        } else {
+            iy += sy;
+            t_y += delta_y;
+        }
+    }
+    // Rounding took the walk past the end cell without meeting it: refuse rather than guess.
+    !is_blocked(ex, ey) && ix == ex && iy == ey
 }

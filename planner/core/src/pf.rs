@@ -416,11 +416,7 @@ fn finish_into_goal_disc(grid: &PlanningGrid, goal: &GoalRegion, path: &mut Vec<
             end[1] + a * (goal.center[1] - end[1]),
         ]
     };
-    let free = (0..=steps).all(|s| {
-        let p = point(s);
-        grid.contains(p) && !grid.blocked_at(p)
-    });
-    if free {
+    if grid.segment_is_free(end, goal.center) {
         // Stop at the first point inside the disc rather than running to the centre.
         if let Some(s) = (1..=steps).find(|&s| goal.contains(point(s))) {
             path.push(point(s));

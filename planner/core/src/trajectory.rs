@@ -10,6 +10,7 @@
 use serde::Serialize;
 
 use crate::error::PlanError;
+use crate::grid::segment_is_clear;
 use crate::map::{GridMap, Point};
 
 /// Upper bound on samples of one reference (keeps absurd speed/period combinations bounded).
@@ -125,7 +126,18 @@ pub fn build_trajectory(
     }
     let total = arc[arc.len() - 1];
     let step = opts.speed * opts.dt;
-    let walking_samples = (total / step).ceil() as usize;
+    // Compared in floating point first: a tiny speed must not overflow the sample count.
+    let walking_estimate = (total / step).ceil();
+    if !(walking_estimate < MAX_SAMPLES as f64) {
+        return Err(PlanError::InvalidOption {
+            name: "speed/dt",
+            reason: format!(
+                "{total:.1} m at {} m/s sampled every {} s needs about {walking_estimate:.3e} samples, more than the limit of {MAX_SAMPLES}",
+                opts.speed, opts.dt
+            ),
+        });
+    }
+    let walking_samples = walking_estimate as usize;
     let heading_at = |s: f64| {
         let half = 0.5 * opts.heading_window;
         let (a, b) = (
@@ -163,14 +175,20 @@ pub fn build_trajectory(
         yaw = target;
     }
     let walk_start = samples.len();
+    let mut walk: Vec<(f64, f64)> = Vec::with_capacity(walking_samples + 1);
     for k in 0..=walking_samples {
-        let s = (k as f64 * step).min(total);
+        walk.push(((k as f64 * step).min(total), t));
+        t += opts.dt;
+    }
+    if map.obstacles.is_some() {
+        walk = keep_chords_clear(map, &points, &arc, &walk, opts.speed);
+    }
+    for (k, &(s, t)) in walk.iter().enumerate() {
         let p = point_at(&points, &arc, s);
         if k > 0 {
             yaw += wrap_angle(heading_at(s) - yaw);
         }
         samples.push(sample(map, t, p, yaw, [0.0, 0.0], 0.0));
-        t += opts.dt;
     }
     // Velocities and yaw rates from central differences of the sampled walk (one-sided at the ends),
     // so that they are consistent with the positions a tracker sees; the last sample is at rest.
@@ -189,6 +207,45 @@ pub fn build_trajectory(
         samples[i].yaw_rate = (samples[hi].yaw - samples[lo].yaw) / span;
     }
     Ok(samples)
+}
+
+/// The walk's (arc length, time) samples with the path's own vertices added wherever the straight
+/// chord between two consecutive samples would cross an obstacle cell of the map. A tracker
+/// interpolates linearly between samples, so the samples' polyline, not only the path, must stay
+/// out of obstacles; the path's segments are obstacle-free (the integrator checks them), and so
+/// is a polyline through its vertices. Inserted samples are timed at the nominal speed.
+fn keep_chords_clear(
+    map: &GridMap,
+    points: &[Point],
+    arc: &[f64],
+    walk: &[(f64, f64)],
+    speed: f64,
+) -> Vec<(f64, f64)> {
+    let clear = |a: Point, b: Point| {
+        segment_is_clear(
+            map.origin,
+            map.resolution,
+            (map.width, map.height),
+            a,
+            b,
+            |ix, iy| map.is_obstacle(ix, iy),
+        )
+    };
+    let mut out = Vec::with_capacity(walk.len());
+    for (k, &(s, t)) in walk.iter().enumerate() {
+        if let Some(&(s_prev, t_prev)) = k.checked_sub(1).and_then(|j| walk.get(j)) {
+            let (a, b) = (point_at(points, arc, s_prev), point_at(points, arc, s));
+            if !clear(a, b) {
+                let first = arc.partition_point(|&v| v <= s_prev);
+                let last = arc.partition_point(|&v| v < s);
+                for &v in &arc[first..last] {
+                    out.push((v, t_prev + (v - s_prev) / speed));
+                }
+            }
+        }
+        out.push((s, t));
+    }
+    out
 }
 
 fn sample(
