@@ -129,6 +129,7 @@ def sample_messages() -> list[Any]:
     options.start_density = plan_options_t.START_DENSITY_UNIFORM
     options.sample_period = 0.05
     options.max_solve_time = 30.0
+    options.solver = plan_options_t.SOLVER_CLARABEL
 
     request = plan_request_t()
     request.header = header(17)
@@ -160,6 +161,10 @@ def sample_messages() -> list[Any]:
     metrics.solve_time, metrics.objective = 0.0421, 0.37
     metrics.lp_status, metrics.lp_iterations = plan_metrics_t.LP_SOLVED, 23
     metrics.expanded_nodes, metrics.reached_goal = 0, True
+    metrics.lp_solver, metrics.certified, metrics.cache_hit = plan_metrics_t.SOLVER_DIJKSTRA, True, True
+    metrics.primal_residual, metrics.dual_residual, metrics.duality_gap = 1e-15, 0.0, 3e-16
+    metrics.certificate_tolerance, metrics.generator_time = 1e-6, 0.0
+    metrics.solve_phase_time, metrics.path_time = 0.004, 0.002
     reply = plan_reply_t()
     reply.header = header(18)
     reply.request_id = request.request_id

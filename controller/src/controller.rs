@@ -236,10 +236,11 @@ fn validate_config(config: &ControllerConfig) -> Result<(), ControllerError> {
     if config.mpc_every_ticks == 0 {
         return err("mpc_every_ticks must be ≥ 1".into());
     }
-    if !(10..=40).contains(&config.mpc_horizon) {
+    if !crate::limits::MPC_HORIZON.contains(&config.mpc_horizon) {
         return err(format!(
-            "mpc_horizon = {} outside 10..=40",
-            config.mpc_horizon
+            "mpc_horizon = {} outside {:?}",
+            config.mpc_horizon,
+            crate::limits::MPC_HORIZON
         ));
     }
     if config.f_min >= config.f_max {

@@ -28,6 +28,7 @@
 pub mod api;
 pub mod controller;
 pub mod gait;
+pub mod limits;
 pub mod model;
 pub mod mpc;
 

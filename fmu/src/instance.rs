@@ -5,6 +5,7 @@ use quad_controller::{
     Command, Controller, ControllerConfig, FsmState, HeightMap, Reference, RobotState,
 };
 
+use crate::budget::max_ticks_per_step;
 use crate::ffi::Fmi2Status;
 use crate::logger::Logger;
 use crate::resources::Resources;
@@ -63,6 +64,7 @@ pub struct Instance {
     stop_time: Option<f64>,
     time: f64,
     ticks_done: u64,
+    max_ticks_per_step: u64,
     last_successful_time: f64,
 }
 
@@ -86,6 +88,7 @@ impl Instance {
             stop_time: None,
             time: 0.0,
             ticks_done: 0,
+            max_ticks_per_step: 0,
             last_successful_time: 0.0,
         }
     }
@@ -103,6 +106,12 @@ impl Instance {
     /// Control ticks run since `fmi2ExitInitializationMode`.
     pub fn ticks_done(&self) -> u64 {
         self.ticks_done
+    }
+
+    /// The most control ticks one doStep may run (see [`crate::budget`]); 0 before
+    /// `fmi2ExitInitializationMode`.
+    pub fn max_ticks_per_step(&self) -> u64 {
+        self.max_ticks_per_step
     }
 
     fn require(&self, function: &'static str, allowed: &[Phase]) -> Result<(), FmuError> {
@@ -166,12 +175,17 @@ impl Instance {
         self.time = self.start_time;
         self.last_successful_time = self.start_time;
         self.ticks_done = 0;
+        self.max_ticks_per_step = max_ticks_per_step(&self.config);
         self.phase = Phase::StepComplete;
         self.logger.log(
             Fmi2Status::Ok,
             &format!(
-                "initialised at t = {}: control dt {} s, MPC every {} ticks",
-                self.start_time, self.config.control_dt, self.config.mpc_every_ticks
+                "initialised at t = {}: control dt {} s, MPC every {} ticks, at most {} control ticks per doStep (h <= {} s)",
+                self.start_time,
+                self.config.control_dt,
+                self.config.mpc_every_ticks,
+                self.max_ticks_per_step,
+                self.max_ticks_per_step as f64 * self.config.control_dt
             ),
         );
         Ok(())
@@ -287,13 +301,20 @@ impl Instance {
         let dt = self.config.control_dt;
         let end = current_time + step;
         let target = ((end - self.start_time) / dt).round();
-        if !(target.is_finite() && target < 2f64.powi(62)) {
-            return Err(FmuError::InvalidArgument(format!(
-                "t + h = {end} is too far from the start time for control dt {dt}"
-            )));
+        // Refused before anything runs (NaN and inf included), so the instance stays usable.
+        let ticks = target - self.ticks_done as f64;
+        let within_cap = ticks <= self.max_ticks_per_step as f64; // false for NaN
+        if !within_cap {
+            return Err(FmuError::StepTooLong {
+                step,
+                ticks,
+                max_ticks: self.max_ticks_per_step,
+                max_step: self.max_ticks_per_step as f64 * dt,
+            });
         }
-        // `target` is a non-negative integer below 2^62 here, so the cast is exact.
-        let target = target as u64;
+        // `target` is an integer in [0, ticks_done + max_ticks_per_step] here (the FMU time
+        // never runs behind the ticks done), so the cast is exact.
+        let target = target.max(0.0) as u64;
         let Some(controller) = self.controller.as_mut() else {
             return Err(FmuError::Internal(
                 "no controller in state stepComplete".to_owned(),
@@ -503,20 +524,147 @@ mod tests {
     #[test]
     fn invalid_parameters_keep_the_instance_in_initialisation() {
         let mut i = instance();
-        // mpc.horizon passes the table's range check but the controller wants >= 10 steps.
-        i.set("fmi2SetInteger", &[vr("mpc.horizon")], &[Value::Integer(2)])
-            .unwrap();
+        // Each value is inside its own range, but f_min must stay below f_max: checked when the
+        // controller is built in fmi2ExitInitializationMode.
+        i.set(
+            "fmi2SetReal",
+            &[vr("mpc.fMin"), vr("mpc.fMax")],
+            &[Value::Real(500.0), Value::Real(400.0)],
+        )
+        .unwrap();
         i.enter_initialization_mode().unwrap();
         let err = i.exit_initialization_mode().unwrap_err();
         assert!(matches!(err, FmuError::Config(_)), "{err}");
+        assert!(err.to_string().contains("f_min must be < f_max"), "{err}");
         assert_eq!(i.phase(), Phase::InitializationMode);
-        i.set(
-            "fmi2SetInteger",
-            &[vr("mpc.horizon")],
-            &[Value::Integer(10)],
-        )
-        .unwrap();
+        i.set("fmi2SetReal", &[vr("mpc.fMax")], &[Value::Real(600.0)])
+            .unwrap();
         i.exit_initialization_mode().unwrap();
+    }
+
+    #[test]
+    fn parameters_outside_their_range_are_refused_at_set_time() {
+        let mut i = instance();
+        let horizon = vr("mpc.horizon");
+        for bad in [9, 41, 0, -1, i32::MIN, i32::MAX] {
+            let err = i
+                .set("fmi2SetInteger", &[horizon], &[Value::Integer(bad)])
+                .unwrap_err();
+            assert!(matches!(err, FmuError::InvalidValue { .. }), "{bad}: {err}");
+        }
+        let every = vr("mpc.everyTicks");
+        assert!(i
+            .set("fmi2SetInteger", &[every], &[Value::Integer(0)])
+            .is_err());
+        assert!(i
+            .set("fmi2SetInteger", &[every], &[Value::Integer(1001)])
+            .is_err());
+        // Nothing was stored: the defaults still build a controller.
+        i.enter_initialization_mode().unwrap();
+        i.exit_initialization_mode().unwrap();
+        assert_eq!(i.config, ControllerConfig::default());
+    }
+
+    /// The control.dt values of the issue: 1e-12 (first doStep of 1 ms never returned), 1e-9
+    /// (3.6 s per step), 10 and 1e300 (no control tick ever ran).
+    #[test]
+    fn regression_extreme_control_dt_is_refused_at_set_time() {
+        let mut i = instance();
+        let dt = vr("control.dt");
+        for bad in [
+            1e-12,
+            1e-9,
+            10.0,
+            1e300,
+            0.0,
+            -1e-3,
+            f64::NAN,
+            f64::INFINITY,
+        ] {
+            let err = i
+                .set("fmi2SetReal", &[dt], &[Value::Real(bad)])
+                .unwrap_err()
+                .to_string();
+            assert!(err.starts_with("invalid value for control.dt"), "{err}");
+        }
+        for good in [1e-4, 0.05] {
+            i.set("fmi2SetReal", &[dt], &[Value::Real(good)]).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_step_longer_than_the_tick_cap_is_refused_and_changes_nothing() {
+        let mut i = running();
+        let max = i.max_ticks_per_step();
+        assert_eq!(max, crate::budget::max_ticks_per_step(&i.config));
+        let dt = i.config.control_dt;
+        let err = i.do_step(0.0, (max + 1) as f64 * dt).unwrap_err();
+        assert!(matches!(err, FmuError::StepTooLong { .. }), "{err}");
+        assert!(err.to_string().contains("use shorter steps"), "{err}");
+        assert_eq!(
+            (i.ticks_done(), i.time(), i.phase()),
+            (0, 0.0, Phase::StepComplete)
+        );
+        i.do_step(0.0, max as f64 * dt).unwrap();
+        assert_eq!(i.ticks_done(), max);
+        // The cap counts the ticks of this step, not since the start.
+        let t = i.time();
+        i.do_step(t, max as f64 * dt).unwrap();
+        assert_eq!(i.ticks_done(), 2 * max);
+    }
+
+    /// h = 1e12…1e15 hung and h = 1000 took 27 s: now each is refused before any tick runs.
+    #[test]
+    fn regression_huge_and_invalid_steps_return_at_once() {
+        let mut i = running();
+        for h in [
+            1e12,
+            1e13,
+            1e14,
+            1e15,
+            1000.0,
+            1e300,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NAN,
+            f64::NEG_INFINITY,
+            -1.0,
+            0.0,
+            -0.0,
+        ] {
+            let start = std::time::Instant::now();
+            assert!(i.do_step(0.0, h).is_err(), "h = {h}");
+            assert!(start.elapsed().as_secs_f64() < 0.5, "h = {h}");
+            assert_eq!(i.ticks_done(), 0, "h = {h}");
+        }
+        for t in [f64::NAN, f64::INFINITY, -1e300, 1e300] {
+            assert!(matches!(
+                i.do_step(t, 0.001),
+                Err(FmuError::TimeMismatch { .. })
+            ));
+        }
+        // Subnormal and tiny steps run no tick but advance the time exactly.
+        let tiny = f64::from_bits(1);
+        i.do_step(0.0, tiny).unwrap();
+        i.do_step(tiny, 1e-300).unwrap();
+        assert_eq!(i.ticks_done(), 0);
+        assert_eq!(i.time(), tiny + 1e-300);
+        let t = i.time();
+        i.do_step(t, 0.01).unwrap();
+        assert_eq!(i.ticks_done(), 10);
+    }
+
+    #[test]
+    fn far_start_times_run_no_ticks_but_do_not_hang() {
+        for start in [1e15, 1e300, -1e300] {
+            let mut i = instance();
+            i.setup_experiment(start, None).unwrap();
+            i.enter_initialization_mode().unwrap();
+            i.exit_initialization_mode().unwrap();
+            let began = std::time::Instant::now();
+            let _ = i.do_step(start, 0.5);
+            assert!(began.elapsed().as_secs_f64() < 1.0, "start {start}");
+        }
     }
 
     #[test]

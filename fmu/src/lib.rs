@@ -7,8 +7,11 @@
 //!   with a reason sent to the importer's logger.
 //! * [`instance`] — the call-state machine (instantiated → initializationMode → stepComplete ⇄
 //!   stepFailed → terminated) around one `Controller`.
-//! * [`variables`] — the single variable table; [`model_description`] turns it into
-//!   `modelDescription.xml` and `documentation/index.html`.
+//! * [`variables`] — the single variable table (with each parameter's `min`/`max`, taken from
+//!   `quad_controller::limits`); [`model_description`] turns it into `modelDescription.xml` and
+//!   `documentation/index.html`.
+//! * [`budget`] — the most control ticks one `fmi2DoStep` may run (so every call returns within
+//!   1 s whatever the parameters and step size).
 //! * [`resources`] — `fmuResourceLocation` (file URI) → `resources/quadruped.urdf` and
 //!   `resources/controller.json`.
 //! * [`bundle`] — writes `QuadController.fmu` (used by the `bundle-fmu` binary).
@@ -16,6 +19,7 @@
 //! # Timing
 #![doc = include_str!("timing.md")]
 
+pub mod budget;
 pub mod bundle;
 mod exports;
 pub mod ffi;
@@ -91,6 +95,18 @@ pub enum FmuError {
         given: f64,
         /// The end of the last completed step.
         expected: f64,
+    },
+    /// The step would run more control ticks than one doStep may (see [`budget`]).
+    #[error("communicationStepSize {step} needs {ticks} control ticks, more than the {max_ticks} one doStep may run with these parameters (h <= {max_step} s); nothing was run: use shorter steps")]
+    StepTooLong {
+        /// The step size asked for.
+        step: f64,
+        /// Ticks it would need (may be inf or NaN).
+        ticks: f64,
+        /// The cap.
+        max_ticks: u64,
+        /// The longest step the cap allows, s.
+        max_step: f64,
     },
     /// The parameters do not make a valid controller.
     #[error("controller rejected the parameters: {0}")]

@@ -140,18 +140,20 @@ pub fn documentation_html() -> String {
     );
     out.push_str(
         "<table border=\"1\"><tr><th>name</th><th>vr</th><th>causality</th><th>variability</th>\
-         <th>type</th><th>start</th><th>unit</th><th>description</th></tr>\n",
+         <th>type</th><th>start</th><th>min</th><th>max</th><th>unit</th><th>description</th></tr>\n",
     );
     for v in table() {
         let _ = writeln!(
             out,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             xml_escape(&v.name),
             v.value_reference,
             v.causality.xml_name(),
             v.variability.xml_name(),
             v.scalar_type().xml_name(),
             v.start.xml_text(),
+            v.min.map(|b| format!("{b:?}")).unwrap_or_default(),
+            v.max.map(|b| format!("{b:?}")).unwrap_or_default(),
             v.unit.map(|u| u.name()).unwrap_or(""),
             xml_escape(&v.description)
         );
@@ -177,6 +179,19 @@ mod tests {
         assert!(xml.contains("canHandleVariableCommunicationStepSize=\"true\""));
         assert!(!xml.contains("<Derivatives/>"));
         assert!(xml.contains("name=\"joint.q[1]\" valueReference=\"13\""));
+        // Every parameter carries its range.
+        let parameters = table()
+            .iter()
+            .filter(|v| v.causality == Causality::Parameter)
+            .count();
+        let with_range = xml
+            .split("<ScalarVariable ")
+            .filter(|block| block.contains("causality=\"parameter\""))
+            .filter(|block| block.contains(" min=\"") && block.contains(" max=\""))
+            .count();
+        assert_eq!(with_range, parameters);
+        assert!(xml.contains("unit=\"s\" min=\"0.0001\" max=\"0.05\" start=\"0.001\""));
+        assert!(xml.contains("<Integer min=\"10\" max=\"40\" start=\"10\"/>"));
     }
 
     #[test]

@@ -109,6 +109,8 @@ pub fn load(dir: &Path) -> Result<Resources, FmuError> {
         .map_err(|e| FmuError::Resources(format!("{URDF_FILE}: {e}")))?;
     let config: ControllerConfig = serde_json::from_str(&read(CONFIG_FILE)?)
         .map_err(|e| FmuError::Resources(format!("{CONFIG_FILE}: {e}")))?;
+    crate::variables::check_parameters(&config)
+        .map_err(|e| FmuError::Resources(format!("{CONFIG_FILE}: {e}")))?;
     Ok(Resources { model, config })
 }
 
@@ -149,6 +151,40 @@ mod tests {
             let err = resource_dir_from_uri(uri).unwrap_err().to_string();
             assert!(err.contains("fmuResourceLocation"), "{uri}: {err}");
         }
+    }
+
+    #[test]
+    fn a_shipped_configuration_outside_the_ranges_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let urdf = crate::bundle::repo_root()
+            .join("robot")
+            .join("quadruped.urdf");
+        std::fs::copy(urdf, dir.path().join(URDF_FILE)).unwrap();
+        let write = |config: &ControllerConfig| {
+            std::fs::write(
+                dir.path().join(CONFIG_FILE),
+                serde_json::to_string(config).unwrap(),
+            )
+            .unwrap()
+        };
+        write(&ControllerConfig::default());
+        assert!(load(dir.path()).is_ok());
+        // The first hang of the issue: a 1e-12 s tick made the first 1 ms doStep run 10⁹ ticks.
+        write(&ControllerConfig {
+            control_dt: 1e-12,
+            ..ControllerConfig::default()
+        });
+        let err = load(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("controller.json: invalid value for control.dt"),
+            "{err}"
+        );
+        write(&ControllerConfig {
+            mpc_every_ticks: usize::MAX,
+            ..ControllerConfig::default()
+        });
+        let err = load(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("mpc.everyTicks"), "{err}");
     }
 
     #[test]

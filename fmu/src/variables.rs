@@ -4,11 +4,12 @@
 //! Value references are the table index (unique across types), so the `index` attribute used in
 //! `<ModelStructure>` is always `value_reference + 1`.
 
+use std::ops::RangeInclusive;
 use std::sync::OnceLock;
 
 use quad_controller::{
-    Command, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference, RobotState,
-    HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
+    limits, Command, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference,
+    RobotState, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
 };
 
 use crate::FmuError;
@@ -239,7 +240,48 @@ fn gait_code(gait: GaitKind) -> i32 {
     }
 }
 
+/// A `usize` range of `quad_controller::limits` as FMI bounds.
+fn count_range(range: RangeInclusive<usize>) -> (f64, f64) {
+    // The bounds are small counts (≤ 1000), exact as f64.
+    (*range.start() as f64, *range.end() as f64)
+}
+
+/// An `f64` range of `quad_controller::limits` as FMI bounds.
+fn real_range(range: RangeInclusive<f64>) -> (f64, f64) {
+    (*range.start(), *range.end())
+}
+
 impl Param {
+    /// The inclusive range `fmi2Set*` accepts (`min`/`max` in `modelDescription.xml`), taken from
+    /// `quad_controller::limits`, the one definition of the controller's operating envelope.
+    pub fn range(self) -> (f64, f64) {
+        match self {
+            Param::ControlDt => real_range(limits::CONTROL_DT),
+            Param::MpcEveryTicks => count_range(limits::MPC_EVERY_TICKS),
+            Param::MpcHorizon => count_range(limits::MPC_HORIZON),
+            Param::MpcDt => real_range(limits::MPC_DT),
+            // 0 trot, 1 walk (see `gait_code`).
+            Param::Gait => (0.0, 1.0),
+            Param::GaitPeriod => real_range(limits::GAIT_PERIOD),
+            Param::SwingHeight => real_range(limits::SWING_HEIGHT),
+            Param::Mu => real_range(limits::MU),
+            Param::ForceMin => real_range(limits::F_MIN),
+            Param::ForceMax => real_range(limits::F_MAX),
+            Param::BodyHeight => real_range(limits::BODY_HEIGHT),
+            Param::MpcQ(_) => real_range(limits::MPC_Q),
+            Param::MpcR => real_range(limits::MPC_R),
+            Param::KpSwing(_) | Param::KpStand(_) => real_range(limits::JOINT_KP),
+            Param::KdSwing(_) | Param::KdStand(_) | Param::DampingKd => {
+                real_range(limits::JOINT_KD)
+            }
+            Param::StandUpDuration => real_range(limits::STAND_UP_DURATION),
+            Param::RaibertGain => real_range(limits::RAIBERT_GAIN),
+            Param::MaxTilt => real_range(limits::MAX_TILT),
+            Param::JointLimitMargin => real_range(limits::JOINT_LIMIT_MARGIN),
+            Param::MaxTerrainPitch => real_range(limits::MAX_TERRAIN_PITCH),
+        }
+    }
+
     /// Current value of the field in `config`.
     pub fn read(self, config: &ControllerConfig) -> Value {
         let as_int = |v: usize| Value::Integer(i32::try_from(v).unwrap_or(i32::MAX));
@@ -532,8 +574,8 @@ impl TableBuilder {
         config: &ControllerConfig,
         description: String,
         unit: Option<Unit>,
-        range: (Option<f64>, Option<f64>),
     ) {
+        let (min, max) = param.range();
         self.push(
             name,
             Causality::Parameter,
@@ -541,7 +583,7 @@ impl TableBuilder {
             param.read(config),
             description,
             unit,
-            range,
+            (Some(min), Some(max)),
             Binding::Parameter(param),
         );
     }
@@ -562,8 +604,6 @@ fn build_table() -> Vec<Variable> {
     let (state, reference) = initial_inputs();
     let command = initial_command();
     let config = ControllerConfig::default();
-    let positive = (Some(f64::MIN_POSITIVE), None);
-    let non_negative = (Some(0.0), None);
 
     // Inputs: measured state.
     for (i, axis) in AXES.iter().enumerate() {
@@ -775,7 +815,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Leg control tick; a doStep runs round(h / control.dt) ticks".into(),
         Some(Second),
-        positive,
     );
     t.parameter(
         "mpc.everyTicks".into(),
@@ -783,7 +822,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "The MPC is solved every k-th control tick".into(),
         None,
-        (Some(1.0), Some(1000.0)),
     );
     t.parameter(
         "mpc.horizon".into(),
@@ -791,7 +829,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "MPC horizon length in prediction steps".into(),
         None,
-        (Some(1.0), Some(1000.0)),
     );
     t.parameter(
         "mpc.dt".into(),
@@ -799,7 +836,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "MPC prediction step".into(),
         Some(Second),
-        positive,
     );
     t.parameter(
         "gait.kind".into(),
@@ -807,7 +843,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Gait of the locomotion state: 0 trot, 1 walk".into(),
         None,
-        (Some(0.0), Some(1.0)),
     );
     t.parameter(
         "gait.period".into(),
@@ -815,7 +850,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Gait cycle period".into(),
         Some(Second),
-        positive,
     );
     t.parameter(
         "gait.swingHeight".into(),
@@ -823,7 +857,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Swing-foot apex height".into(),
         Some(Metre),
-        non_negative,
     );
     t.parameter(
         "mpc.mu".into(),
@@ -831,7 +864,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Friction coefficient of the MPC friction pyramid".into(),
         None,
-        positive,
     );
     t.parameter(
         "mpc.fMin".into(),
@@ -839,7 +871,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Minimum normal force on a stance foot".into(),
         Some(Newton),
-        non_negative,
     );
     t.parameter(
         "mpc.fMax".into(),
@@ -847,7 +878,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Maximum normal force on a stance foot".into(),
         Some(Newton),
-        positive,
     );
     t.parameter(
         "stand.bodyHeight".into(),
@@ -855,7 +885,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Nominal standing height above the terrain (used when ref.bodyHeight <= 0)".into(),
         Some(Metre),
-        positive,
     );
     let q_names = [
         "roll",
@@ -879,7 +908,6 @@ fn build_table() -> Vec<Variable> {
             c,
             format!("MPC state weight: {q}"),
             None,
-            non_negative,
         );
     }
     t.parameter(
@@ -888,7 +916,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "MPC force weight".into(),
         None,
-        non_negative,
     );
     /// (name prefix, parameter of joint j, description, unit)
     type GainRow = (&'static str, fn(usize) -> Param, &'static str, Unit);
@@ -926,7 +953,6 @@ fn build_table() -> Vec<Variable> {
                 c,
                 format!("{description}, {joint}"),
                 Some(unit),
-                non_negative,
             );
         }
     }
@@ -936,7 +962,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Duration of the stand-up motion".into(),
         Some(Second),
-        positive,
     );
     t.parameter(
         "gait.raibertGain".into(),
@@ -944,7 +969,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Raibert foothold velocity-feedback gain".into(),
         Some(Second),
-        non_negative,
     );
     t.parameter(
         "safety.maxTilt".into(),
@@ -952,7 +976,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Tilt above which the FSM enters damping".into(),
         Some(Radian),
-        positive,
     );
     t.parameter(
         "safety.jointLimitMargin".into(),
@@ -960,7 +983,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Joint position margin beyond the URDF limits before damping".into(),
         Some(Radian),
-        non_negative,
     );
     t.parameter(
         "safety.dampingKd".into(),
@@ -968,7 +990,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Joint damping of the damping state".into(),
         Some(NewtonMetreSecondPerRadian),
-        non_negative,
     );
     t.parameter(
         "terrain.maxPitch".into(),
@@ -976,7 +997,6 @@ fn build_table() -> Vec<Variable> {
         c,
         "Largest body pitch the terrain-following reference may ask for".into(),
         Some(Radian),
-        non_negative,
     );
     t.rows
 }
@@ -1000,6 +1020,17 @@ pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
     }
     if let Some(max) = variable.max.filter(|&max| number > max) {
         return Err(invalid(format!("{number} is above the maximum {max}")));
+    }
+    Ok(())
+}
+
+/// Checks every parameter of `config` against its range: the `controller.json` shipped in the
+/// resources must lie in the same envelope as values set through `fmi2Set*`.
+pub fn check_parameters(config: &ControllerConfig) -> Result<(), FmuError> {
+    for v in table() {
+        if let Binding::Parameter(param) = v.binding {
+            check_value(v, param.read(config))?;
+        }
     }
     Ok(())
 }
@@ -1177,6 +1208,117 @@ mod tests {
                     "{}",
                     v.name
                 ),
+            }
+        }
+    }
+
+    fn next_up(x: f64) -> f64 {
+        if x == 0.0 {
+            f64::from_bits(1)
+        } else if x > 0.0 {
+            f64::from_bits(x.to_bits() + 1)
+        } else {
+            f64::from_bits(x.to_bits() - 1)
+        }
+    }
+
+    fn next_down(x: f64) -> f64 {
+        -next_up(-x)
+    }
+
+    fn parameters() -> impl Iterator<Item = (&'static Variable, Param)> {
+        table().iter().filter_map(|v| match v.binding {
+            Binding::Parameter(p) => Some((v, p)),
+            _ => None,
+        })
+    }
+
+    #[test]
+    fn every_parameter_has_a_range_holding_its_start_value() {
+        assert_eq!(parameters().count(), 43);
+        for (v, param) in parameters() {
+            let (min, max) = param.range();
+            assert_eq!((v.min, v.max), (Some(min), Some(max)), "{}", v.name);
+            assert!(
+                min.is_finite() && max.is_finite() && min < max,
+                "{}",
+                v.name
+            );
+            check_value(v, v.start).unwrap_or_else(|e| panic!("{e}"));
+        }
+        check_parameters(&ControllerConfig::default()).unwrap();
+    }
+
+    #[test]
+    fn values_just_outside_a_range_and_non_finite_values_are_refused() {
+        for (v, param) in parameters() {
+            let (min, max) = param.range();
+            let (below, above) = match v.start {
+                Value::Real(_) => (Value::Real(next_down(min)), Value::Real(next_up(max))),
+                _ => (
+                    Value::Integer(min as i32 - 1),
+                    Value::Integer(max as i32 + 1),
+                ),
+            };
+            for bad in [below, above] {
+                let err = check_value(v, bad).unwrap_err().to_string();
+                assert!(
+                    err.starts_with(&format!("invalid value for {}", v.name)),
+                    "{err}"
+                );
+            }
+            if let Value::Real(_) = v.start {
+                for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
+                    assert!(
+                        check_value(v, Value::Real(bad)).is_err(),
+                        "{} {bad}",
+                        v.name
+                    );
+                }
+            }
+            for good in [min, max] {
+                let value = match v.start {
+                    Value::Real(_) => Value::Real(good),
+                    _ => Value::Integer(good as i32),
+                };
+                check_value(v, value).unwrap_or_else(|e| panic!("{e}"));
+            }
+        }
+    }
+
+    /// The ranges are the controller's operating envelope: every end point, with the other
+    /// parameters at their defaults, builds a controller, except where a parameter is also
+    /// checked against another one in fmi2ExitInitializationMode (`f_min < f_max`, a standing
+    /// height the legs reach); those work with a matching partner.
+    #[test]
+    fn every_range_end_point_builds_a_controller() {
+        use quad_controller::{Controller, RobotModel};
+        let model = RobotModel::from_urdf_file(
+            &crate::bundle::repo_root()
+                .join("robot")
+                .join("quadruped.urdf"),
+        )
+        .unwrap();
+        for (v, param) in parameters() {
+            let (min, max) = param.range();
+            for end in [min, max] {
+                let mut config = ControllerConfig::default();
+                let value = match v.start {
+                    Value::Real(_) => Value::Real(end),
+                    _ => Value::Integer(end as i32),
+                };
+                param.write(&mut config, value);
+                match (param, end == max) {
+                    (Param::ForceMin, true) => config.f_max = end + 1.0,
+                    (Param::ForceMax, false) => config.f_min = 0.0,
+                    _ => {}
+                }
+                let result = Controller::new(model.clone(), config.clone());
+                if param == Param::BodyHeight && end == max {
+                    assert!(result.is_err(), "legs of 0.4 m cannot stand 0.5 m high");
+                } else {
+                    result.unwrap_or_else(|e| panic!("{} = {end}: {e}", v.name));
+                }
             }
         }
     }

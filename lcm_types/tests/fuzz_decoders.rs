@@ -82,6 +82,7 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
             start_density: PlanOptions::START_DENSITY_UNIFORM,
             sample_period: 0.1,
             max_solve_time: 5.0,
+            solver: PlanOptions::SOLVER_CLARABEL,
         },
     };
     let samples: Vec<TrajectorySample> = (0..4)
@@ -118,6 +119,16 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
             lp_iterations: 17,
             expanded_nodes: 0,
             reached_goal: true,
+            lp_solver: PlanMetrics::SOLVER_DIJKSTRA,
+            primal_residual: 1e-15,
+            dual_residual: 0.0,
+            duality_gap: 2e-16,
+            certified: true,
+            certificate_tolerance: 1e-6,
+            cache_hit: true,
+            generator_time: 0.0,
+            solve_phase_time: 0.004,
+            path_time: 0.002,
         },
     };
     let failed = PlanReply {

@@ -320,6 +320,90 @@ fn overlaps_obstacle(map: &GridMap, corner: Point, size: f64) -> bool {
         .any(|iy| xs.clone().any(|ix| mask[map.index(ix, iy)]))
 }
 
+/// Whether the straight segment `a → b` crosses no cell for which `blocked(ix, iy)` holds, on a
+/// grid of `shape = (width, height)` square cells of side `cell` from `origin`; leaving the grid
+/// counts as blocked. Every cell the segment passes through is visited (grid traversal after
+/// Amanatides and Woo), so a step can never cut an obstacle corner between two checked points.
+/// Where the segment runs exactly through a cell corner, both side cells are checked too
+/// (conservative: touching a blocked cell at a point is refused).
+pub fn segment_is_clear(
+    origin: Point,
+    cell: f64,
+    shape: (usize, usize),
+    a: Point,
+    b: Point,
+    blocked: impl Fn(usize, usize) -> bool,
+) -> bool {
+    let (width, height) = (shape.0 as i64, shape.1 as i64);
+    let to_cell = |p: Point| [(p[0] - origin[0]) / cell, (p[1] - origin[1]) / cell];
+    let (fa, fb) = (to_cell(a), to_cell(b));
+    if !fa.iter().chain(fb.iter()).all(|v| v.is_finite()) {
+        return false;
+    }
+    let is_blocked = |ix: i64, iy: i64| {
+        ix < 0 || iy < 0 || ix >= width || iy >= height || blocked(ix as usize, iy as usize)
+    };
+    let (mut ix, mut iy) = (fa[0].floor() as i64, fa[1].floor() as i64);
+    let (ex, ey) = (fb[0].floor() as i64, fb[1].floor() as i64);
+    let (dx, dy) = (fb[0] - fa[0], fb[1] - fa[1]);
+    let sign = |d: f64| match d.partial_cmp(&0.0) {
+        Some(std::cmp::Ordering::Greater) => 1i64,
+        Some(std::cmp::Ordering::Less) => -1,
+        _ => 0,
+    };
+    let (sx, sy) = (sign(dx), sign(dy));
+    let boundary = |f: f64, i: i64, d: f64| {
+        if d > 0.0 {
+            (i as f64 + 1.0 - f) / d
+        } else if d < 0.0 {
+            (i as f64 - f) / d
+        } else {
+            f64::INFINITY
+        }
+    };
+    let mut t_x = boundary(fa[0], ix, dx);
+    let mut t_y = boundary(fa[1], iy, dy);
+    let delta_x = if dx != 0.0 {
+        1.0 / dx.abs()
+    } else {
+        f64::INFINITY
+    };
+    let delta_y = if dy != 0.0 {
+        1.0 / dy.abs()
+    } else {
+        f64::INFINITY
+    };
+    let steps = (ex - ix).abs() + (ey - iy).abs();
+    for _ in 0..=steps {
+        if is_blocked(ix, iy) {
+            return false;
+        }
+        if ix == ex && iy == ey {
+            return true;
+        }
+        let corner = t_x.is_finite()
+            && t_y.is_finite()
+            && (t_x - t_y).abs() <= 1e-12 * t_x.abs().max(t_y.abs()).max(1.0);
+        if corner {
+            if is_blocked(ix + sx, iy) || is_blocked(ix, iy + sy) {
+                return false;
+            }
+            ix += sx;
+            iy += sy;
+            t_x += delta_x;
+            t_y += delta_y;
+        } else if t_x < t_y {
+            ix += sx;
+            t_x += delta_x;
+        } else {
+            iy += sy;
+            t_y += delta_y;
+        }
+    }
+    // Rounding took the walk past the end cell without meeting it: refuse rather than guess.
+    !is_blocked(ex, ey) && ix == ex && iy == ey
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -416,88 +500,4 @@ mod tests {
         );
         assert!(PlanningGrid::from_parts([0.0, 0.0], 1.0, 0, 2, vec![], vec![]).is_err());
     }
-}
-
-/// Whether the straight segment `a → b` crosses no cell for which `blocked(ix, iy)` holds, on a
-/// grid of `shape = (width, height)` square cells of side `cell` from `origin`; leaving the grid
-/// counts as blocked. Every cell the segment passes through is visited (grid traversal after
-/// Amanatides and Woo), so a step can never cut an obstacle corner between two checked points.
-/// Where the segment runs exactly through a cell corner, both side cells are checked too
-/// (conservative: touching a blocked cell at a point is refused).
-pub fn segment_is_clear(
-    origin: Point,
-    cell: f64,
-    shape: (usize, usize),
-    a: Point,
-    b: Point,
-    blocked: impl Fn(usize, usize) -> bool,
-) -> bool {
-    let (width, height) = (shape.0 as i64, shape.1 as i64);
-    let to_cell = |p: Point| [(p[0] - origin[0]) / cell, (p[1] - origin[1]) / cell];
-    let (fa, fb) = (to_cell(a), to_cell(b));
-    if !fa.iter().chain(fb.iter()).all(|v| v.is_finite()) {
-        return false;
-    }
-    let is_blocked = |ix: i64, iy: i64| {
-        ix < 0 || iy < 0 || ix >= width || iy >= height || blocked(ix as usize, iy as usize)
-    };
-    let (mut ix, mut iy) = (fa[0].floor() as i64, fa[1].floor() as i64);
-    let (ex, ey) = (fb[0].floor() as i64, fb[1].floor() as i64);
-    let (dx, dy) = (fb[0] - fa[0], fb[1] - fa[1]);
-    let sign = |d: f64| match d.partial_cmp(&0.0) {
-        Some(std::cmp::Ordering::Greater) => 1i64,
-        Some(std::cmp::Ordering::Less) => -1,
-        _ => 0,
-    };
-    let (sx, sy) = (sign(dx), sign(dy));
-    let boundary = |f: f64, i: i64, d: f64| {
-        if d > 0.0 {
-            (i as f64 + 1.0 - f) / d
-        } else if d < 0.0 {
-            (i as f64 - f) / d
-        } else {
-            f64::INFINITY
-        }
-    };
-    let mut t_x = boundary(fa[0], ix, dx);
-    let mut t_y = boundary(fa[1], iy, dy);
-    let delta_x = if dx != 0.0 {
-        1.0 / dx.abs()
-    } else {
-        f64::INFINITY
-    };
-    let delta_y = if dy != 0.0 {
-        1.0 / dy.abs()
-    } else {
-        f64::INFINITY
-    };
-    let steps = (ex - ix).abs() + (ey - iy).abs();
-    for _ in 0..=steps {
-        if is_blocked(ix, iy) {
-            return false;
-        }
-        if ix == ex && iy == ey {
-            return true;
-        }
-        let corner = t_x.is_finite()
-            && t_y.is_finite()
-            && (t_x - t_y).abs() <= 1e-12 * t_x.abs().max(t_y.abs()).max(1.0);
-        if corner {
-            if is_blocked(ix + sx, iy) || is_blocked(ix, iy + sy) {
-                return false;
-            }
-            ix += sx;
-            iy += sy;
-            t_x += delta_x;
-            t_y += delta_y;
-        } else if t_x < t_y {
-            ix += sx;
-            t_x += delta_x;
-        } else {
-            iy += sy;
-            t_y += delta_y;
-        }
-    }
-    // Rounding took the walk past the end cell without meeting it: refuse rather than guess.
-    !is_blocked(ex, ey) && ix == ex && iy == ey
 }

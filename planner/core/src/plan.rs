@@ -13,9 +13,10 @@ use tracing::info;
 use crate::error::PlanError;
 use crate::graph::{astar_path, dijkstra_path, Connectivity};
 use crate::grid::{GoalRegion, PlanningGrid};
+use crate::lp::LpSolver;
 use crate::map::{GridMap, Point};
 use crate::metrics::{evaluate_path, PathMetrics};
-use crate::pf::{self, BasisKind, LpReport, PfGenerators, PfOptions, StartDensity};
+use crate::pf::{self, BasisKind, LpReport, LpSettings, PfGenerators, PfOptions, StartDensity};
 pub use crate::trajectory::TrajectorySample;
 use crate::trajectory::{build_trajectory, TrajectoryOptions};
 use crate::traversability::{TraversabilityField, TraversabilityParams};
@@ -85,6 +86,10 @@ pub struct PlannerOptions {
     pub traversability: TraversabilityParams,
     /// Sample period of the reference trajectory, seconds.
     pub dt: f64,
+    /// Solver of the P-F LP.
+    pub solver: LpSolver,
+    /// Wall-clock limit of the P-F solve, seconds (`f64::INFINITY` for none).
+    pub max_solve_time: f64,
 }
 
 impl Default for PlannerOptions {
@@ -98,6 +103,8 @@ impl Default for PlannerOptions {
             start_density: StartDensity::default(),
             traversability: TraversabilityParams::default(),
             dt: 0.1,
+            solver: LpSolver::default(),
+            max_solve_time: f64::INFINITY,
         }
     }
 }
@@ -232,6 +239,11 @@ impl Planner {
                 let pf_options = PfOptions {
                     u_max: options.u_max,
                     start_density: options.start_density,
+                    lp: LpSettings {
+                        solver: options.solver,
+                        time_limit_s: options.max_solve_time,
+                        ..LpSettings::default()
+                    },
                     ..PfOptions::default()
                 };
                 let solution = pf::solve(generators, &self.grid, start, goal, &pf_options)?;

@@ -128,7 +128,7 @@ pub fn build_trajectory(
     let step = opts.speed * opts.dt;
     // Compared in floating point first: a tiny speed must not overflow the sample count.
     let walking_estimate = (total / step).ceil();
-    if !(walking_estimate < MAX_SAMPLES as f64) {
+    if walking_estimate.is_nan() || walking_estimate >= MAX_SAMPLES as f64 {
         return Err(PlanError::InvalidOption {
             name: "speed/dt",
             reason: format!(

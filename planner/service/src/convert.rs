@@ -7,8 +7,10 @@ use std::sync::Arc;
 use lcm_types::pfnav::{PlanOptions, PlanReply, PlanRequest, TerrainMap};
 use pf_planner::basis::BasisKind;
 use pf_planner::grid::GoalRegion;
+use pf_planner::lp::LpSolver;
 use pf_planner::map::{GridMap, Point};
 use pf_planner::pf::StartDensity;
+use pf_planner::trajectory::{MAX_SAMPLES, MAX_SPEED};
 
 /// Why a message is not planned: the reply status (`PlanReply::STATUS_*`) and the reason.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -148,7 +150,13 @@ pub struct ResolvedOptions {
     pub start_density: StartDensity,
     pub sample_period: f64,
     pub max_solve_time: f64,
+    pub solver: LpSolver,
 }
+
+/// Largest number of basis functions (grid_size²) for which Clarabel may be requested: its
+/// interior-point iterations grow with the grid (128²: 2–4 s, 256²: minutes), so larger grids
+/// could not honour the time limit; the exact solver has no such limit.
+pub const MAX_CLARABEL_FUNCTIONS: usize = 128 * 128;
 
 fn positive_or_default(value: f64, default: f64, name: &str) -> Result<f64, Rejection> {
     if value == 0.0 {
@@ -211,11 +219,32 @@ pub fn resolve_options(
             )))
         }
     };
+    let solver = match options.solver {
+        PlanOptions::SOLVER_DEFAULT | PlanOptions::SOLVER_EXACT => LpSolver::Exact,
+        PlanOptions::SOLVER_CLARABEL => LpSolver::Clarabel,
+        other => {
+            return Err(Rejection::invalid_request(format!(
+                "unknown options.solver {other} (0 default, 1 exact, 2 clarabel)"
+            )))
+        }
+    };
+    if solver == LpSolver::Clarabel && grid_size * grid_size > MAX_CLARABEL_FUNCTIONS {
+        return Err(Rejection::invalid_request(format!(
+            "options.solver = clarabel is limited to {MAX_CLARABEL_FUNCTIONS} basis functions (grid_size <= 128), got grid_size {grid_size}; use the exact solver"
+        )));
+    }
+    let speed = positive_or_default(options.speed, defaults.speed, "speed")?;
+    if speed > MAX_SPEED {
+        return Err(Rejection::invalid_request(format!(
+            "options.speed must be <= {MAX_SPEED} m/s, got {speed}"
+        )));
+    }
     Ok(ResolvedOptions {
+        solver,
         basis,
         grid_size,
         directions,
-        speed: positive_or_default(options.speed, defaults.speed, "speed")?,
+        speed,
         start_density,
         sample_period: positive_or_default(
             options.sample_period,
@@ -314,6 +343,18 @@ pub fn validate_request(
         }
     };
     let options = resolve_options(&msg.options, &map, defaults)?;
+    // Every path from start to goal is at least the straight line minus the goal radius long: a
+    // reference sampled that finely would exceed the sample cap whatever the planner finds, so
+    // the request is refused before any work.
+    let shortest =
+        ((msg.goal_x - msg.start_x).hypot(msg.goal_y - msg.start_y) - msg.goal_radius).max(0.0);
+    let least_samples = shortest / (options.speed * options.sample_period);
+    if least_samples > MAX_SAMPLES as f64 {
+        return Err(Rejection::invalid_request(format!(
+            "the reference would need at least {least_samples:.3e} samples ({shortest:.1} m at {} m/s, one every {} s), more than the limit of {MAX_SAMPLES}; raise speed or sample_period",
+            options.speed, options.sample_period
+        )));
+    }
     Ok(ValidatedRequest {
         request_id: msg.request_id,
         method_code: msg.method,

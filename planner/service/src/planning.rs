@@ -1,10 +1,13 @@
 //! Runs one validated request through pf-planner and turns the result into reply fields. The
-//! P-F generators, which depend only on the planning grid, the basis and the direction count,
-//! come from a small LRU cache so that repeated requests on one map skip their construction.
+//! P-F generators, which depend only on the geometry of the planning grid (origin, cell size,
+//! shape, blocked cells), the basis and the direction count, come from a small LRU cache: a new
+//! map of the same geometry (new heights, so new traversability), a new start or a new goal is a
+//! cache hit and needs only a new solve.
 
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
 use std::sync::Arc;
+use std::time::Instant;
 
 use lcm_types::pfnav::{PlanMetrics, PlanReply, TrajectorySample};
 use pf_planner::basis::BasisKind;
@@ -21,7 +24,8 @@ use pf_planner::traversability::{TraversabilityField, TraversabilityParams};
 use crate::cache::BuildCache;
 use crate::convert::{MethodChoice, Rejection, ValidatedRequest};
 
-/// Identity of a generator set: the planning grid (by content hash) and the basis settings.
+/// Identity of a generator set: the planning grid's geometry (by content hash; not its
+/// traversability) and the basis settings.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct GeneratorKey {
     grid_hash: u64,
@@ -41,9 +45,6 @@ impl GeneratorKey {
         grid.origin.map(f64::to_bits).hash(&mut hasher);
         grid.cell_size.to_bits().hash(&mut hasher);
         (grid.width, grid.height).hash(&mut hasher);
-        for c in &grid.cost {
-            c.to_bits().hash(&mut hasher);
-        }
         grid.blocked.hash(&mut hasher);
         let basis = match *basis {
             BasisKind::Indicator => BasisKey::Indicator,
@@ -133,10 +134,20 @@ pub fn rejection_of(error: &PlanError) -> Rejection {
     Rejection::new(status, error.to_string())
 }
 
-/// Clarabel's status names mapped to `plan_metrics_t.LP_*`.
+/// The LP report's status names mapped to `plan_metrics_t.LP_*`.
+/// The LP report's solver names mapped to `plan_metrics_t.SOLVER_*`.
+fn lp_solver_code(solver: &str) -> i8 {
+    match solver {
+        "dijkstra" => PlanMetrics::SOLVER_DIJKSTRA,
+        "policy-iteration" => PlanMetrics::SOLVER_POLICY_ITERATION,
+        "clarabel" => PlanMetrics::SOLVER_CLARABEL,
+        _ => PlanMetrics::SOLVER_NONE,
+    }
+}
+
 fn lp_status_code(status: &str) -> i8 {
     match status {
-        "Solved" => PlanMetrics::LP_SOLVED,
+        "Solved" | "Trivial" => PlanMetrics::LP_SOLVED,
         "AlmostSolved" => PlanMetrics::LP_ALMOST_SOLVED,
         s if s.contains("Infeasible") => PlanMetrics::LP_INFEASIBLE,
         "MaxIterations" | "AlmostMaxIterations" => PlanMetrics::LP_MAX_ITERATIONS,
@@ -152,9 +163,20 @@ pub fn plan(
     cache: &GeneratorCache,
     traversability: &TraversabilityParams,
 ) -> Result<PlanOutcome, Rejection> {
+    let started = Instant::now();
     let map = &*request.map;
     let opts = &request.options;
     let reject = |e: PlanError| rejection_of(&e);
+    let out_of_time = |phase: &str| {
+        Rejection::new(
+            PlanReply::STATUS_SOLVER_FAILED,
+            format!(
+                "time limit max_solve_time = {} s reached after {phase} ({:.3} s)",
+                opts.max_solve_time,
+                started.elapsed().as_secs_f64()
+            ),
+        )
+    };
     let field = TraversabilityField::from_map(map, traversability).map_err(reject)?;
     let grid = PlanningGrid::from_field(map, &field, opts.grid_size).map_err(reject)?;
     let mut metrics = PlanMetrics {
@@ -165,35 +187,56 @@ pub fn plan(
     let path: Vec<Point> = match request.method {
         MethodChoice::Dijkstra | MethodChoice::AStar => {
             let conn = Connectivity::from_directions(opts.directions).map_err(reject)?;
+            let searched = Instant::now();
             let found = if request.method == MethodChoice::Dijkstra {
                 graph::dijkstra_path(&grid, request.start, &request.goal, conn)
             } else {
                 graph::astar_path(&grid, request.start, &request.goal, conn)
             }
             .map_err(reject)?;
+            metrics.solve_phase_time = searched.elapsed().as_secs_f64();
             metrics.objective = found.cost;
             metrics.expanded_nodes = i64::try_from(found.expanded).unwrap_or(i64::MAX);
             found.points
         }
         MethodChoice::Pf => {
+            let built = Instant::now();
             let (gens, hit) = cache.get(&grid, &opts.basis, opts.directions);
             cache_hit = hit;
             let gens = gens?;
+            if !hit {
+                metrics.generator_time = built.elapsed().as_secs_f64();
+            }
+            let remaining = opts.max_solve_time - started.elapsed().as_secs_f64();
+            if remaining <= 0.0 {
+                return Err(out_of_time("the generators"));
+            }
             // The LP's speed bound stays the library's (it scales the objective and the feedback
             // field); the reference is re-timed at `opts.speed` below, as `pf-plan` does.
             let pf_options = PfOptions {
                 start_density: opts.start_density,
                 lp: LpSettings {
-                    time_limit_s: opts.max_solve_time,
+                    time_limit_s: remaining,
+                    solver: opts.solver,
                     ..LpSettings::default()
                 },
                 ..PfOptions::default()
             };
+            let solved = Instant::now();
             let solution = pf::solve(&gens, &grid, request.start, &request.goal, &pf_options)
                 .map_err(reject)?;
-            metrics.objective = solution.lp.objective;
-            metrics.lp_status = lp_status_code(&solution.lp.status);
-            metrics.lp_iterations = i32::try_from(solution.lp.iterations).unwrap_or(i32::MAX);
+            let lp = &solution.lp;
+            metrics.solve_phase_time = lp.solve_time_s;
+            metrics.path_time = solved.elapsed().as_secs_f64() - lp.solve_time_s;
+            metrics.objective = lp.objective;
+            metrics.lp_status = lp_status_code(&lp.status);
+            metrics.lp_iterations = i32::try_from(lp.iterations).unwrap_or(i32::MAX);
+            metrics.lp_solver = lp_solver_code(&lp.solver);
+            metrics.primal_residual = lp.certificate.primal_residual;
+            metrics.dual_residual = lp.certificate.dual_residual;
+            metrics.duality_gap = lp.certificate.duality_gap;
+            metrics.certified = lp.certificate.holds();
+            metrics.certificate_tolerance = lp.certificate.tolerance;
             if !solution.outcome.reached_goal() {
                 return Err(rejection_of(&PlanError::TrajectoryFailed {
                     reason: format!("{:?}", solution.outcome),
@@ -202,6 +245,7 @@ pub fn plan(
             solution.path
         }
     };
+    let retimed = Instant::now();
     let path_metrics = evaluate_path(map, &field, &path);
     let trajectory_options = TrajectoryOptions {
         speed: opts.speed,
@@ -223,6 +267,8 @@ pub fn plan(
                 yaw_rate: s.yaw_rate,
             })
             .collect();
+    metrics.path_time += retimed.elapsed().as_secs_f64();
+    metrics.cache_hit = cache_hit;
     metrics.cost = path_metrics.cost_integral;
     metrics.length = path_metrics.length;
     metrics.duration = samples.last().map_or(0.0, |s| s.t);

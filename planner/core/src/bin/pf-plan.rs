@@ -12,6 +12,7 @@ use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
 use pf_planner::io::{load_scenario, save_scenario, MapScenario};
+use pf_planner::lp::LpSolver;
 use pf_planner::pf::BasisKind;
 use pf_planner::plan::{Method, Plan, Planner, PlannerOptions};
 use pf_planner::plot::{plot_plans, PlotPath};
@@ -50,7 +51,7 @@ enum Command {
         #[arg(long, default_value_t = 32)]
         rbf_grid: usize,
         /// Nominal speed of the reference trajectories, m/s.
-        #[arg(long, default_value_t = 0.5)]
+        #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
         speed: f64,
     },
 }
@@ -111,11 +112,23 @@ struct PlanArgs {
     #[arg(long, default_value_t = 8)]
     directions: usize,
     /// Nominal speed of the reference trajectory, m/s.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
     speed: f64,
+    /// Solver of the P-F LP: exact (Dijkstra / policy iteration on the dual) or clarabel.
+    #[arg(long, value_enum, default_value = "exact")]
+    solver: SolverArg,
+    /// Wall-clock limit of each P-F solve, seconds.
+    #[arg(long, allow_negative_numbers = true)]
+    max_solve_time: Option<f64>,
     /// Output directory.
     #[arg(long, default_value = ".")]
     out: PathBuf,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    Exact,
+    Clarabel,
 }
 
 fn main() -> Result<()> {
@@ -183,8 +196,19 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
         basis,
         speed: args.speed,
         traversability: scenario.traversability,
+        solver: match args.solver {
+            SolverArg::Exact => LpSolver::Exact,
+            SolverArg::Clarabel => LpSolver::Clarabel,
+        },
+        max_solve_time: args.max_solve_time.unwrap_or(f64::INFINITY),
         ..PlannerOptions::default()
     };
+    if options.max_solve_time.is_nan() || options.max_solve_time <= 0.0 {
+        bail!(
+            "--max-solve-time must be > 0 seconds, got {}",
+            options.max_solve_time
+        );
+    }
     let methods: Vec<Method> = match args.method {
         MethodArg::Pf => vec![Method::Pf],
         MethodArg::Astar => vec![Method::AStar],
@@ -224,6 +248,21 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
                     plan.solve_time_s,
                     stem.display()
                 );
+                if let Some(lp) = &plan.lp {
+                    let c = &lp.certificate;
+                    println!(
+                        "          LP {} by {} in {:.3} s (generators {:.3} s); certificate {}: primal residual {:.1e}, dual residual {:.1e}, gap {:.1e} (tolerance {:.0e})",
+                        lp.status,
+                        lp.solver,
+                        lp.solve_time_s,
+                        lp.generator_time_s,
+                        if c.holds() { "holds" } else { "FAILS" },
+                        c.primal_residual,
+                        c.dual_residual,
+                        c.duality_gap,
+                        c.tolerance
+                    );
+                }
                 drawn.push(PlotPath {
                     label: label(method, &options),
                     points: plan.path,
@@ -270,7 +309,8 @@ fn write_plan(stem: &Path, scenario: &str, plan: &Plan) -> Result<()> {
     let m = &plan.metrics;
     let lp = plan.lp.as_ref().map(|lp| {
         json!({
-            "status": lp.status, "objective": lp.objective, "primal_residual": lp.primal_residual,
+            "status": lp.status, "solver": lp.solver, "certificate": lp.certificate,
+            "certified": lp.certificate.holds(), "objective": lp.objective, "primal_residual": lp.primal_residual,
             "dual_residual": lp.dual_residual, "mass_balance_residual": lp.mass_balance_residual,
             "iterations": lp.iterations, "solve_time_s": lp.solve_time_s,
             "generator_time_s": lp.generator_time_s, "variables": lp.variables, "constraints": lp.constraints,

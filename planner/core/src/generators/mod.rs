@@ -27,11 +27,9 @@
 
 use std::time::Instant;
 
-use faer::linalg::solvers::DenseSolveCore;
-use faer::{Mat, Side};
 use tracing::debug;
 
-use crate::basis::{Basis, BasisKind, BasisValue};
+use crate::basis::{Basis, BasisKind};
 use crate::error::PlanError;
 use crate::grid::PlanningGrid;
 use crate::map::Point;
@@ -46,9 +44,6 @@ pub const SPARSITY_THRESHOLD: f64 = 1e-5;
 
 /// A row of U whose sum is at most this is treated as having lost all its samples (a wall).
 pub const WALL_ROW_SUM: f64 = 1e-6;
-
-/// Largest accepted number of active RBF functions (the dense least squares is O(Q³)).
-pub const MAX_RBF_FUNCTIONS: usize = 4096;
 
 /// One control direction of the split flow: unit vector and the generator's time step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -104,7 +99,7 @@ pub fn directions(count: usize, cell_size: f64) -> Result<Vec<Direction>, PlanEr
 /// The dynamics the samples come from: the single integrator ẋ = d, flowed for time `t`.
 /// (Constant velocity, so this is exact; it is the only place that knows the flow.)
 #[inline]
-fn flow(x: Point, d: [f64; 2], t: f64) -> Point {
+pub(crate) fn flow(x: Point, d: [f64; 2], t: f64) -> Point {
     [x[0] + t * d[0], x[1] + t * d[1]]
 }
 
@@ -184,7 +179,8 @@ impl SparseMatrix {
 /// Diagnostics of a generator build.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct GeneratorStats {
-    /// Snapshot samples per direction (all lattice points of all cells).
+    /// Snapshot samples per direction (RBF: all lattice points of all cells; indicator: one per
+    /// active cell, which gives the same U, see `ulam`).
     pub samples: usize,
     /// Samples, summed over directions, whose move was blocked (left the grid or touched an
     /// obstacle) and which therefore stayed in place.
@@ -215,14 +211,14 @@ pub struct Generators {
 /// Whether `p` lies in the domain of the basis: a grid cell that carries an active function
 /// (indicator: a free cell; RBF: a cell whose centre is active, i.e. at least one cell away from
 /// every blocked cell).
-fn in_domain(grid: &PlanningGrid, basis: &Basis, p: Point) -> bool {
+pub(crate) fn in_domain(grid: &PlanningGrid, basis: &Basis, p: Point) -> bool {
     grid.cell_of(p)
         .is_some_and(|(ix, iy)| basis.index_of_cell(grid.index(ix, iy)).is_some())
 }
 
 /// Whether the move `x → y` is allowed: `y` in the domain of the basis and the box spanned by the
 /// displacement free of blocked cells.
-fn valid_pair(grid: &PlanningGrid, basis: &Basis, x: Point, y: Point) -> bool {
+pub(crate) fn valid_pair(grid: &PlanningGrid, basis: &Basis, x: Point, y: Point) -> bool {
     if !in_domain(grid, basis, y) {
         return false;
     }
@@ -264,15 +260,14 @@ impl Generators {
         let started = Instant::now();
         let basis = Basis::new(grid, kind)?;
         let directions = directions(direction_count, grid.cell_size)?;
-        let per_axis = kind.samples_per_axis();
-        let points = sample_points(grid, per_axis);
-        let mut stats = GeneratorStats {
-            samples: points.len(),
-            ..GeneratorStats::default()
-        };
+        let mut stats = GeneratorStats::default();
         let generators = match kind {
-            BasisKind::Indicator => build_ulam(grid, &basis, &directions, &points, &mut stats),
-            BasisKind::Rbf { .. } => build_rbf(grid, &basis, &directions, &points, &mut stats)?,
+            BasisKind::Indicator => ulam::build_ulam(grid, &basis, &directions, &mut stats),
+            BasisKind::Rbf { .. } => {
+                let points = sample_points(grid, kind.samples_per_axis());
+                stats.samples = points.len();
+                rbf::build_rbf(grid, &basis, &directions, &points, &mut stats)?
+            }
         };
         stats.nnz = generators.iter().map(SparseMatrix::nnz).sum();
         stats.build_time_s = started.elapsed().as_secs_f64();
@@ -294,7 +289,11 @@ impl Generators {
 }
 
 /// Lₖ = (Uᵀ − I)/Δt from the row-normalised rows of U (each row a sparse list `(column, value)`).
-fn generator_from_rows(n: usize, rows: Vec<Vec<(usize, f64)>>, step: f64) -> SparseMatrix {
+pub(crate) fn generator_from_rows(
+    n: usize,
+    rows: Vec<Vec<(usize, f64)>>,
+    step: f64,
+) -> SparseMatrix {
     // Row i of U is column i of Uᵀ.
     let columns = rows
         .into_iter()
@@ -316,7 +315,7 @@ fn generator_from_rows(n: usize, rows: Vec<Vec<(usize, f64)>>, step: f64) -> Spa
 }
 
 /// Divides each row by its sum; a row without data (no samples) becomes the identity (a wall).
-fn normalise_rows(rows: &mut [Vec<(usize, f64)>], stats: &mut GeneratorStats) {
+pub(crate) fn normalise_rows(rows: &mut [Vec<(usize, f64)>], stats: &mut GeneratorStats) {
     for (i, row) in rows.iter_mut().enumerate() {
         let sum: f64 = row.iter().map(|e| e.1).sum();
         if sum <= WALL_ROW_SUM || (row.len() == 1 && row[0].0 == i) {
@@ -336,221 +335,17 @@ fn normalise_rows(rows: &mut [Vec<(usize, f64)>], stats: &mut GeneratorStats) {
     }
 }
 
-/// Ulam's method: G is diagonal (sample count per cell), so U = G⁻¹A row by row.
-fn build_ulam(
-    grid: &PlanningGrid,
-    basis: &Basis,
-    directions: &[Direction],
-    points: &[Point],
-    stats: &mut GeneratorStats,
-) -> Vec<SparseMatrix> {
-    let n = basis.len();
-    let p = points.len() as f64;
-    let mut phi_x = Vec::new();
-    let mut phi_y = Vec::new();
-    // G = Φ(X)Φ(X)ᵀ/P is diagonal for indicators.
-    let mut gram = vec![0.0; n];
-    for &x in points {
-        basis.eval_into(x, &mut phi_x);
-        for &(i, v) in &phi_x {
-            gram[i] += v * v / p;
-        }
-    }
-    directions
-        .iter()
-        .map(|dir| {
-            let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
-            for &x in points {
-                basis.eval_into(x, &mut phi_x);
-                if phi_x.is_empty() {
-                    continue;
-                }
-                let y = flow(x, dir.vector, dir.step);
-                // A blocked move stays where it is: the pair (x, x).
-                if valid_pair(grid, basis, x, y) {
-                    basis.eval_into(y, &mut phi_y);
-                } else {
-                    stats.invalid_pairs += 1;
-                    phi_y.clone_from(&phi_x);
-                }
-                for &(i, vi) in &phi_x {
-                    for &(j, vj) in &phi_y {
-                        accumulate(&mut rows[i], j, vi * vj / p);
-                    }
-                }
-            }
-            for (i, row) in rows.iter_mut().enumerate() {
-                for e in row.iter_mut() {
-                    e.1 /= gram[i];
-                }
-            }
-            normalise_rows(&mut rows, stats);
-            generator_from_rows(n, rows, dir.step)
-        })
-        .collect()
-}
+mod rbf;
+mod ulam;
 
-/// Adds `v` to entry `j` of a short sparse row.
-#[inline]
-fn accumulate(row: &mut Vec<(usize, f64)>, j: usize, v: f64) {
-    match row.iter_mut().find(|e| e.0 == j) {
-        Some(e) => e.1 += v,
-        None => row.push((j, v)),
-    }
-}
-
-/// Gaussian RBFs: dense Gram matrix over the samples in the domain of the basis, one faer
-/// Cholesky factorisation and G⁻¹ shared by all directions; each direction's sparse A is
-/// multiplied by G⁻¹ and U is then sparsified (see [`rbf_direction`]).
-fn build_rbf(
-    grid: &PlanningGrid,
-    basis: &Basis,
-    directions: &[Direction],
-    points: &[Point],
-    stats: &mut GeneratorStats,
-) -> Result<Vec<SparseMatrix>, PlanError> {
-    let n = basis.len();
-    if n > MAX_RBF_FUNCTIONS {
-        return Err(PlanError::InvalidOption {
-            name: "grid_size",
-            reason: format!(
-                "{n} RBF functions exceed the limit of {MAX_RBF_FUNCTIONS} for the dense least squares; use a coarser grid or the indicator basis"
-            ),
-        });
-    }
-    let p = points.len() as f64;
-    let t0 = Instant::now();
-    let phis: Vec<Vec<BasisValue>> = points
-        .iter()
-        .map(|&x| {
-            // The regression lives on the domain of the basis: samples in the hole around an
-            // obstacle (where no active function is centred) are not data.
-            let mut v = Vec::new();
-            if in_domain(grid, basis, x) {
-                basis.eval_into(x, &mut v);
-            }
-            v
-        })
-        .collect();
-    let mut gram = Mat::<f64>::zeros(n, n);
-    for phi in &phis {
-        for &(i, vi) in phi {
-            for &(j, vj) in phi {
-                gram[(i, j)] += vi * vj / p;
-            }
-        }
-    }
-    let llt = gram.llt(Side::Lower).map_err(|e| PlanError::InvalidOption {
-        name: "rbf basis",
-        reason: format!(
-            "Gram matrix of the RBF samples is not positive definite ({e:?}): use more samples per basis function or a smaller sigma"
-        ),
-    })?;
-    // G is symmetric: G⁻¹ once, shared by all directions (column l = row l).
-    let g_inv = llt.inverse();
-    debug!(
-        gram_and_inverse_s = t0.elapsed().as_secs_f64(),
-        "RBF Gram matrix inverted"
-    );
-    let data = RbfData {
-        grid,
-        basis,
-        points,
-        phis: &phis,
-        g_inv: &g_inv,
-        weight: 1.0 / p,
-    };
-    let results: Vec<(SparseMatrix, GeneratorStats)> = directions
-        .iter()
-        .map(|dir| rbf_direction(&data, dir))
-        .collect();
-    let mut out = Vec::with_capacity(directions.len());
-    for (l, s) in results {
-        stats.invalid_pairs += s.invalid_pairs;
-        stats.wall_rows += s.wall_rows;
-        stats.max_negative_row_mass = stats.max_negative_row_mass.max(s.max_negative_row_mass);
-        out.push(l);
-    }
-    Ok(out)
-}
-
-/// Shared, read-only inputs of the per-direction RBF regression.
-struct RbfData<'a> {
-    grid: &'a PlanningGrid,
-    basis: &'a Basis,
-    points: &'a [Point],
-    /// Basis values at every sample (empty outside the domain of the basis).
-    phis: &'a [Vec<BasisValue>],
-    /// G⁻¹ (symmetric).
-    g_inv: &'a Mat<f64>,
-    /// 1 / number of samples.
-    weight: f64,
-}
-
-/// Lₖ of one direction: A from the snapshot pairs, U = G⁻¹A, sparsified and row-normalised.
-fn rbf_direction(data: &RbfData<'_>, dir: &Direction) -> (SparseMatrix, GeneratorStats) {
-    let n = data.basis.len();
-    let mut stats = GeneratorStats::default();
-    let mut phi_y = Vec::new();
-    let mut a = Mat::<f64>::zeros(n, n);
-    for (&x, phi_x) in data.points.iter().zip(data.phis) {
-        if phi_x.is_empty() {
-            continue;
-        }
-        let y = flow(x, dir.vector, dir.step);
-        // A blocked move stays where it is: the pair (x, x).
-        if valid_pair(data.grid, data.basis, x, y) {
-            data.basis.eval_into(y, &mut phi_y);
-        } else {
-            stats.invalid_pairs += 1;
-            phi_y.clone_from(phi_x);
-        }
-        for &(j, vj) in &phi_y {
-            let col = a.col_as_slice_mut(j);
-            let wj = vj * data.weight;
-            for &(i, vi) in phi_x {
-                col[i] += vi * wj;
-            }
-        }
-    }
-    // U = G⁻¹ A (least squares of G U = A with G symmetric positive definite). A has only the
-    // overlaps of truncated Gaussians (a few dozen entries per column), so G⁻¹ A costs
-    // n · nnz(A) flops instead of the 2n³ of a dense triangular solve per direction.
-    let mut u = Mat::<f64>::zeros(n, n);
-    for j in 0..n {
-        let u_col = u.col_as_slice_mut(j);
-        for (l, &a_lj) in a.col_as_slice(j).iter().enumerate() {
-            if a_lj != 0.0 {
-                for (u_ij, &g_il) in u_col.iter_mut().zip(data.g_inv.col_as_slice(l)) {
-                    *u_ij += g_il * a_lj;
-                }
-            }
-        }
-    }
-    let mut max_abs = 0.0f64;
-    for j in 0..n {
-        for &v in u.col_as_slice(j) {
-            max_abs = max_abs.max(v.abs());
-        }
-    }
-    let cut = SPARSITY_THRESHOLD * max_abs;
-    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
-    for j in 0..n {
-        for (i, &v) in u.col_as_slice(j).iter().enumerate() {
-            if v.abs() > cut {
-                rows[i].push((j, v));
-            }
-        }
-    }
-    normalise_rows(&mut rows, &mut stats);
-    (generator_from_rows(n, rows, dir.step), stats)
-}
+pub use rbf::MAX_RBF_FUNCTIONS;
 
 #[cfg(test)]
-mod tests {
-    use super::*;
+pub(crate) mod test_grids {
+    use crate::grid::PlanningGrid;
 
-    fn open_grid(width: usize, height: usize, blocked: &[usize]) -> PlanningGrid {
+    /// A grid of `width × height` cells of 0.25 m with the given cells blocked.
+    pub(crate) fn open_grid(width: usize, height: usize, blocked: &[usize]) -> PlanningGrid {
         let mut b = vec![false; width * height];
         for &i in blocked {
             b[i] = true;
@@ -565,76 +360,11 @@ mod tests {
         )
         .expect("valid grid")
     }
+}
 
-    #[test]
-    fn ulam_generator_is_the_one_cell_shift_with_walls_at_the_edge_and_obstacles() {
-        // 4 x 3 grid, cell (2, 1) blocked.
-        let grid = open_grid(4, 3, &[6]);
-        let gens = Generators::build(&grid, BasisKind::Indicator, 8).expect("generators");
-        let basis = &gens.basis;
-        let h = grid.cell_size;
-        let east = &gens.generators[0];
-        let ne = &gens.generators[1];
-        let idx =
-            |ix: usize, iy: usize| basis.index_of_cell(grid.index(ix, iy)).expect("free cell");
-        // Cell (0, 1) moves east into (1, 1): column has −1/h on the diagonal and +1/h at (1, 1).
-        let col: Vec<(usize, f64)> = east.column(idx(0, 1)).collect();
-        assert_eq!(col.len(), 2);
-        assert!(col.contains(&(idx(0, 1), -1.0 / h)) && col.contains(&(idx(1, 1), 1.0 / h)));
-        // Cell (1, 1) would move east into the blocked cell: a wall (zero column).
-        assert_eq!(east.column(idx(1, 1)).count(), 0);
-        // Cell (3, 0) is at the east edge: a wall.
-        assert_eq!(east.column(idx(3, 0)).count(), 0);
-        // NE from (1, 0) would pass the blocked corner (2, 1)... it lands in (2, 1) itself: wall.
-        assert_eq!(ne.column(idx(1, 0)).count(), 0);
-        // NE from (2, 0) passes (2, 1) on its way to (3, 1): cutting the corner is not allowed.
-        assert_eq!(ne.column(idx(2, 0)).count(), 0);
-        // NE from (0, 0) to (1, 1) is free.
-        let diag = 2f64.sqrt() * h;
-        let col: Vec<(usize, f64)> = ne.column(idx(0, 0)).collect();
-        assert!(col.contains(&(idx(1, 1), 1.0 / diag)));
-        // Every column of every Lₖ sums to zero: mass is conserved.
-        for l in &gens.generators {
-            for j in 0..l.ncols {
-                let s: f64 = l.column(j).map(|e| e.1).sum();
-                assert!(s.abs() < 1e-12);
-            }
-        }
-        assert_eq!(gens.stats.max_negative_row_mass, 0.0);
-    }
-
-    #[test]
-    fn rbf_generator_is_close_to_a_lattice_shift_in_the_interior_and_conserves_mass() {
-        let grid = open_grid(10, 10, &[]);
-        let gens = Generators::build(&grid, BasisKind::DEFAULT_RBF, 4).expect("generators");
-        let basis = &gens.basis;
-        let h = grid.cell_size;
-        let east = &gens.generators[0];
-        let i = basis.index_of_cell(grid.index(4, 5)).expect("active");
-        let j = basis.index_of_cell(grid.index(5, 5)).expect("active");
-        let col: Vec<(usize, f64)> = east.column(i).collect();
-        let to_j = col.iter().find(|e| e.0 == j).expect("shift entry").1;
-        let self_entry = col.iter().find(|e| e.0 == i).expect("diagonal").1;
-        // Edge effects of a 10 x 10 grid reach the interior at the 0.4 % level (as in the prototype).
-        assert!((to_j * h - 1.0).abs() < 1e-2, "U(i→i+e1) = {}", to_j * h);
-        assert!(
-            (self_entry * h + 1.0).abs() < 1e-2,
-            "diagonal {}",
-            self_entry * h
-        );
-        for l in &gens.generators {
-            for j in 0..l.ncols {
-                let s: f64 = l.column(j).map(|e| e.1).sum();
-                assert!(s.abs() < 1e-9 / h, "column sum {s}");
-            }
-        }
-        // Rows next to the map edge carry the largest negative mass (8 % here, on a tiny grid).
-        assert!(gens.stats.max_negative_row_mass < 0.1, "{:?}", gens.stats);
-        // Moves off the map stay in place: the edge functions keep part of their mass (no
-        // function is a complete wall on an open grid), and the blocked samples are counted.
-        assert_eq!(gens.stats.wall_rows, 0, "{:?}", gens.stats);
-        assert!(gens.stats.invalid_pairs > 0, "{:?}", gens.stats);
-    }
+#[cfg(test)]
+mod tests {
+    use super::*;
 
     #[test]
     fn direction_count_other_than_four_or_eight_is_rejected() {
