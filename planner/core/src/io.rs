@@ -19,6 +19,7 @@
 //! `b1` data in C or Fortran order; anything else is a typed [`PlanError::Format`].
 
 use std::fs;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -112,13 +113,39 @@ pub fn save_scenario(scenario: &MapScenario, dir: &Path) -> Result<PathBuf, Plan
     Ok(json_path)
 }
 
-/// Reads a sidecar and its arrays, and checks every invariant (shapes, finite values, start/goal finite).
+/// Largest sidecar accepted, bytes (a real one is a few hundred bytes).
+pub const MAX_SIDECAR_BYTES: u64 = 1 << 20;
+
+/// Reads a sidecar and its arrays, and checks every invariant (shapes, finite values, start/goal
+/// finite), refusing maps of more than [`MAX_MAP_CELLS`] cells before their data is read.
 pub fn load_scenario(json_path: &Path) -> Result<MapScenario, PlanError> {
-    let text = fs::read_to_string(json_path).map_err(|e| io_error(json_path, e))?;
+    load_scenario_limited(json_path, MAX_MAP_CELLS)
+}
+
+/// [`load_scenario`] with a lower cell limit (at most [`MAX_MAP_CELLS`]).
+///
+/// The arrays must be files in the sidecar's own directory (a relative path without `..`): a
+/// sidecar is data and must not be able to point the reader at other files.
+pub fn load_scenario_limited(json_path: &Path, max_cells: usize) -> Result<MapScenario, PlanError> {
+    let max_cells = max_cells.min(MAX_MAP_CELLS);
+    let text = read_limited(json_path, MAX_SIDECAR_BYTES)?;
     let sidecar: Sidecar = serde_json::from_str(&text).map_err(|e| format_error(json_path, e))?;
+    let too_large = sidecar
+        .width
+        .checked_mul(sidecar.height)
+        .map_or(true, |n| n > max_cells);
+    if too_large {
+        return Err(format_error(
+            json_path,
+            format!(
+                "map of {} x {} cells exceeds the limit of {max_cells} cells",
+                sidecar.width, sidecar.height
+            ),
+        ));
+    }
     let dir = json_path.parent().unwrap_or(Path::new("."));
-    let heights_path = dir.join(&sidecar.heights);
-    let heights = read_npy(&heights_path)?;
+    let heights_path = array_path(json_path, dir, &sidecar.heights)?;
+    let heights = read_npy_limited(&heights_path, max_cells)?;
     let expect_shape = |array: &NpyArray, path: &Path| {
         if array.shape != (sidecar.height, sidecar.width) {
             return Err(PlanError::Format {
@@ -134,8 +161,8 @@ pub fn load_scenario(json_path: &Path) -> Result<MapScenario, PlanError> {
     expect_shape(&heights, &heights_path)?;
     let obstacles = match &sidecar.obstacles {
         Some(file) => {
-            let path = dir.join(file);
-            let mask = read_npy(&path)?;
+            let path = array_path(json_path, dir, file)?;
+            let mask = read_npy_limited(&path, max_cells)?;
             expect_shape(&mask, &path)?;
             Some(mask.values.iter().map(|&v| v != 0.0).collect())
         }
@@ -222,26 +249,90 @@ fn npy_header(descr: &str, shape: (usize, usize)) -> Vec<u8> {
 
 /// Reads a 2-D `.npy` array (see the module docs for the accepted dtypes).
 pub fn read_npy(path: &Path) -> Result<NpyArray, PlanError> {
-    let bytes = fs::read(path).map_err(|e| io_error(path, e))?;
-    parse_npy(&bytes).map_err(|reason| PlanError::Format {
-        path: path.display().to_string(),
-        reason,
-    })
+    read_npy_limited(path, MAX_MAP_CELLS)
 }
 
-/// Parses the bytes of a 2-D `.npy` file.
-pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
+/// Reads a 2-D `.npy` array of at most `max_cells` elements. The header is read and checked
+/// first (shape against the limit, data size against the file's length), so an oversize or
+/// inconsistent file is refused without reading its data.
+pub fn read_npy_limited(path: &Path, max_cells: usize) -> Result<NpyArray, PlanError> {
+    let format = |reason: String| PlanError::Format {
+        path: path.display().to_string(),
+        reason,
+    };
+    let mut file = fs::File::open(path).map_err(|e| io_error(path, e))?;
+    let file_len = file.metadata().map_err(|e| io_error(path, e))?.len();
+    let mut prefix = Vec::with_capacity(NPY_PREFIX_LEN);
+    (&mut file)
+        .take(NPY_PREFIX_LEN as u64)
+        .read_to_end(&mut prefix)
+        .map_err(|e| io_error(path, e))?;
+    let (header_start, header_len) = npy_header_extent(&prefix).map_err(format)?;
+    if header_len > MAX_NPY_HEADER_BYTES {
+        return Err(format(format!(
+            "header of {header_len} bytes exceeds {MAX_NPY_HEADER_BYTES}"
+        )));
+    }
+    let mut head = prefix;
+    (&mut file)
+        .take((header_start + header_len).saturating_sub(head.len()) as u64)
+        .read_to_end(&mut head)
+        .map_err(|e| io_error(path, e))?;
+    let header = parse_npy_header(&head, max_cells).map_err(format)?;
+    let expected = header.data_start as u64 + header.data_bytes() as u64;
+    if file_len != expected {
+        return Err(format(format!(
+            "file has {file_len} bytes, expected {expected} for shape {:?} of {}",
+            header.shape, header.descr
+        )));
+    }
+    let mut bytes = head;
+    bytes.truncate(header.data_start);
+    bytes.reserve_exact(header.data_bytes());
+    file.read_to_end(&mut bytes)
+        .map_err(|e| io_error(path, e))?;
+    npy_values(&header, &bytes[header.data_start..]).map_err(format)
+}
+
+/// Bytes of an `.npy` file that hold the magic, the version and the header length.
+const NPY_PREFIX_LEN: usize = 12;
+/// Largest `.npy` header accepted (numpy writes 64–128 bytes).
+const MAX_NPY_HEADER_BYTES: usize = 64 * 1024;
+
+/// A parsed `.npy` header.
+struct NpyHeader {
+    descr: &'static str,
+    item: usize,
+    fortran: bool,
+    shape: (usize, usize),
+    data_start: usize,
+}
+
+impl NpyHeader {
+    fn data_bytes(&self) -> usize {
+        // Bounded by the cell limit times 8: no overflow.
+        self.shape.0 * self.shape.1 * self.item
+    }
+}
+
+/// `(header start, header length)` from the first bytes of an `.npy` file.
+fn npy_header_extent(bytes: &[u8]) -> Result<(usize, usize), String> {
     if bytes.len() < 10 || &bytes[..6] != NPY_MAGIC {
         return Err("not an .npy file (bad magic)".into());
     }
-    let (header_len, header_start): (usize, usize) = match bytes[6] {
-        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+    match bytes[6] {
+        1 => Ok((10, u16::from_le_bytes([bytes[8], bytes[9]]) as usize)),
+        2 | 3 if bytes.len() >= 12 => Ok((
             12,
-        ),
-        v => return Err(format!("unsupported .npy version {v}")),
-    };
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+        )),
+        v => Err(format!("unsupported .npy version {v}")),
+    }
+}
+
+/// Parses the header at the start of `bytes` (which must hold all of it).
+fn parse_npy_header(bytes: &[u8], max_cells: usize) -> Result<NpyHeader, String> {
+    let (header_start, header_len) = npy_header_extent(bytes)?;
     let data_start = header_start
         .checked_add(header_len)
         .filter(|&end| end <= bytes.len())
@@ -270,33 +361,49 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
     let [rows, cols] = dims[..] else {
         return Err(format!("expected a 2-D array, got shape {shape_text}"));
     };
-    let count = rows
-        .checked_mul(cols)
-        .filter(|&n| n <= MAX_MAP_CELLS)
+    let max_cells = max_cells.min(MAX_MAP_CELLS);
+    rows.checked_mul(cols)
+        .filter(|&n| n <= max_cells)
         .ok_or(format!(
-            "array of shape ({rows}, {cols}) exceeds {MAX_MAP_CELLS} cells"
+            "array of shape ({rows}, {cols}) exceeds {max_cells} cells"
         ))?;
-    let item = match descr {
-        "<f8" | "<i8" => 8,
-        "<f4" | "<i4" => 4,
-        "|u1" | "|b1" | "<u1" | "<b1" => 1,
+    let (descr, item) = match descr {
+        "<f8" => ("<f8", 8),
+        "<i8" => ("<i8", 8),
+        "<f4" => ("<f4", 4),
+        "<i4" => ("<i4", 4),
+        "|u1" | "<u1" => ("|u1", 1),
+        "|b1" | "<b1" => ("|b1", 1),
         other => {
             return Err(format!(
                 "unsupported dtype {other} (expected <f8, <f4, <i8, <i4, |u1 or |b1)"
             ))
         }
     };
-    let data = &bytes[data_start..];
-    if data.len() != count * item {
+    Ok(NpyHeader {
+        descr,
+        item,
+        fortran,
+        shape: (rows, cols),
+        data_start,
+    })
+}
+
+/// The values of `data` (exactly the array's bytes) in C order, as f64.
+fn npy_values(header: &NpyHeader, data: &[u8]) -> Result<NpyArray, String> {
+    let (rows, cols) = header.shape;
+    let count = rows * cols;
+    if data.len() != header.data_bytes() {
         return Err(format!(
-            "data has {} bytes, expected {} for shape ({rows}, {cols}) of {descr}",
+            "data has {} bytes, expected {} for shape ({rows}, {cols}) of {}",
             data.len(),
-            count * item
+            header.data_bytes(),
+            header.descr
         ));
     }
     let raw: Vec<f64> = data
-        .chunks_exact(item)
-        .map(|c| match descr {
+        .chunks_exact(header.item)
+        .map(|c| match header.descr {
             "<f8" => f64::from_le_bytes(c.try_into().unwrap_or([0; 8])),
             "<i8" => i64::from_le_bytes(c.try_into().unwrap_or([0; 8])) as f64,
             "<f4" => f32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
@@ -304,7 +411,7 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
             _ => c[0] as f64,
         })
         .collect();
-    let values = if fortran {
+    let values = if header.fortran {
         let mut v = vec![0.0; count];
         for c in 0..cols {
             for r in 0..rows {
@@ -319,6 +426,45 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
         shape: (rows, cols),
         values,
     })
+}
+
+/// Parses the bytes of a whole 2-D `.npy` file.
+pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
+    let header = parse_npy_header(bytes, MAX_MAP_CELLS)?;
+    npy_values(&header, &bytes[header.data_start..])
+}
+
+/// A sidecar's array file: a relative path inside the sidecar's directory (no `..`, no root).
+fn array_path(json_path: &Path, dir: &Path, file: &str) -> Result<PathBuf, PlanError> {
+    let relative = Path::new(file);
+    let inside = !file.is_empty()
+        && relative
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)));
+    if inside {
+        Ok(dir.join(relative))
+    } else {
+        Err(format_error(
+            json_path,
+            format!("array file {file:?} must be a relative path inside the sidecar's directory"),
+        ))
+    }
+}
+
+/// Reads a text file of at most `max_bytes`.
+fn read_limited(path: &Path, max_bytes: u64) -> Result<String, PlanError> {
+    let file = fs::File::open(path).map_err(|e| io_error(path, e))?;
+    let mut text = String::new();
+    file.take(max_bytes + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| io_error(path, e))?;
+    if text.len() as u64 > max_bytes {
+        return Err(format_error(
+            path,
+            format!("larger than {max_bytes} bytes: not a map sidecar"),
+        ));
+    }
+    Ok(text)
 }
 
 /// The raw text of `key`'s value in a Python dict literal (shape tuples kept whole).
@@ -407,5 +553,85 @@ mod tests {
         assert!(parse_npy(&bytes).unwrap_err().contains("unsupported dtype"));
         let bytes = npy_header("<f8", (1 << 40, 1 << 40));
         assert!(parse_npy(&bytes).unwrap_err().contains("exceeds"));
+    }
+
+    /// A 5000² `.npy` was read whole (201 MB) before its size was refused: the header alone
+    /// decides now. The file here is the header of a 5000² array followed by one byte, so
+    /// reading the data would fail differently.
+    #[test]
+    fn regression_an_oversize_npy_is_refused_from_its_header() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("big.npy");
+        let mut bytes = npy_header("<f8", (5000, 5000));
+        bytes.push(0);
+        fs::write(&path, &bytes).expect("write");
+        let err = read_npy(&path).unwrap_err().to_string();
+        assert!(err.contains("exceeds 16777216 cells"), "{err}");
+        // Within the cell limit, the claimed size is checked against the file's length.
+        let mut bytes = npy_header("<f8", (4000, 4000));
+        bytes.push(0);
+        fs::write(&path, &bytes).expect("write");
+        let err = read_npy(&path).unwrap_err().to_string();
+        assert!(err.contains("file has"), "{err}");
+        let err = read_npy_limited(&path, 1024 * 1024)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("exceeds 1048576 cells"), "{err}");
+        // A consistent small file still reads.
+        let mut bytes = npy_header("<f8", (2, 2));
+        for v in [1.0f64, 2.0, 3.0, 4.0] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        fs::write(&path, &bytes).expect("write");
+        let a = read_npy_limited(&path, 4).expect("read");
+        assert_eq!(a.values, vec![1.0, 2.0, 3.0, 4.0]);
+        assert!(read_npy_limited(&path, 3).is_err());
+    }
+
+    #[test]
+    fn regression_sidecar_array_paths_stay_in_the_sidecar_directory() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let scenario = crate::scenarios::by_name("c_shape").expect("scenario");
+        let json = save_scenario(&scenario, dir.path()).expect("save");
+        assert!(load_scenario(&json).is_ok());
+        let text = fs::read_to_string(&json).expect("read");
+        let outside = dir.path().join("outside.npy");
+        fs::copy(dir.path().join("c_shape.heights.npy"), &outside).expect("copy");
+        for bad in [
+            outside.display().to_string(),
+            "../c_shape.heights.npy".to_owned(),
+            "sub/../../x.npy".to_owned(),
+            String::new(),
+        ] {
+            let edited = text.replace(
+                "\"c_shape.heights.npy\"",
+                &serde_json::to_string(&bad).expect("json"),
+            );
+            assert_ne!(edited, text);
+            fs::write(&json, edited).expect("write");
+            let err = load_scenario(&json).unwrap_err().to_string();
+            assert!(
+                err.contains("must be a relative path inside"),
+                "{bad}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_sidecar_claiming_a_map_above_the_limit_is_refused_before_its_arrays_are_read() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let scenario = crate::scenarios::by_name("c_shape").expect("scenario");
+        let json = save_scenario(&scenario, dir.path()).expect("save");
+        let cells = scenario.map.width * scenario.map.height;
+        let err = load_scenario_limited(&json, cells - 1)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("exceeds the limit"), "{err}");
+        assert!(load_scenario_limited(&json, cells).is_ok());
+        fs::write(dir.path().join("huge.json"), vec![b' '; 2 << 20]).expect("write");
+        let err = load_scenario(&dir.path().join("huge.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not a map sidecar"), "{err}");
     }
 }

@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
-use pf_planner::io::{load_scenario, save_scenario, MapScenario};
+use pf_planner::io::{load_scenario_limited, save_scenario, MapScenario};
 use pf_planner::lp::LpSolver;
 use pf_planner::pf::BasisKind;
 use pf_planner::plan::{Method, Plan, Planner, PlannerOptions};
@@ -93,6 +93,10 @@ struct PlanArgs {
     /// Map sidecar JSON (see `pf-plan scenario export`).
     #[arg(long)]
     map: Option<PathBuf>,
+    /// Largest map accepted with --map, in cells (refused from the file headers, before the
+    /// arrays are read). Maps are resampled to --grid cells for planning.
+    #[arg(long, default_value_t = 2048 * 2048)]
+    max_map_cells: usize,
     /// Planning method (all = P-F, A* and Dijkstra on the same grid).
     #[arg(long, value_enum, default_value = "all")]
     method: MethodArg,
@@ -163,9 +167,8 @@ fn main() -> Result<()> {
 fn load(args: &PlanArgs) -> Result<MapScenario> {
     match (&args.scenario, &args.map) {
         (Some(name), None) => Ok(scenarios::by_name(name)?),
-        (None, Some(path)) => {
-            load_scenario(path).with_context(|| format!("loading map {}", path.display()))
-        }
+        (None, Some(path)) => load_scenario_limited(path, args.max_map_cells)
+            .with_context(|| format!("loading map {}", path.display())),
         _ => bail!("give exactly one of --scenario or --map"),
     }
 }
