@@ -1,25 +1,109 @@
-//! Round-trip latency (request published → reply received) through the service on a 64 x 64
-//! map, next to the bare planner call on the same request. The transport is `memq://`
-//! (in-process; udpm adds the kernel's loopback multicast on top), so the difference is the
-//! service's own cost: encode, decode, validation, queue hand-off, reply.
+//! Round-trip latency (request published → reply received) through the service, next to the
+//! bare planner call on the same request: a 64 x 64 map sent inline, and the `c_shape` scenario
+//! published once on the map channel and named by its seq in every request (the real-time case:
+//! P-F on a 128² grid with cached generators, and Dijkstra on the same grid as the baseline).
+//! The transport is `memq://` (in-process; udpm adds the kernel's loopback multicast on top), so
+//! the difference is the service's own cost: encode, decode, validation, queue hand-off, reply.
+//! A table of medians is printed at the end.
 //!
 //! `cargo bench -p pf-planner-service --bench roundtrip -- --warm-up-time 1 --measurement-time 3`
 
+use std::cell::RefCell;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::Criterion;
 use lcm_transport::Lcm;
 use lcm_types::pfnav::{Header, PlanReply, PlanRequest, TerrainMap};
 use lcm_types::Message;
+use pf_planner::map::GridMap;
+use pf_planner::scenarios;
 use pf_planner::traversability::TraversabilityParams;
 use pf_planner_service::convert::{validate_request, MapSource, OptionDefaults};
 use pf_planner_service::planning::{self, GeneratorCache};
 use pf_planner_service::ServiceConfig;
 
 const SIDE: usize = 64;
+/// Seq under which the c_shape map is published.
+const PUBLISHED_SEQ: i64 = 7;
+/// P-F planning grid of the published-map case.
+const PUBLISHED_GRID: i32 = 128;
+
+/// Medians of criterion's samples, by benchmark name.
+struct Recorder(RefCell<Vec<(String, f64)>>);
+
+impl Recorder {
+    /// Benchmarks `routine` under `name` and records its median time.
+    fn measure(&self, c: &mut Criterion, name: &str, mut routine: impl FnMut()) {
+        let samples = RefCell::new(Vec::new());
+        c.bench_function(name, |b| {
+            b.iter_custom(|iters| {
+                let started = Instant::now();
+                for _ in 0..iters {
+                    routine();
+                }
+                let elapsed = started.elapsed();
+                samples
+                    .borrow_mut()
+                    .push(elapsed.as_secs_f64() / iters as f64);
+                elapsed
+            })
+        });
+        let mut times = samples.into_inner();
+        times.sort_by(f64::total_cmp);
+        let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
+        self.0.borrow_mut().push((name.to_owned(), median));
+    }
+}
+
+/// The wire form of a planner map.
+fn map_message(map: &GridMap, seq: i64) -> TerrainMap {
+    let obstacles = map.obstacles.clone().unwrap_or_default();
+    TerrainMap {
+        header: Header {
+            utime: 0,
+            seq,
+            frame_id: "world".into(),
+        },
+        origin_x: map.origin[0],
+        origin_y: map.origin[1],
+        resolution: map.resolution,
+        width: i32::try_from(map.width).expect("width"),
+        height: i32::try_from(map.height).expect("height"),
+        num_cells: i32::try_from(map.heights.len()).expect("cells"),
+        heights: map.heights.clone(),
+        num_obstacle_cells: i32::try_from(obstacles.len()).expect("obstacles"),
+        obstacle_mask: obstacles,
+    }
+}
+
+/// A request naming the published c_shape map.
+fn published_request(id: i64, method: i8) -> PlanRequest {
+    let scenario = scenarios::by_name("c_shape").expect("scenario");
+    let mut request = PlanRequest {
+        request_id: id,
+        map_seq: PUBLISHED_SEQ,
+        start_x: scenario.start[0],
+        start_y: scenario.start[1],
+        goal_x: scenario.goal.center[0],
+        goal_y: scenario.goal.center[1],
+        goal_radius: scenario.goal.radius,
+        method,
+        ..PlanRequest::default()
+    };
+    request.options.grid_size = PUBLISHED_GRID;
+    request
+}
+
+/// The published map, for the bare planner calls.
+struct PublishedMap(Arc<GridMap>);
+impl MapSource for PublishedMap {
+    fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<GridMap>)> {
+        (seq == PUBLISHED_SEQ).then(|| (seq, Arc::clone(&self.0)))
+    }
+}
 
 fn request(id: i64, method: i8) -> PlanRequest {
     let n = SIDE * SIDE;
@@ -67,7 +151,36 @@ impl MapSource for NoMaps {
     }
 }
 
-fn bench(c: &mut Criterion) {
+/// Publishes `msg` with a fresh id and waits for its reply.
+fn round_trip(
+    lcm: &Lcm,
+    channel: &str,
+    replies: &mpsc::Receiver<PlanReply>,
+    msg: &PlanRequest,
+    id: i64,
+) -> PlanReply {
+    let mut m = msg.clone();
+    m.request_id = id;
+    lcm.publish(channel, &m.encode().expect("encodes"))
+        .expect("publish");
+    loop {
+        let reply = replies
+            .recv_timeout(Duration::from_secs(60))
+            .expect("reply");
+        if reply.request_id == id {
+            assert_eq!(reply.status, PlanReply::STATUS_OK, "{}", reply.error);
+            return reply;
+        }
+    }
+}
+
+fn main() {
+    let mut c = Criterion::default()
+        .sample_size(20)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3))
+        .configure_from_args();
+    let rec = Recorder(RefCell::new(Vec::new()));
     let lcm = Arc::new(Lcm::open("memq://").expect("memq"));
     let config = ServiceConfig::with_prefix("BENCH_").expect("prefix");
     let (tx, replies) = mpsc::channel::<PlanReply>();
@@ -82,7 +195,8 @@ fn bench(c: &mut Criterion) {
         std::thread::spawn(move || pf_planner_service::run(lcm, config, shutdown))
     };
     let cache = GeneratorCache::new(4);
-    let mut group = c.benchmark_group("plan_64x64");
+    let traversability = TraversabilityParams::default();
+    let mut id = 0;
     for (name, method) in [
         ("dijkstra", PlanRequest::METHOD_DIJKSTRA),
         ("pf", PlanRequest::METHOD_PF),
@@ -90,35 +204,86 @@ fn bench(c: &mut Criterion) {
         let msg = request(1, method);
         let validated =
             validate_request(&msg, &NoMaps, 1 << 20, &OptionDefaults::default()).expect("valid");
-        group.bench_function(format!("{name}/bare_planner"), |b| {
-            b.iter(|| {
-                planning::plan(&validated, &cache, &TraversabilityParams::default()).expect("plans")
-            })
-        });
-        let mut id = 0;
-        group.bench_function(format!("{name}/service_roundtrip_memq"), |b| {
-            b.iter(|| {
+        rec.measure(
+            &mut c,
+            &format!("64² inline map, {name}: bare planner"),
+            || {
+                planning::plan(&validated, &cache, &traversability).expect("plans");
+            },
+        );
+        rec.measure(
+            &mut c,
+            &format!("64² inline map, {name}: service round trip"),
+            || {
                 id += 1;
-                let mut m = msg.clone();
-                m.request_id = id;
-                lcm.publish(&config.channels.request, &m.encode().expect("encodes"))
-                    .expect("publish");
-                loop {
-                    let reply = replies
-                        .recv_timeout(Duration::from_secs(60))
-                        .expect("reply");
-                    if reply.request_id == id {
-                        assert_eq!(reply.status, PlanReply::STATUS_OK, "{}", reply.error);
-                        break reply;
-                    }
-                }
-            })
-        });
+                round_trip(&lcm, &config.channels.request, &replies, &msg, id);
+            },
+        );
     }
-    group.finish();
+
+    let scenario = scenarios::by_name("c_shape").expect("scenario");
+    let published = map_message(&scenario.map, PUBLISHED_SEQ);
+    lcm.publish(&config.channels.map, &published.encode().expect("encodes"))
+        .expect("publish map");
+    let maps = PublishedMap(Arc::new(scenario.map.clone()));
+    // The service stores the map asynchronously: the first request may race it.
+    let first = published_request(0, PlanRequest::METHOD_PF);
+    let stored = Instant::now();
+    loop {
+        id += 1;
+        let mut m = first.clone();
+        m.request_id = id;
+        lcm.publish(&config.channels.request, &m.encode().expect("encodes"))
+            .expect("publish");
+        let reply = loop {
+            let r = replies
+                .recv_timeout(Duration::from_secs(60))
+                .expect("reply");
+            if r.request_id == id {
+                break r;
+            }
+        };
+        if reply.status == PlanReply::STATUS_OK {
+            break;
+        }
+        assert!(
+            stored.elapsed() < Duration::from_secs(10),
+            "published map never stored: {}",
+            reply.error
+        );
+    }
+    for (name, method) in [
+        ("dijkstra", PlanRequest::METHOD_DIJKSTRA),
+        ("pf", PlanRequest::METHOD_PF),
+    ] {
+        let msg = published_request(1, method);
+        let validated =
+            validate_request(&msg, &maps, 1 << 20, &OptionDefaults::default()).expect("valid");
+        rec.measure(
+            &mut c,
+            &format!("c_shape published, {PUBLISHED_GRID}² {name}: bare planner"),
+            || {
+                planning::plan(&validated, &cache, &traversability).expect("plans");
+            },
+        );
+        rec.measure(
+            &mut c,
+            &format!("c_shape published, {PUBLISHED_GRID}² {name}: service round trip"),
+            || {
+                id += 1;
+                round_trip(&lcm, &config.channels.request, &replies, &msg, id);
+            },
+        );
+    }
     shutdown.store(true, Ordering::SeqCst);
     let _ = service.join();
-}
+    c.final_summary();
 
-criterion_group!(benches, bench);
-criterion_main!(benches);
+    println!();
+    println!("medians of criterion's samples (memq://; target: 128² P-F round trip ≤ 100 ms)");
+    println!("| case | median |");
+    println!("|---|---:|");
+    for (name, median) in rec.0.borrow().iter() {
+        println!("| {name} | {:.2} ms |", median * 1e3);
+    }
+}
