@@ -59,6 +59,9 @@ pub enum PlanError {
     /// The LP solver stopped without a solution (iteration/time limit, numerical trouble).
     #[error("P-F linear program failed with solver status {status}: {reason}")]
     LpFailed { status: String, reason: String },
+    /// The request's time limit passed during `phase`; nothing was kept from the phase.
+    #[error("time limit of {limit_s} s reached during {phase}")]
+    TimeLimit { phase: &'static str, limit_s: f64 },
     /// The feedback-law trajectory did not reach the goal.
     #[error("P-F trajectory did not reach the goal: {reason}")]
     TrajectoryFailed { reason: String },

@@ -5,6 +5,7 @@
 
 pub mod basis;
 pub mod certificate;
+pub mod deadline;
 pub mod error;
 pub mod feedback;
 pub mod generators;

@@ -37,7 +37,7 @@
 
 use std::fmt;
 use std::str::FromStr;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -46,6 +46,7 @@ use clarabel::solver::{
 use tracing::{debug, warn};
 
 use crate::certificate::{certify, Certificate};
+use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::generators::Generators;
 use crate::ssp;
@@ -381,8 +382,7 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
             },
         });
     }
-    let deadline = (settings.time_limit_s.is_finite() && settings.time_limit_s >= 0.0)
-        .then(|| started + Duration::from_secs_f64(settings.time_limit_s.min(1e9)));
+    let deadline = Deadline::after(started, settings.time_limit_s);
     if settings.solver == LpSolver::Exact {
         if let Some(exact) = ssp::solve(problem, deadline)? {
             let density: Vec<f64> = (0..n)
@@ -511,6 +511,12 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
             return Err(PlanError::Infeasible {
                 reason: "no flow carries the start density into the goal region without entering an obstacle or leaving the map (the goal is walled off)".into(),
+            })
+        }
+        SolverStatus::MaxTime => {
+            return Err(PlanError::TimeLimit {
+                phase: "the LP solve (Clarabel)",
+                limit_s: settings.time_limit_s,
             })
         }
         _ => {

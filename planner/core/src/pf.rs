@@ -12,6 +12,7 @@ use std::time::Instant;
 use tracing::{debug, info};
 
 pub use crate::basis::BasisKind;
+use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::feedback::integrate;
 pub use crate::feedback::{FeedbackField, IntegrationOutcome, IntegrationSettings};
@@ -101,8 +102,18 @@ impl PfGenerators {
         basis: &BasisKind,
         directions: usize,
     ) -> Result<Self, PlanError> {
+        Self::build_until(grid, basis, directions, Deadline::NONE)
+    }
+
+    /// [`PfGenerators::build`], stopped with [`PlanError::TimeLimit`] once `deadline` passes.
+    pub fn build_until(
+        grid: &PlanningGrid,
+        basis: &BasisKind,
+        directions: usize,
+        deadline: Deadline,
+    ) -> Result<Self, PlanError> {
         let started = Instant::now();
-        let generators = Generators::build(grid, *basis, directions)?;
+        let generators = Generators::build_until(grid, *basis, directions, deadline)?;
         let per_axis = match basis {
             BasisKind::Indicator => 1,
             BasisKind::Rbf { .. } => COST_QUADRATURE_PER_AXIS,
@@ -170,24 +181,37 @@ pub struct PfSolution {
     pub targets: Vec<bool>,
 }
 
-/// Active functions that can reach the target through the generators' flows (reverse BFS).
+/// Active functions that can reach the target through the generators' flows (reverse BFS over
+/// the transposed move graph, built as one flat CSR: two passes over the non-zeros).
 fn can_reach_target(gens: &Generators, target: &[bool]) -> Vec<bool> {
     let n = gens.basis.len();
+    let moves = || {
+        gens.generators.iter().flat_map(move |l| {
+            (0..n).flat_map(move |i| {
+                l.column(i)
+                    .filter(move |&(j, v)| j != i && v > 0.0)
+                    .map(move |(j, _)| (i, j))
+            })
+        })
+    };
     // Incoming adjacency: j ← i when some Lₖ moves mass from i to j.
-    let mut predecessors: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for l in &gens.generators {
-        for i in 0..n {
-            for (j, v) in l.column(i) {
-                if j != i && v > 0.0 {
-                    predecessors[j].push(i);
-                }
-            }
-        }
+    let mut start = vec![0usize; n + 1];
+    for (_, j) in moves() {
+        start[j + 1] += 1;
+    }
+    for j in 0..n {
+        start[j + 1] += start[j];
+    }
+    let mut fill = start[..n].to_vec();
+    let mut predecessors = vec![0usize; start[n]];
+    for (i, j) in moves() {
+        predecessors[fill[j]] = i;
+        fill[j] += 1;
     }
     let mut reach = target.to_vec();
     let mut queue: VecDeque<usize> = (0..n).filter(|&i| target[i]).collect();
     while let Some(j) = queue.pop_front() {
-        for &i in &predecessors[j] {
+        for &i in &predecessors[start[j]..start[j + 1]] {
             if !reach[i] {
                 reach[i] = true;
                 queue.push_back(i);
@@ -298,12 +322,17 @@ pub fn prepare(
     // Reachable through the generators' flows *and* by moves of the sampled system over the
     // domain of the basis: RBF generators carry small entries (above the sparsity threshold)
     // across gaps that the robot cannot pass, which would otherwise put start mass into pockets
-    // that can only leak out at enormous cost.
-    let reach: Vec<bool> = can_reach_target(g, &target)
-        .into_iter()
-        .zip(can_move_to_target(g, grid, &target))
-        .map(|(a, b)| a && b)
-        .collect();
+    // that can only leak out at enormous cost. Ulam's generators are exactly those moves, so
+    // one search suffices for them.
+    let moves = can_move_to_target(g, grid, &target);
+    let reach: Vec<bool> = match basis.kind() {
+        BasisKind::Indicator => moves,
+        BasisKind::Rbf { .. } => can_reach_target(g, &target)
+            .into_iter()
+            .zip(moves)
+            .map(|(a, b)| a && b)
+            .collect(),
+    };
     if !reach[start_fn] {
         return Err(PlanError::Unreachable {
             reason: "no sequence of moves through free cells connects the start to the goal region"

@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use tracing::info;
 
+use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::graph::{astar_path, dijkstra_path, Connectivity};
 use crate::grid::{GoalRegion, PlanningGrid};
@@ -88,7 +89,8 @@ pub struct PlannerOptions {
     pub dt: f64,
     /// Solver of the P-F LP.
     pub solver: LpSolver,
-    /// Wall-clock limit of the P-F solve, seconds (`f64::INFINITY` for none).
+    /// Wall-clock limit of the P-F computation (generator build and LP), seconds
+    /// (`f64::INFINITY` for none); reached: [`PlanError::TimeLimit`].
     pub max_solve_time: f64,
 }
 
@@ -220,10 +222,16 @@ impl Planner {
                 options.basis.validate()?;
                 let cached = matches!(&self.pf_cache, Some((b, d, g)) if *b == options.basis && *d == options.directions && g.matches(&self.grid));
                 let mut generator_time_s = 0.0;
+                // max_solve_time bounds the whole P-F computation: generators, then the LP.
+                let deadline = Deadline::after(started, options.max_solve_time);
                 if !cached {
                     let t0 = Instant::now();
-                    let built =
-                        PfGenerators::build(&self.grid, &options.basis, options.directions)?;
+                    let built = PfGenerators::build_until(
+                        &self.grid,
+                        &options.basis,
+                        options.directions,
+                        deadline,
+                    )?;
                     generator_time_s = t0.elapsed().as_secs_f64();
                     self.pf_cache = Some((options.basis, options.directions, built));
                 }
@@ -241,7 +249,7 @@ impl Planner {
                     start_density: options.start_density,
                     lp: LpSettings {
                         solver: options.solver,
-                        time_limit_s: options.max_solve_time,
+                        time_limit_s: deadline.remaining_s(),
                         ..LpSettings::default()
                     },
                     ..PfOptions::default()

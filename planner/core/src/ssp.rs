@@ -38,6 +38,7 @@ use faer::sparse::{SparseColMat, Triplet};
 use faer::Col;
 use tracing::debug;
 
+use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::lp::LpProblem;
 
@@ -317,13 +318,13 @@ pub fn structure(problem: &LpProblem<'_>) -> Structure {
 /// Solves the LP exactly; `Ok(None)` when the generators are not Markov (use Clarabel).
 pub fn solve(
     problem: &LpProblem<'_>,
-    deadline: Option<Instant>,
+    deadline: Deadline,
 ) -> Result<Option<SspSolution>, PlanError> {
     let started = Instant::now();
     let n = problem.target.len();
     if let Some(moves) = deterministic_moves(problem) {
         let moves_s = started.elapsed().as_secs_f64();
-        let solution = solve_deterministic(problem, &moves)?;
+        let solution = solve_deterministic(problem, &moves, deadline)?;
         debug!(
             moves_s,
             solved_s = started.elapsed().as_secs_f64(),
@@ -347,6 +348,9 @@ pub fn solve(
         }
     }
 }
+
+/// States settled by Dijkstra between two deadline checks (about 0.1 ms of work).
+const STATES_PER_DEADLINE_CHECK: usize = 4096;
 
 /// No move (a wall, or a target state).
 const NO_MOVE: u32 = u32::MAX;
@@ -391,7 +395,11 @@ fn deterministic_moves(problem: &LpProblem<'_>) -> Option<Vec<u32>> {
 
 /// Dijkstra from the targets over the reversed moves, then the flux in one pass over the
 /// shortest-path tree in decreasing value.
-fn solve_deterministic(problem: &LpProblem<'_>, dest: &[u32]) -> Result<SspSolution, PlanError> {
+fn solve_deterministic(
+    problem: &LpProblem<'_>,
+    dest: &[u32],
+    deadline: Deadline,
+) -> Result<SspSolution, PlanError> {
     let gens = problem.generators;
     let n = gens.basis.len();
     let k_count = gens.directions.len();
@@ -425,6 +433,9 @@ fn solve_deterministic(problem: &LpProblem<'_>, dest: &[u32]) -> Result<SspSolut
     while let Some(HeapEntry { key, state: j }) = heap.pop() {
         if key > value[j] {
             continue;
+        }
+        if order.len() % STATES_PER_DEADLINE_CHECK == 0 {
+            deadline.check("the LP solve (Dijkstra)")?;
         }
         order.push(j);
         for &(i, k) in &from[ptr[j] as usize..ptr[j + 1] as usize] {
@@ -490,7 +501,7 @@ fn q_value(model: &Model, target: &[bool], value: &[f64], a: usize) -> f64 {
 fn policy_iteration(
     problem: &LpProblem<'_>,
     model: &Model,
-    deadline: Option<Instant>,
+    deadline: Deadline,
 ) -> Result<SspSolution, PlanError> {
     let target = problem.target;
     let n = target.len();
@@ -604,14 +615,7 @@ fn policy_iteration(
                 ),
             });
         }
-        if deadline.is_some_and(|d| Instant::now() >= d) {
-            return Err(PlanError::LpFailed {
-                status: "MaxTime".into(),
-                reason: format!(
-                    "time limit reached after {iterations} policy evaluations ({changed} states still switching)"
-                ),
-            });
-        }
+        deadline.check("the LP solve (policy iteration)")?;
     }
 }
 

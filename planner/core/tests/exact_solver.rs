@@ -235,7 +235,9 @@ fn generators_with_negative_mass_are_left_to_clarabel() {
         ssp::structure(&problem),
         Structure::General { .. }
     ));
-    assert!(ssp::solve(&problem, None).expect("no error").is_none());
+    assert!(ssp::solve(&problem, pf_planner::deadline::Deadline::NONE)
+        .expect("no error")
+        .is_none());
     let sol = lp::solve(&problem, &settings(LpSolver::Exact)).expect("Clarabel fallback");
     assert_eq!(sol.report.solver, "clarabel");
 }
@@ -259,4 +261,72 @@ fn exact_solver_equals_dijkstra_at_256_cells() {
     );
     assert!(rel < TOLERANCE, "rel {rel:.2e}");
     assert!(sol.outcome.reached_goal(), "{:?}", sol.outcome);
+}
+
+/// A passed deadline stops every exact path with `TimeLimit` naming the phase: Dijkstra
+/// (Ulam's generators), policy iteration (stochastic generators) and the generator build.
+#[test]
+fn a_passed_deadline_stops_each_phase_with_a_time_limit_error() {
+    use pf_planner::deadline::Deadline;
+    use pf_planner::error::PlanError;
+    let scenario = pf_planner::scenarios::by_name("c_shape").expect("scenario");
+    let grid = PlanningGrid::from_map(&scenario.map, &scenario.traversability, 64).expect("grid");
+    let passed = Deadline::after(std::time::Instant::now(), 0.0);
+    let err = PfGenerators::build_until(&grid, &BasisKind::Indicator, 8, passed).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PlanError::TimeLimit {
+                phase: "the generator build",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let gens = PfGenerators::build(&grid, &BasisKind::Indicator, 8).expect("generators");
+    let opts = PfOptions {
+        start_density: StartDensity::UniformFree,
+        lp: LpSettings {
+            time_limit_s: 0.0,
+            ..settings(LpSolver::Exact)
+        },
+        ..PfOptions::default()
+    };
+    let err = pf::solve(&gens, &grid, scenario.start, &scenario.goal, &opts).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PlanError::TimeLimit {
+                phase: "the LP solve (Dijkstra)",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let stochastic = slippery(gens.generators());
+    let prepared = pf::prepare(
+        &gens,
+        &grid,
+        scenario.start,
+        &scenario.goal,
+        StartDensity::UniformFree,
+    )
+    .expect("prepared");
+    let problem = LpProblem {
+        generators: &stochastic,
+        ..prepared.problem(&gens, 1.0)
+    };
+    let err = lp::solve(&problem, &opts.lp).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            PlanError::TimeLimit {
+                phase: "the LP solve (policy iteration)",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // Without a limit the same problems solve.
+    assert!(lp::solve(&problem, &settings(LpSolver::Exact)).is_ok());
 }

@@ -55,6 +55,13 @@ impl<K: PartialEq, V: Clone> BuildCache<K, V> {
     }
 
     /// Entries currently held.
+    /// Drops the entry of `key`, if held (a build that must not be reused, e.g. one stopped by
+    /// its request's time limit).
+    pub fn evict(&self, key: &K) {
+        let mut entries = self.entries.lock().unwrap_or_else(PoisonError::into_inner);
+        entries.retain(|(k, _)| k != key);
+    }
+
     pub fn len(&self) -> usize {
         self.entries
             .lock()

@@ -11,6 +11,7 @@ use std::time::Instant;
 
 use lcm_types::pfnav::{PlanMetrics, PlanReply, TrajectorySample};
 use pf_planner::basis::BasisKind;
+use pf_planner::deadline::Deadline;
 use pf_planner::error::PlanError;
 use pf_planner::graph::{self, Connectivity};
 use pf_planner::grid::PlanningGrid;
@@ -75,23 +76,33 @@ impl GeneratorCache {
     }
 
     /// Generators for `grid`, from the cache when possible; the bool says whether it was a hit.
+    /// A build stopped by `deadline` is not kept (the next request builds again); when the
+    /// stopped build was another request's, this one builds with its own deadline.
     fn get(
         &self,
         grid: &PlanningGrid,
         basis: &BasisKind,
         directions: usize,
+        deadline: Deadline,
     ) -> (CachedGenerators, bool) {
         let build = || {
-            PfGenerators::build(grid, basis, directions)
+            PfGenerators::build_until(grid, basis, directions, deadline)
                 .map(Arc::new)
                 .map_err(|e| rejection_of(&e))
         };
-        let (cached, hit) = self
-            .0
-            .get_or_build(GeneratorKey::new(grid, basis, directions), build);
+        let key = GeneratorKey::new(grid, basis, directions);
+        let (cached, hit) = self.0.get_or_build(key.clone(), build);
         match cached {
             // A 64-bit hash collision between two grids: never use generators of another grid.
             Ok(gens) if !gens.matches(grid) => (build(), false),
+            Err(rejection) if rejection.status == PlanReply::STATUS_SOLVER_TIMEOUT => {
+                self.0.evict(&key);
+                if hit {
+                    (build(), false)
+                } else {
+                    (Err(rejection), false)
+                }
+            }
             other => (other, hit),
         }
     }
@@ -126,6 +137,7 @@ pub fn rejection_of(error: &PlanError) -> Rejection {
         | PlanError::GoalInObstacle { .. }
         | PlanError::Unreachable { .. } => PlanReply::STATUS_GOAL_UNREACHABLE,
         PlanError::InvalidOption { .. } => PlanReply::STATUS_INVALID_REQUEST,
+        PlanError::TimeLimit { .. } => PlanReply::STATUS_SOLVER_TIMEOUT,
         PlanError::Infeasible { .. }
         | PlanError::LpFailed { .. }
         | PlanError::TrajectoryFailed { .. } => PlanReply::STATUS_SOLVER_FAILED,
@@ -167,16 +179,9 @@ pub fn plan(
     let map = &*request.map;
     let opts = &request.options;
     let reject = |e: PlanError| rejection_of(&e);
-    let out_of_time = |phase: &str| {
-        Rejection::new(
-            PlanReply::STATUS_SOLVER_FAILED,
-            format!(
-                "time limit max_solve_time = {} s reached after {phase} ({:.3} s)",
-                opts.max_solve_time,
-                started.elapsed().as_secs_f64()
-            ),
-        )
-    };
+    // max_solve_time bounds the P-F computation from the moment a worker takes the request:
+    // generators (unless cached), then the LP, checked inside both.
+    let deadline = Deadline::after(started, opts.max_solve_time);
     let field = TraversabilityField::from_map(map, traversability).map_err(reject)?;
     let grid = PlanningGrid::from_field(map, &field, opts.grid_size).map_err(reject)?;
     let mut metrics = PlanMetrics {
@@ -201,22 +206,19 @@ pub fn plan(
         }
         MethodChoice::Pf => {
             let built = Instant::now();
-            let (gens, hit) = cache.get(&grid, &opts.basis, opts.directions);
+            let (gens, hit) = cache.get(&grid, &opts.basis, opts.directions, deadline);
             cache_hit = hit;
             let gens = gens?;
             if !hit {
                 metrics.generator_time = built.elapsed().as_secs_f64();
             }
-            let remaining = opts.max_solve_time - started.elapsed().as_secs_f64();
-            if remaining <= 0.0 {
-                return Err(out_of_time("the generators"));
-            }
+            deadline.check("the generator build").map_err(reject)?;
             // The LP's speed bound stays the library's (it scales the objective and the feedback
             // field); the reference is re-timed at `opts.speed` below, as `pf-plan` does.
             let pf_options = PfOptions {
                 start_density: opts.start_density,
                 lp: LpSettings {
-                    time_limit_s: remaining,
+                    time_limit_s: deadline.remaining_s(),
                     solver: opts.solver,
                     ..LpSettings::default()
                 },

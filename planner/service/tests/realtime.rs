@@ -108,3 +108,41 @@ fn requests_beyond_the_limits_are_refused_at_once_with_the_limit_named() {
     );
     service.stop();
 }
+
+/// max_solve_time bounds the P-F computation, generator build included: a 512² plan (about
+/// 0.4 s on the 2-core development machine) with a 0.1 s limit is answered SOLVER_TIMEOUT within the limit
+/// plus 10 % and 50 ms (plus a margin for a loaded test machine), and the stopped build is not
+/// cached: the same request without a limit then succeeds.
+#[test]
+fn max_solve_time_is_kept_and_a_stopped_build_is_not_reused() {
+    let service = TestService::start(config("RT4_"));
+    let limit = 0.1;
+    let mut limited = c_shape_pf(1, 512);
+    limited.options.max_solve_time = limit;
+    let started = Instant::now();
+    service.publish_request(&limited);
+    let reply = service.reply_to(1, WAIT);
+    let elapsed = started.elapsed().as_secs_f64();
+    assert_eq!(
+        reply.status,
+        PlanReply::STATUS_SOLVER_TIMEOUT,
+        "{}",
+        reply.error
+    );
+    assert!(
+        reply.error.contains("time limit of 0.1 s"),
+        "{}",
+        reply.error
+    );
+    assert!(
+        elapsed <= limit * 1.1 + 0.05 + 0.25,
+        "reply after {elapsed:.3} s for a {limit} s limit"
+    );
+    let mut unlimited = c_shape_pf(2, 512);
+    unlimited.options.max_solve_time = 0.0;
+    service.publish_request(&unlimited);
+    let reply = service.reply_to(2, WAIT);
+    assert_eq!(reply.status, PlanReply::STATUS_OK, "{}", reply.error);
+    assert!(!reply.metrics.cache_hit);
+    service.stop();
+}

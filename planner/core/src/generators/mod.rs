@@ -30,6 +30,7 @@ use std::time::Instant;
 use tracing::debug;
 
 use crate::basis::{Basis, BasisKind};
+use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::grid::PlanningGrid;
 use crate::map::Point;
@@ -257,16 +258,31 @@ impl Generators {
         kind: BasisKind,
         direction_count: usize,
     ) -> Result<Self, PlanError> {
+        Self::build_until(grid, kind, direction_count, Deadline::NONE)
+    }
+
+    /// [`Generators::build`], stopped with [`PlanError::TimeLimit`] once `deadline` passes
+    /// (checked inside Ulam's build; RBF builds are checked when they finish).
+    pub fn build_until(
+        grid: &PlanningGrid,
+        kind: BasisKind,
+        direction_count: usize,
+        deadline: Deadline,
+    ) -> Result<Self, PlanError> {
         let started = Instant::now();
         let basis = Basis::new(grid, kind)?;
         let directions = directions(direction_count, grid.cell_size)?;
         let mut stats = GeneratorStats::default();
         let generators = match kind {
-            BasisKind::Indicator => ulam::build_ulam(grid, &basis, &directions, &mut stats),
+            BasisKind::Indicator => {
+                ulam::build_ulam(grid, &basis, &directions, deadline, &mut stats)?
+            }
             BasisKind::Rbf { .. } => {
                 let points = sample_points(grid, kind.samples_per_axis());
                 stats.samples = points.len();
-                rbf::build_rbf(grid, &basis, &directions, &points, &mut stats)?
+                let built = rbf::build_rbf(grid, &basis, &directions, &points, &mut stats)?;
+                deadline.check("the RBF generator build")?;
+                built
             }
         };
         stats.nnz = generators.iter().map(SparseMatrix::nnz).sum();

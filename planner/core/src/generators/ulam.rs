@@ -12,7 +12,12 @@ use std::thread;
 
 use super::{flow, valid_pair, Direction, GeneratorStats, SparseMatrix};
 use crate::basis::Basis;
+use crate::deadline::Deadline;
+use crate::error::PlanError;
 use crate::grid::PlanningGrid;
+
+/// Cells built between two deadline checks (about 0.1 ms of work).
+const CELLS_PER_DEADLINE_CHECK: usize = 4096;
 
 /// One direction's generator and its blocked-move count.
 struct UlamDirection {
@@ -25,19 +30,20 @@ pub(super) fn build_ulam(
     grid: &PlanningGrid,
     basis: &Basis,
     directions: &[Direction],
+    deadline: Deadline,
     stats: &mut GeneratorStats,
-) -> Vec<SparseMatrix> {
+) -> Result<Vec<SparseMatrix>, PlanError> {
     let workers = thread::available_parallelism()
         .map_or(1, usize::from)
         .clamp(1, directions.len().max(1));
     let chunk = directions.len().div_ceil(workers).max(1);
-    let built: Vec<UlamDirection> = thread::scope(|scope| {
+    let built: Vec<Option<UlamDirection>> = thread::scope(|scope| {
         let handles: Vec<_> = directions
             .chunks(chunk)
             .map(|dirs| {
                 scope.spawn(move || {
                     dirs.iter()
-                        .map(|dir| ulam_direction(grid, basis, dir))
+                        .map(|dir| ulam_direction(grid, basis, dir, deadline))
                         .collect::<Vec<_>>()
                 })
             })
@@ -54,15 +60,26 @@ pub(super) fn build_ulam(
     stats.samples = basis.len();
     let mut generators = Vec::with_capacity(built.len());
     for d in built {
+        let Some(d) = d else {
+            return Err(PlanError::TimeLimit {
+                phase: "the generator build",
+                limit_s: deadline.limit_s(),
+            });
+        };
         stats.invalid_pairs += d.walls;
         stats.wall_rows += d.walls;
         generators.push(d.generator);
     }
-    generators
+    Ok(generators)
 }
 
-/// Lₖ of one direction, column by column in CSC order.
-fn ulam_direction(grid: &PlanningGrid, basis: &Basis, dir: &Direction) -> UlamDirection {
+/// Lₖ of one direction, column by column in CSC order; `None` once `deadline` has passed.
+fn ulam_direction(
+    grid: &PlanningGrid,
+    basis: &Basis,
+    dir: &Direction,
+    deadline: Deadline,
+) -> Option<UlamDirection> {
     let n = basis.len();
     let rate = 1.0 / dir.step;
     let mut col_ptr = Vec::with_capacity(n + 1);
@@ -71,6 +88,9 @@ fn ulam_direction(grid: &PlanningGrid, basis: &Basis, dir: &Direction) -> UlamDi
     let mut walls = 0;
     col_ptr.push(0);
     for i in 0..n {
+        if i % CELLS_PER_DEADLINE_CHECK == 0 && deadline.passed() {
+            return None;
+        }
         let x = grid.center_of_index(basis.cell(i));
         let y = flow(x, dir.vector, dir.step);
         let target = if valid_pair(grid, basis, x, y) {
@@ -95,7 +115,7 @@ fn ulam_direction(grid: &PlanningGrid, basis: &Basis, dir: &Direction) -> UlamDi
         }
         col_ptr.push(row_idx.len());
     }
-    UlamDirection {
+    Some(UlamDirection {
         generator: SparseMatrix {
             nrows: n,
             ncols: n,
@@ -104,7 +124,7 @@ fn ulam_direction(grid: &PlanningGrid, basis: &Basis, dir: &Direction) -> UlamDi
             values,
         },
         walls,
-    }
+    })
 }
 
 #[cfg(test)]
