@@ -1,29 +1,26 @@
 //! Data-driven Perron-Frobenius generators (ANSDMD), one per control direction.
 //!
 //! For each direction dₖ the planner generates snapshot pairs `(xₛ, yₛ)` by flowing the single
-//! integrator ẋ = dₖ for a time Δtₖ from every point xₛ of an exact sub-lattice of every cell in
-//! the domain of the basis (the cells that carry an active function), so the generator only ever
-//! sees sampled data, never the flow map itself. Then
-//! - `G = Φ(X) Φ(X)ᵀ / P`, `A = Φ(X) Φ(Y)ᵀ / P` (P samples),
-//! - `U = argmin ‖G U − A‖_F` (G is diagonal for indicators: Ulam's method; a faer Cholesky
-//!   factorisation and G⁻¹ for Gaussian RBFs),
-//! - every row of `U` is divided by its sum (a row whose moves are all blocked is the identity:
-//!   a reflecting wall, never a free sink),
-//! - `Lₖ = (Uᵀ − I) / Δtₖ`, stored sparse (entries below [`SPARSITY_THRESHOLD`] × max |U|
-//!   dropped).
+//! integrator ẋ = dₖ for a time Δtₖ from points xₛ of an exact sub-lattice of every cell in the
+//! domain of the basis (the cells that carry an active function), so the generator only ever
+//! sees sampled data, never the flow map itself. From the pairs it estimates a transfer matrix U
+//! (row i: where the mass of function i goes) and stores `Lₖ = (Uᵀ − I)/Δtₖ` sparse:
+//! - indicators ([`ulam`]): Ulam's method, U = G⁻¹A with diagonal G, one deterministic move or
+//!   a wall per cell;
+//! - Gaussian RBFs ([`rbf`]): the Galerkin transfer in the partition of unity of the truncated
+//!   Gaussians, non-negative and row-stochastic (Markov) by construction.
+//!
+//! Every U is Markov: every row non-negative and summing to one, a row whose moves are all
+//! blocked the identity (a reflecting wall, never a free sink). So every Lₖ conserves mass and
+//! the LP is a stochastic shortest path (see [`crate::ssp`]).
 //!
 //! Δtₖ makes each displacement exactly one lattice vector (Δt = h axially, √2·h diagonally): the
-//! condition under which the indicator LP is exactly Dijkstra's problem and the RBF generator stays
-//! sparse. A move is *blocked* when its image leaves the grid or when the axis-aligned box spanned
-//! by the displacement touches a blocked cell (a robot moving past an obstacle corner would graze
-//! it; for one-cell moves this is the graph rule "a diagonal step must not cut a blocked corner").
-//! The sampled system stops at obstacles: a blocked move leaves the sample where it is, so its
-//! snapshot pair is `(x, x)`. This keeps every row of `A` complete (`A` is `G` times a
-//! stochastic-like matrix), so the least squares never divides a row by the small remainder of
-//! a partly blocked function — which, with the older "blocked pairs carry no data" rule, gave
-//! RBF rows next to obstacles tens of units of negative mass, fake sinks the LP exploited (the
-//! `pits` failure). For indicators a one-cell move is blocked for all samples of a cell or for
-//! none, so a blocked cell-direction is still exactly the wall `U = I` (zero column in Lₖ).
+//! condition under which the indicator LP is exactly Dijkstra's problem and the sample images are
+//! themselves lattice samples. A move is *blocked* when its image leaves the grid or when the
+//! axis-aligned box spanned by the displacement touches a blocked cell (a robot moving past an
+//! obstacle corner would graze it; for one-cell moves this is the graph rule "a diagonal step
+//! must not cut a blocked corner"). The sampled system stops at obstacles: a blocked move leaves
+//! the sample where it is, so its snapshot pair is `(x, x)`.
 
 use std::time::Instant;
 
@@ -34,17 +31,6 @@ use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::grid::PlanningGrid;
 use crate::map::Point;
-
-/// Entries of U smaller than this fraction of the largest |U| are dropped (keeps Lₖ sparse).
-///
-/// Only RBF generators have such entries (Ulam's are exactly 0 or 1). Measured on the three
-/// scenarios at 32² centres: going from 1e-9 to 1e-5 changes the LP value by < 1e-5 relative and
-/// the trajectories not at all, while the tiny entries made the LP 10–20× slower (`pits`:
-/// 11 s → 0.5 s).
-pub const SPARSITY_THRESHOLD: f64 = 1e-5;
-
-/// A row of U whose sum is at most this is treated as having lost all its samples (a wall).
-pub const WALL_ROW_SUM: f64 = 1e-6;
 
 /// One control direction of the split flow: unit vector and the generator's time step.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -304,55 +290,8 @@ impl Generators {
     }
 }
 
-/// Lₖ = (Uᵀ − I)/Δt from the row-normalised rows of U (each row a sparse list `(column, value)`).
-pub(crate) fn generator_from_rows(
-    n: usize,
-    rows: Vec<Vec<(usize, f64)>>,
-    step: f64,
-) -> SparseMatrix {
-    // Row i of U is column i of Uᵀ.
-    let columns = rows
-        .into_iter()
-        .enumerate()
-        .map(|(i, row)| {
-            let mut col: Vec<(usize, f64)> = row.into_iter().map(|(j, u)| (j, u / step)).collect();
-            col.push((i, -1.0 / step));
-            col
-        })
-        .collect();
-    let mut l = SparseMatrix::from_columns(n, columns);
-    // A self-loop (U_ii = 1, a wall) cancels against −I: drop the exact zeros it leaves.
-    let mut columns = Vec::with_capacity(n);
-    for j in 0..n {
-        columns.push(l.column(j).filter(|&(_, v)| v != 0.0).collect());
-    }
-    l = SparseMatrix::from_columns(n, columns);
-    l
-}
-
-/// Divides each row by its sum; a row without data (no samples) becomes the identity (a wall).
-pub(crate) fn normalise_rows(rows: &mut [Vec<(usize, f64)>], stats: &mut GeneratorStats) {
-    for (i, row) in rows.iter_mut().enumerate() {
-        let sum: f64 = row.iter().map(|e| e.1).sum();
-        if sum <= WALL_ROW_SUM || (row.len() == 1 && row[0].0 == i) {
-            stats.wall_rows += 1;
-            row.clear();
-            row.push((i, 1.0));
-            continue;
-        }
-        let mut negative = 0.0;
-        for e in row.iter_mut() {
-            e.1 /= sum;
-            if e.1 < 0.0 {
-                negative -= e.1;
-            }
-        }
-        stats.max_negative_row_mass = stats.max_negative_row_mass.max(negative);
-    }
-}
-
-mod rbf;
-mod ulam;
+pub mod rbf;
+pub mod ulam;
 
 pub use rbf::MAX_RBF_FUNCTIONS;
 
