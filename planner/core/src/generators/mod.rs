@@ -293,6 +293,32 @@ impl Generators {
 pub mod rbf;
 pub mod ulam;
 
+/// `build(direction)` for every direction, spread over the available cores, in order.
+fn per_direction<T: Send>(
+    directions: &[Direction],
+    build: impl Fn(&Direction) -> T + Sync,
+) -> Vec<T> {
+    let workers = std::thread::available_parallelism()
+        .map_or(1, usize::from)
+        .clamp(1, directions.len().max(1));
+    let chunk = directions.len().div_ceil(workers).max(1);
+    let build = &build;
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = directions
+            .chunks(chunk)
+            .map(|dirs| scope.spawn(move || dirs.iter().map(build).collect::<Vec<T>>()))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| match h.join() {
+                Ok(v) => v,
+                // A panic in a worker is a bug of the builder: re-raise it where it belongs.
+                Err(payload) => std::panic::resume_unwind(payload),
+            })
+            .collect()
+    })
+}
+
 pub use rbf::MAX_RBF_FUNCTIONS;
 
 #[cfg(test)]

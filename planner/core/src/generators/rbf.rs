@@ -22,9 +22,7 @@
 //! Memory is O(samples · support); time O(Q · samples per function · support) per direction,
 //! directions in parallel.
 
-use std::thread;
-
-use super::{valid_pair, Direction, GeneratorStats, SparseMatrix};
+use super::{per_direction, valid_pair, Direction, GeneratorStats, SparseMatrix};
 use crate::basis::{Basis, BasisValue};
 use crate::error::PlanError;
 use crate::grid::PlanningGrid;
@@ -168,31 +166,9 @@ pub(super) fn build_rbf(
         });
     }
     let pu = PartitionOfUnity::new(grid, basis, points);
-    let workers = thread::available_parallelism()
-        .map_or(1, usize::from)
-        .clamp(1, directions.len().max(1));
-    let chunk = directions.len().div_ceil(workers).max(1);
-    let built: Vec<(SparseMatrix, GeneratorStats)> = thread::scope(|scope| {
-        let handles: Vec<_> = directions
-            .chunks(chunk)
-            .map(|dirs| {
-                let pu = &pu;
-                scope.spawn(move || {
-                    dirs.iter()
-                        .map(|dir| transfer(grid, basis, pu, per_cell, dir))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| match h.join() {
-                Ok(v) => v,
-                // A panic in a worker is a bug in this module: re-raise it where it belongs.
-                Err(payload) => std::panic::resume_unwind(payload),
-            })
-            .collect()
-    });
+    let pu = &pu;
+    let built: Vec<(SparseMatrix, GeneratorStats)> =
+        per_direction(directions, |dir| transfer(grid, basis, pu, per_cell, dir));
     let mut generators = Vec::with_capacity(built.len());
     for (l, s) in built {
         stats.invalid_pairs += s.invalid_pairs;

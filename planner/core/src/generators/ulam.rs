@@ -8,9 +8,7 @@
 //! cell. Each column of Lₖ = (Uᵀ − I)/Δt is then `{i: −1/Δt, j: +1/Δt}` or empty (a wall), and
 //! is written straight into CSC arrays. The directions are built on all cores.
 
-use std::thread;
-
-use super::{flow, valid_pair, Direction, GeneratorStats, SparseMatrix};
+use super::{flow, per_direction, valid_pair, Direction, GeneratorStats, SparseMatrix};
 use crate::basis::Basis;
 use crate::deadline::Deadline;
 use crate::error::PlanError;
@@ -33,30 +31,8 @@ pub(super) fn build_ulam(
     deadline: Deadline,
     stats: &mut GeneratorStats,
 ) -> Result<Vec<SparseMatrix>, PlanError> {
-    let workers = thread::available_parallelism()
-        .map_or(1, usize::from)
-        .clamp(1, directions.len().max(1));
-    let chunk = directions.len().div_ceil(workers).max(1);
-    let built: Vec<Option<UlamDirection>> = thread::scope(|scope| {
-        let handles: Vec<_> = directions
-            .chunks(chunk)
-            .map(|dirs| {
-                scope.spawn(move || {
-                    dirs.iter()
-                        .map(|dir| ulam_direction(grid, basis, dir, deadline))
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| match h.join() {
-                Ok(v) => v,
-                // A panic in a worker is a bug in this module: re-raise it where it belongs.
-                Err(payload) => std::panic::resume_unwind(payload),
-            })
-            .collect()
-    });
+    let built: Vec<Option<UlamDirection>> =
+        per_direction(directions, |dir| ulam_direction(grid, basis, dir, deadline));
     stats.samples = basis.len();
     let mut generators = Vec::with_capacity(built.len());
     for d in built {
