@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Generates the Python LCM types (package `pfnav`) from lcm_types/*.lcm into build/lcm_python.
 # The generated code is never committed (build/ is gitignored) and never edited by hand.
-# lcm-gen: $LCM_GEN if set, else the venv's (PyPI `lcm` 1.5.3, whose Python classes carry the
-# __typenames__/__dimensions__ metadata the tests use), else the one on PATH (Debian 1.3.1).
+# lcm-gen: $LCM_GEN if set (setup.sh passes lcm-gen 1.5.3 from the PyPI wheel, whose Python
+# classes carry the __typenames__/__dimensions__ metadata the tests use), else the venv's, else
+# the one on PATH.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"

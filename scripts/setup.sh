@@ -9,7 +9,9 @@ log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*"; }
 
 # libclang-dev: bindgen in the fmi crate (the FMU importer used by the Rust FMU tests).
 # cmake, make: OSQP's C sources (osqp-sys), the MPC benchmark's comparison solver and test cross-check.
-APT_PACKAGES=(liblcm-dev liblcm-bin libglib2.0-dev iproute2 util-linux pkg-config
+# gcc, patch, ca-certificates: the patched liblcm (scripts/build_liblcm.sh; its source comes from
+# Debian's deb-src index through apt, into a private apt directory under build/).
+APT_PACKAGES=(libglib2.0-dev iproute2 util-linux pkg-config gcc ca-certificates patch
               libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils
               libclang-dev cmake make)
 missing=()
@@ -40,11 +42,40 @@ if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
     echo "$want" > "$stamp"
 fi
 
+# LCM: Debian's and PyPI's liblcm let one UDP packet write out of bounds (docs/liblcm-fix.md).
+# Every receiver here uses the patched build instead: the Rust transport links it, Python imports
+# its module (the PyPI `lcm` package is not installed), lcm-logger/lcm-logplayer are its tools.
+log "patched liblcm (build/lcm)"
+bash scripts/build_liblcm.sh "$ROOT/.venv/bin/python"
+if .venv/bin/python -m pip show lcm >/dev/null 2>&1; then
+    .venv/bin/python -m pip uninstall -y -q lcm
+fi
+site="$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+echo "$ROOT/build/lcm/python" > "$site/pfnav_lcm.pth"
+ln -sf "$ROOT/build/lcm/bin/lcm-logger" .venv/bin/lcm-logger
+ln -sf "$ROOT/build/lcm/bin/lcm-logplayer" .venv/bin/lcm-logplayer
+# lcm-gen 1.5.3 (a code generator, no network code) from the PyPI wheel, for the Python types'
+# metadata the tests use; nothing else of the wheel is installed.
+if [[ ! -x build/lcm-gen/lcm-gen ]]; then
+    log "lcm-gen 1.5.3 from the PyPI wheel"
+    wheels="$(mktemp -d)"
+    .venv/bin/python -m pip download -q --no-deps --only-binary :all: lcm==1.5.3 -d "$wheels"
+    mkdir -p build/lcm-gen
+    .venv/bin/python - "$wheels" <<'PY'
+import glob, os, sys, zipfile
+wheel = glob.glob(os.path.join(sys.argv[1], "lcm-1.5.3-*.whl"))[0]
+with zipfile.ZipFile(wheel) as z, open("build/lcm-gen/lcm-gen", "wb") as out:
+    out.write(z.read("bin/lcm-gen"))
+os.chmod("build/lcm-gen/lcm-gen", 0o755)
+PY
+    rm -rf "$wheels"
+fi
+ln -sf "$ROOT/build/lcm-gen/lcm-gen" .venv/bin/lcm-gen
+
 # Python LCM types are generated from lcm_types/*.lcm by lcm-gen, never hand-written.
 if [[ -x lcm_types/gen_python.sh ]] || [[ -f lcm_types/gen_python.sh ]]; then
     log "generating Python LCM types into build/lcm_python"
-    PATH="$ROOT/.venv/bin:$PATH" bash lcm_types/gen_python.sh
-    site="$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+    LCM_GEN="$ROOT/build/lcm-gen/lcm-gen" bash lcm_types/gen_python.sh
     echo "$ROOT/build/lcm_python" > "$site/pfnav_lcm_types.pth"
 fi
 

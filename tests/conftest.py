@@ -71,7 +71,7 @@ def lcm_url() -> str:
             pytrace=False,
         )
     # A port of its own keeps this session's traffic apart from other tests on the same namespace.
-    return f"udpm://239.255.76.67:{7600 + os.getpid() % 100}?ttl=0"
+    return f"udpm://239.255.76.67:{7600 + os.getpid() % 100}?ttl=0&recv_buf_size=4194304"
 
 
 @pytest.fixture(scope="session")

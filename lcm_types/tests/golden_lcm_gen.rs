@@ -9,7 +9,7 @@
 //! - the Rust decoder reads lcm-gen's bytes back to the same values.
 //!
 //! lcm-gen and Python come from the repo's venv (`.venv`, set up by scripts/setup.sh: lcm-gen
-//! 1.5.3 from the PyPI `lcm` wheel) or else from PATH; the script needs the class metadata
+//! 1.5.3 extracted from the PyPI `lcm` wheel) or else from PATH; the script needs the class metadata
 //! that lcm-gen >= 1.4 writes (Debian's 1.3.1 does not).
 
 use std::collections::BTreeMap;

@@ -26,7 +26,7 @@ from .errors import HarnessError, PlannerError
 from .paths import repo_root
 from .scenario import Scenario, Terrain
 
-DEFAULT_LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
+DEFAULT_LCM_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304"
 DEFAULT_CHANNEL_PREFIX = "PFNAV_"
 METHODS = ("pf", "astar", "dijkstra")
 # Footprint radius the harness starts the service with (m). The robot's feet stand 0.13 m beside

@@ -1,5 +1,6 @@
 //! Hand-written declarations of the part of `<lcm/lcm.h>` (liblcm 1.3.1) this crate uses.
-//! Checked against `/usr/include/lcm/lcm.h`; the layout of `lcm_recv_buf_t` must match it exactly.
+//! Checked against `build/lcm/include/lcm/lcm.h` (the patched 1.3.1 build of `scripts/build_liblcm.sh`);
+//! the layout of `lcm_recv_buf_t` must match it exactly (`data_size` is a `uint32_t`).
 
 use std::os::raw::{c_char, c_int, c_uint, c_void};
 

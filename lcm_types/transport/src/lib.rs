@@ -1,4 +1,4 @@
-//! Safe wrapper over Debian's liblcm (FFI): open by URL, publish, subscribe, handle with timeout.
+//! Safe wrapper over liblcm (FFI; the patched build of `scripts/build_liblcm.sh`): open by URL, publish, subscribe, handle with timeout.
 //!
 //! This crate is the only place of the project with `unsafe` code for LCM. It speaks raw bytes;
 //! encoding and decoding messages is the job of the `lcm-types` crate.
@@ -32,6 +32,14 @@
 //! - Handler closures must be `Send + 'static`: they are called on whichever thread handles.
 //!   A panic inside a handler is caught at the FFI boundary (a panic must never unwind into C),
 //!   logged with `tracing`, and the handler stays subscribed.
+//!
+//! # Received sizes
+//!
+//! The size liblcm hands over with a message is checked before a slice is made over it: above
+//! the instance's maximum ([`Lcm::set_max_message_size`], default [`MAX_MESSAGE_BYTES`]) or with
+//! a null buffer the message is dropped, counted ([`Lcm::dropped_messages`]) and logged. An
+//! unpatched liblcm computed that size from a malformed packet as 17 − 18, i.e. 2³² − 1
+//! (docs/liblcm-fix.md).
 
 mod ffi;
 
@@ -39,6 +47,7 @@ use std::ffi::{CStr, CString};
 use std::os::raw::{c_char, c_int, c_uint, c_void};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::ptr::NonNull;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::ThreadId;
 use std::time::Duration;
@@ -46,11 +55,18 @@ use std::time::Duration;
 use thiserror::Error;
 
 /// The URL used when neither the caller nor `LCM_DEFAULT_URL` names one: liblcm's default
-/// multicast group with `ttl=0`, so packets never leave the host.
-pub const DEFAULT_URL: &str = "udpm://239.255.76.67:7667?ttl=0";
+/// multicast group with `ttl=0`, so packets never leave the host, and a 4 MiB kernel receive
+/// buffer, so a burst of requests is queued rather than dropped by the kernel (the kernel caps
+/// it at `net.core.rmem_max`).
+pub const DEFAULT_URL: &str = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
 
 /// The environment variable that overrides [`DEFAULT_URL`] in [`Lcm::open_default`].
 pub const DEFAULT_URL_ENV: &str = "LCM_DEFAULT_URL";
+
+/// Largest message size an instance can be configured to hand to a handler, and its default,
+/// bytes (liblcm's own `LCM_MAX_MESSAGE_SIZE`, 256 MiB); anything larger is dropped, counted and
+/// logged before a slice is made over it.
+pub const MAX_MESSAGE_BYTES: usize = 1 << 28;
 
 /// Longest channel name liblcm accepts for publishing (`LCM_MAX_CHANNEL_NAME_LENGTH`).
 pub const MAX_CHANNEL_LEN: usize = 63;
@@ -81,6 +97,8 @@ pub enum LcmError {
     ReentrantHandle,
     #[error("liblcm reported an error while waiting for or dispatching messages")]
     HandleFailed,
+    #[error("maximum message size {bytes} is outside 1..={max} bytes")]
+    MaxMessageSize { bytes: usize, max: usize },
 }
 
 type Handler = Box<dyn FnMut(&str, &[u8]) + Send + 'static>;
@@ -97,6 +115,13 @@ enum SlotState {
 
 struct HandlerSlot {
     state: Mutex<SlotState>,
+    limits: Arc<ReceiveLimits>,
+}
+
+/// The received-size check of one instance, shared with its handler slots.
+struct ReceiveLimits {
+    max_message_bytes: AtomicUsize,
+    dropped: AtomicU64,
 }
 
 fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -114,6 +139,7 @@ pub struct Lcm {
     handling_thread: Mutex<Option<ThreadId>>,
     /// Every slot handed to liblcm as `userdata`; freed only while `handle_lock` is held.
     slots: Mutex<Vec<Arc<HandlerSlot>>>,
+    limits: Arc<ReceiveLimits>,
 }
 
 // SAFETY: see the module documentation. liblcm 1.3.1 guards its subscription tables with an
@@ -148,6 +174,10 @@ impl Lcm {
             handle_lock: Mutex::new(()),
             handling_thread: Mutex::new(None),
             slots: Mutex::new(Vec::new()),
+            limits: Arc::new(ReceiveLimits {
+                max_message_bytes: AtomicUsize::new(MAX_MESSAGE_BYTES),
+                dropped: AtomicU64::new(0),
+            }),
         })
     }
 
@@ -159,6 +189,32 @@ impl Lcm {
     /// The URL this instance was opened with.
     pub fn url(&self) -> &str {
         &self.url
+    }
+
+    /// Sets the largest message (bytes, 1 to [`MAX_MESSAGE_BYTES`]) handed to this instance's
+    /// handlers; larger ones are dropped and counted in [`Lcm::dropped_messages`].
+    pub fn set_max_message_size(&self, bytes: usize) -> Result<(), LcmError> {
+        if !(1..=MAX_MESSAGE_BYTES).contains(&bytes) {
+            return Err(LcmError::MaxMessageSize {
+                bytes,
+                max: MAX_MESSAGE_BYTES,
+            });
+        }
+        self.limits
+            .max_message_bytes
+            .store(bytes, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// The largest message handed to handlers, bytes.
+    pub fn max_message_size(&self) -> usize {
+        self.limits.max_message_bytes.load(Ordering::Relaxed)
+    }
+
+    /// Messages liblcm delivered that were dropped before any handler saw them: size above
+    /// [`Lcm::max_message_size`], or a null buffer with a non-zero size.
+    pub fn dropped_messages(&self) -> u64 {
+        self.limits.dropped.load(Ordering::Relaxed)
     }
 
     /// Publishes `data` on `channel` (1 to [`MAX_CHANNEL_LEN`] bytes, no NUL).
@@ -204,6 +260,7 @@ impl Lcm {
         let c_channel = checked_channel(channel_pattern, false)?;
         let slot = Arc::new(HandlerSlot {
             state: Mutex::new(SlotState::Idle(Box::new(handler))),
+            limits: Arc::clone(&self.limits),
         });
         let userdata = Arc::as_ptr(&slot).cast_mut().cast::<c_void>();
         // The slot must be registered before liblcm can call the trampoline with it.
@@ -360,11 +417,43 @@ unsafe extern "C" fn trampoline(
         // SAFETY: liblcm passes a valid recv buffer and a NUL-terminated channel name, both
         // valid for the duration of this call.
         let (rbuf, channel) = unsafe { (&*rbuf, CStr::from_ptr(channel)) };
-        let data: &[u8] = if rbuf.data.is_null() || rbuf.data_size == 0 {
+        // The size is checked before any slice is made from it: a receive path that computed it
+        // from a malformed packet (an unpatched liblcm gave 17 − 18 = 2^32 − 1; `data_size` is a
+        // uint32_t, so an underflow shows up as a huge value) must not become a slice over
+        // memory that is not the message.
+        let max = slot.limits.max_message_bytes.load(Ordering::Relaxed);
+        let size = match usize::try_from(rbuf.data_size) {
+            Ok(size) if size <= max => size,
+            _ => {
+                let dropped = slot.limits.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+                tracing::warn!(
+                    channel = %channel.to_string_lossy(),
+                    size = rbuf.data_size,
+                    max,
+                    dropped,
+                    "liblcm delivered a message above the maximum message size; dropped"
+                );
+                return;
+            }
+        };
+        if rbuf.data.is_null() && size > 0 {
+            let dropped = slot.limits.dropped.fetch_add(1, Ordering::Relaxed) + 1;
+            tracing::warn!(
+                channel = %channel.to_string_lossy(),
+                size,
+                dropped,
+                "liblcm delivered a null buffer with a non-zero size; dropped"
+            );
+            return;
+        }
+        let data: &[u8] = if size == 0 {
             &[]
         } else {
-            // SAFETY: liblcm guarantees `data` points to `data_size` readable bytes.
-            unsafe { std::slice::from_raw_parts(rbuf.data.cast::<u8>(), rbuf.data_size as usize) }
+            // SAFETY: `data` is non-null and liblcm guarantees it points to `data_size` readable
+            // bytes; the patched receive paths (docs/liblcm-fix.md) only deliver sizes bounded
+            // by the received packet or the allocated fragment buffer, and `size` is at most the
+            // configured maximum (≤ MAX_MESSAGE_BYTES).
+            unsafe { std::slice::from_raw_parts(rbuf.data.cast::<u8>(), size) }
         };
         let channel = channel.to_string_lossy();
 

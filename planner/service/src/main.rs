@@ -19,7 +19,7 @@ use tracing_subscriber::EnvFilter;
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Args {
-    /// LCM URL; default: $LCM_DEFAULT_URL, else udpm://239.255.76.67:7667?ttl=0.
+    /// LCM URL; default: $LCM_DEFAULT_URL, else udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304.
     #[arg(long)]
     lcm_url: Option<String>,
     /// Prefix of the four channel names.
@@ -32,8 +32,12 @@ struct Args {
     #[arg(long, default_value_t = 2)]
     workers: usize,
     /// Requests that may wait for a worker; further ones get a STATUS_BUSY reply.
-    #[arg(long = "queue", default_value_t = 64)]
+    #[arg(long = "queue", default_value_t = 2048)]
     queue_capacity: usize,
+    /// Bytes of request packets (inline maps) that may wait together; further ones get a
+    /// STATUS_BUSY reply.
+    #[arg(long, default_value_t = 128 << 20)]
+    max_queued_bytes: usize,
     /// P-F generator sets (map + settings) kept for reuse (least recently used evicted).
     #[arg(long, default_value_t = 4)]
     cache: usize,
@@ -77,6 +81,7 @@ fn main() -> anyhow::Result<()> {
     config.max_map_cells = args.max_map_cells;
     config.workers = args.workers;
     config.queue_capacity = args.queue_capacity;
+    config.max_queued_bytes = args.max_queued_bytes;
     config.cache_capacity = args.cache;
     config.stored_maps = args.stored_maps;
     config.status_period = Duration::from_secs_f64(args.status_period);

@@ -71,6 +71,10 @@ pub struct ServiceConfig {
     pub workers: usize,
     /// Requests that may wait for a worker; more are answered with STATUS_BUSY.
     pub queue_capacity: usize,
+    /// Bytes of request packets (inline maps) that may wait for a worker together; a request
+    /// that would exceed it is answered with STATUS_BUSY. Bounds the queue's memory whatever
+    /// `queue_capacity` is.
+    pub max_queued_bytes: usize,
     /// Generator sets (map + settings) kept for reuse.
     pub cache_capacity: usize,
     /// Maps from the map channel kept for requests that refer to them by seq.
@@ -91,7 +95,8 @@ impl ServiceConfig {
             channels: Channels::with_prefix(prefix)?,
             max_map_cells: 512 * 512,
             workers: 2,
-            queue_capacity: 64,
+            queue_capacity: 2048,
+            max_queued_bytes: 128 << 20,
             cache_capacity: 4,
             stored_maps: 8,
             status_period: Duration::from_secs(1),
@@ -128,6 +133,7 @@ struct Stats {
     latest_map_seq: AtomicI64,
     last_solve_time_bits: AtomicU64,
     queue_depth: AtomicUsize,
+    queued_bytes: AtomicUsize,
     status_seq: AtomicI64,
     reply_seq: AtomicI64,
 }
@@ -145,6 +151,7 @@ impl Stats {
             latest_map_seq: AtomicI64::new(-1),
             last_solve_time_bits: AtomicU64::new(0f64.to_bits()),
             queue_depth: AtomicUsize::new(0),
+            queued_bytes: AtomicUsize::new(0),
             status_seq: AtomicI64::new(0),
             reply_seq: AtomicI64::new(0),
         }
@@ -167,14 +174,80 @@ pub struct ServiceReport {
 struct MapStore {
     capacity: usize,
     maps: Mutex<VecDeque<(i64, Arc<GridMap>)>>,
+    /// The most recent rejections (seq, reason), newest first, at most [`REJECTIONS_KEPT`].
+    rejected: Mutex<VecDeque<(i64, String)>>,
 }
 
+/// Rejected maps whose reason is remembered.
+const REJECTIONS_KEPT: usize = 64;
+/// Longest remembered rejection reason, bytes (keeps the store's memory bounded).
+const REJECTION_REASON_MAX: usize = 512;
+
 impl MapStore {
+    fn new(capacity: usize) -> Self {
+        Self {
+            capacity,
+            maps: Mutex::new(VecDeque::new()),
+            rejected: Mutex::new(VecDeque::new()),
+        }
+    }
+
     fn insert(&self, seq: i64, map: Arc<GridMap>) {
         let mut maps = self.maps.lock().unwrap_or_else(PoisonError::into_inner);
         maps.retain(|(s, _)| *s != seq);
         maps.push_front((seq, map));
         maps.truncate(self.capacity.max(1));
+        drop(maps);
+        let mut rejected = self.rejected.lock().unwrap_or_else(PoisonError::into_inner);
+        rejected.retain(|(s, _)| *s != seq);
+    }
+
+    fn reject(&self, seq: i64, reason: &str) {
+        let mut reason = reason.to_owned();
+        if reason.len() > REJECTION_REASON_MAX {
+            let mut end = REJECTION_REASON_MAX;
+            while !reason.is_char_boundary(end) {
+                end -= 1;
+            }
+            reason.truncate(end);
+            reason.push('…');
+        }
+        let mut rejected = self.rejected.lock().unwrap_or_else(PoisonError::into_inner);
+        rejected.retain(|(s, _)| *s != seq);
+        rejected.push_front((seq, reason));
+        rejected.truncate(REJECTIONS_KEPT);
+    }
+
+    /// Why the map with `seq` was rejected, if it is one of the last [`REJECTIONS_KEPT`]
+    /// rejections and no valid map with that seq arrived since.
+    fn rejection(&self, seq: i64) -> Option<String> {
+        let rejected = self.rejected.lock().unwrap_or_else(PoisonError::into_inner);
+        rejected
+            .iter()
+            .find(|(s, _)| *s == seq)
+            .map(|(_, reason)| reason.clone())
+    }
+
+    /// A request that names a stored-map seq the store does not hold gets the reason that map
+    /// was rejected, when it was one of the recent rejections.
+    fn explain_missing_map(&self, msg: &PlanRequest, rejection: Rejection) -> Rejection {
+        let names_stored_map = msg.num_inline_maps == 0 && msg.map_seq != -1;
+        if rejection.status != PlanReply::STATUS_INVALID_MAP
+            || !names_stored_map
+            || self.map_by_seq(msg.map_seq).is_some()
+        {
+            return rejection;
+        }
+        match self.rejection(msg.map_seq) {
+            Some(reason) => Rejection::new(
+                PlanReply::STATUS_INVALID_MAP,
+                format!(
+                    "map seq {} was rejected when it was published: {reason}",
+                    msg.map_seq
+                ),
+            ),
+            None => rejection,
+        }
     }
 }
 
@@ -202,6 +275,9 @@ struct Shared {
 struct Job {
     request: ValidatedRequest,
     received: Instant,
+    /// Charged against `max_queued_bytes` while the job waits: the packet's size, twice (the
+    /// decoded inline map holds about as much again as its wire form).
+    queued_bytes: usize,
 }
 
 fn now_utime() -> i64 {
@@ -334,6 +410,7 @@ impl Shared {
         ) {
             self.stats.malformed.fetch_add(1, Ordering::Relaxed);
             warn!(seq = claim.seq, reason = %rejection.reason, "map rejected before decoding");
+            self.maps.reject(claim.seq, &rejection.reason);
             return;
         }
         let map = TerrainMap::decode_with_limits(bytes, &self.decode_limits())
@@ -352,6 +429,7 @@ impl Shared {
             Err(rejection) => {
                 self.stats.malformed.fetch_add(1, Ordering::Relaxed);
                 warn!(seq = claim.seq, reason = %rejection.reason, "map rejected");
+                self.maps.reject(claim.seq, &rejection.reason);
             }
         }
     }
@@ -406,6 +484,7 @@ impl Shared {
         ) {
             Ok(request) => request,
             Err(rejection) => {
+                let rejection = self.maps.explain_missing_map(&msg, rejection);
                 self.reject(msg.request_id, msg.method, msg.map_seq, rejection, 0.0);
                 return;
             }
@@ -414,11 +493,38 @@ impl Shared {
             self.reject_shutting_down(&request);
             return;
         }
+        let queued_bytes = bytes.len().saturating_mul(2);
+        let waiting = self
+            .stats
+            .queued_bytes
+            .fetch_add(queued_bytes, Ordering::SeqCst);
+        if waiting.saturating_add(queued_bytes) > self.config.max_queued_bytes && waiting > 0 {
+            self.stats
+                .queued_bytes
+                .fetch_sub(queued_bytes, Ordering::SeqCst);
+            let rejection = Rejection::new(
+                PlanReply::STATUS_BUSY,
+                format!(
+                    "busy: {waiting} bytes of requests are already waiting (limit {}); retry later",
+                    self.config.max_queued_bytes
+                ),
+            );
+            let r = &request;
+            self.reject(r.request_id, r.method_code, r.map_seq, rejection, 0.0);
+            return;
+        }
         self.stats.queue_depth.fetch_add(1, Ordering::SeqCst);
-        match queue.try_send(Job { request, received }) {
+        match queue.try_send(Job {
+            request,
+            received,
+            queued_bytes,
+        }) {
             Ok(()) => {}
             Err(TrySendError::Full(job) | TrySendError::Disconnected(job)) => {
                 self.stats.queue_depth.fetch_sub(1, Ordering::SeqCst);
+                self.stats
+                    .queued_bytes
+                    .fetch_sub(job.queued_bytes, Ordering::SeqCst);
                 let rejection = Rejection::new(
                     PlanReply::STATUS_BUSY,
                     format!(
@@ -449,6 +555,9 @@ impl Shared {
     fn worker(&self, jobs: &Receiver<Job>) {
         for job in jobs.iter() {
             self.stats.queue_depth.fetch_sub(1, Ordering::SeqCst);
+            self.stats
+                .queued_bytes
+                .fetch_sub(job.queued_bytes, Ordering::SeqCst);
             let request = &job.request;
             if self.shutdown.load(Ordering::SeqCst) {
                 self.reject_shutting_down(request);
@@ -527,10 +636,7 @@ pub fn run(
     let (queue, jobs) = crossbeam_channel::bounded::<Job>(config.queue_capacity);
     let shared = Arc::new(Shared {
         cache: GeneratorCache::new(config.cache_capacity),
-        maps: MapStore {
-            capacity: config.stored_maps,
-            maps: Mutex::new(VecDeque::new()),
-        },
+        maps: MapStore::new(config.stored_maps),
         stats: Stats::new(),
         lcm: Arc::clone(&lcm),
         config,

@@ -413,7 +413,7 @@ fn status_is_published_every_period_with_counters() {
     let status = last.unwrap();
     assert!(status.uptime > 0.0);
     assert_eq!((status.requests_received, status.requests_served), (1, 1));
-    assert_eq!(status.queue_capacity, 64);
+    assert_eq!(status.queue_capacity, 2048); // ServiceConfig default: holds a burst
     assert!(status.last_solve_time > 0.0);
     service.stop();
 }

@@ -1,5 +1,5 @@
-//! An in-process service on `memq://` and a client on the same LCM instance (memq delivers only
-//! within one instance). No network is involved.
+//! An in-process service on `memq://` (or, inside the test network namespace, a `udpm://` URL)
+//! and a client on the same LCM instance (memq delivers only within one instance).
 
 #![allow(dead_code)] // each test binary uses a different part of this helper
 
@@ -34,6 +34,12 @@ pub struct TestService {
 impl TestService {
     /// Starts the service with `config` on a fresh memq instance.
     pub fn start(config: ServiceConfig) -> Self {
+        Self::start_on("memq://", config)
+    }
+
+    /// The service and the client on one LCM instance opened with `url` (a `udpm://` URL only
+    /// inside the test network namespace).
+    pub fn start_on(url: &str, config: ServiceConfig) -> Self {
         // Service logs in the test output (RUST_LOG=debug for more); once per test binary.
         let _ = tracing_subscriber::fmt()
             .with_env_filter(
@@ -44,7 +50,7 @@ impl TestService {
             .try_init();
         // 'static so that the client subscriptions can live next to the service; one small
         // leaked instance per test.
-        let lcm_arc = Arc::new(Lcm::open("memq://").expect("memq"));
+        let lcm_arc = Arc::new(Lcm::open(url).expect("LCM URL opens"));
         let lcm: &'static Lcm = Box::leak(Box::new(Arc::clone(&lcm_arc)));
         let (reply_tx, replies) = mpsc::channel();
         let reply_sub = lcm
