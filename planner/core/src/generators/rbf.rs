@@ -28,9 +28,10 @@ use crate::error::PlanError;
 use crate::grid::PlanningGrid;
 use crate::map::Point;
 
-/// Largest accepted number of active RBF functions: 256² centres. Memory is estimated before
-/// anything is built (see [`estimated_bytes`]); at 128² centres the build holds about 0.2 GB.
-pub const MAX_RBF_FUNCTIONS: usize = 256 * 256;
+/// Largest accepted number of active RBF functions: 192² centres, so that one request stays well
+/// below 1 GB (measured peak of a whole `pf-plan` RBF plan on c_shape: 128² centres 0.24 GB,
+/// 256² centres 0.95 GB).
+pub const MAX_RBF_FUNCTIONS: usize = 192 * 192;
 
 /// Largest estimated memory of one RBF build, bytes.
 pub const MAX_RBF_BUILD_BYTES: usize = 1 << 30;
