@@ -21,7 +21,7 @@ use lcm_types::Message;
 use pf_planner::map::GridMap;
 use pf_planner::scenarios;
 use pf_planner::traversability::TraversabilityParams;
-use pf_planner_service::convert::{validate_request, MapSource, OptionDefaults};
+use pf_planner_service::convert::{map_to_message, validate_request, MapSource, OptionDefaults};
 use pf_planner_service::planning::{self, GeneratorCache};
 use pf_planner_service::ServiceConfig;
 
@@ -55,27 +55,6 @@ impl Recorder {
         times.sort_by(f64::total_cmp);
         let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
         self.0.borrow_mut().push((name.to_owned(), median));
-    }
-}
-
-/// The wire form of a planner map.
-fn map_message(map: &GridMap, seq: i64) -> TerrainMap {
-    let obstacles = map.obstacles.clone().unwrap_or_default();
-    TerrainMap {
-        header: Header {
-            utime: 0,
-            seq,
-            frame_id: "world".into(),
-        },
-        origin_x: map.origin[0],
-        origin_y: map.origin[1],
-        resolution: map.resolution,
-        width: i32::try_from(map.width).expect("width"),
-        height: i32::try_from(map.height).expect("height"),
-        num_cells: i32::try_from(map.heights.len()).expect("cells"),
-        heights: map.heights.clone(),
-        num_obstacle_cells: i32::try_from(obstacles.len()).expect("obstacles"),
-        obstacle_mask: obstacles,
     }
 }
 
@@ -222,7 +201,7 @@ fn main() {
     }
 
     let scenario = scenarios::by_name("c_shape").expect("scenario");
-    let published = map_message(&scenario.map, PUBLISHED_SEQ);
+    let published = map_to_message(&scenario.map, PUBLISHED_SEQ);
     lcm.publish(&config.channels.map, &published.encode().expect("encodes"))
         .expect("publish map");
     let maps = PublishedMap(Arc::new(scenario.map.clone()));

@@ -76,6 +76,29 @@ pub fn check_map_size(
     Ok(())
 }
 
+/// The wire form of a planner map (the inverse of [`map_from_message`]), `header.seq = seq`.
+/// Sizes that do not fit the wire's `int32_t` saturate (such a map is refused on receipt).
+pub fn map_to_message(map: &GridMap, seq: i64) -> TerrainMap {
+    let obstacles = map.obstacles.clone().unwrap_or_default();
+    let int = |n: usize| i32::try_from(n).unwrap_or(i32::MAX);
+    TerrainMap {
+        header: lcm_types::pfnav::Header {
+            utime: 0,
+            seq,
+            frame_id: "world".into(),
+        },
+        origin_x: map.origin[0],
+        origin_y: map.origin[1],
+        resolution: map.resolution,
+        width: int(map.width),
+        height: int(map.height),
+        num_cells: int(map.heights.len()),
+        heights: map.heights.clone(),
+        num_obstacle_cells: int(obstacles.len()),
+        obstacle_mask: obstacles,
+    }
+}
+
 /// Turns a decoded `terrain_map_t` into a validated [`GridMap`].
 pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<GridMap, Rejection> {
     check_map_size(msg.width, msg.height, msg.num_cells, max_cells)?;

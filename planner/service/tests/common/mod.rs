@@ -12,7 +12,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use lcm_transport::Lcm;
-use lcm_types::pfnav::{Header, PlanReply, PlanRequest, ServiceStatus, TerrainMap};
+use lcm_types::pfnav::{PlanReply, PlanRequest, ServiceStatus, TerrainMap};
 use lcm_types::Message;
 use pf_planner::map::GridMap;
 use pf_planner_service::{ServiceConfig, ServiceReport};
@@ -173,23 +173,7 @@ pub fn config(prefix: &str) -> ServiceConfig {
 
 /// The wire form of a planner map.
 pub fn map_message(map: &GridMap, seq: i64) -> TerrainMap {
-    let obstacles = map.obstacles.clone().unwrap_or_default();
-    TerrainMap {
-        header: Header {
-            utime: 0,
-            seq,
-            frame_id: "world".into(),
-        },
-        origin_x: map.origin[0],
-        origin_y: map.origin[1],
-        resolution: map.resolution,
-        width: i32::try_from(map.width).unwrap(),
-        height: i32::try_from(map.height).unwrap(),
-        num_cells: i32::try_from(map.heights.len()).unwrap(),
-        heights: map.heights.clone(),
-        num_obstacle_cells: i32::try_from(obstacles.len()).unwrap(),
-        obstacle_mask: obstacles,
-    }
+    pf_planner_service::convert::map_to_message(map, seq)
 }
 
 /// A flat `n` x `n` map of 0.25 m cells at the origin, with optional obstacle cells.
