@@ -11,16 +11,9 @@ use pf_planner::pf::{self, PfGenerators, PfOptions, StartDensity};
 use pf_planner::ssp::{self, Structure};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use support::{graph_value, random_free_point, random_grid};
+use support::{graph_value, random_free_point, random_grid, settings};
 
 const TOLERANCE: f64 = 1e-6;
-
-fn settings(solver: LpSolver) -> LpSettings {
-    LpSettings {
-        solver,
-        ..LpSettings::default()
-    }
-}
 
 /// A stochastic version of Ulam's generators: each move lands where it should with probability
 /// 0.8 and, with 0.2, where the next direction's move from the same cell lands (or stays put when

@@ -5,17 +5,11 @@ mod support;
 
 use pf_planner::basis::BasisKind;
 use pf_planner::grid::PlanningGrid;
-use pf_planner::lp::{self, LpSettings, LpSolver};
+use pf_planner::lp::{self, LpSolver};
 use pf_planner::pf::{self, PfGenerators, PfOptions, StartDensity};
 use pf_planner::scenarios;
 use pf_planner::ssp::{self, Structure};
-
-fn settings(solver: LpSolver) -> LpSettings {
-    LpSettings {
-        solver,
-        ..LpSettings::default()
-    }
-}
+use support::settings;
 
 /// On the three scenarios at 24² centres: the generators are Markov (stochastic, so the exact
 /// path is policy iteration), the exact and Clarabel optima agree to 1e-6, and both are

@@ -4,6 +4,7 @@
 
 use pf_planner::graph::{distances_to_targets, Connectivity};
 use pf_planner::grid::PlanningGrid;
+use pf_planner::lp::{LpSettings, LpSolver};
 use pf_planner::pf::{PfGenerators, PfSolution};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -64,5 +65,13 @@ pub fn random_free_point(rng: &mut ChaCha8Rng, grid: &PlanningGrid) -> [f64; 2] 
         if !grid.blocked[c] {
             return grid.center_of_index(c);
         }
+    }
+}
+
+/// The default LP settings with the given solver.
+pub fn settings(solver: LpSolver) -> LpSettings {
+    LpSettings {
+        solver,
+        ..LpSettings::default()
     }
 }
