@@ -1,6 +1,6 @@
 //! MPC solve time at horizon 10 (Clarabel on the sparse QP, incl. model building and assembly),
 //! median and p99, on a trotting and a standing problem; the same problem, as the condensed QP of
-//! `ConvexMpc::last_qp`, is also solved by OSQP for comparison. Then 300 seeded random trot and
+//! the test oracle (`tests/support/mpc_oracle.rs`), is also solved by OSQP for comparison. Then 300 seeded random trot and
 //! stand problems: interior-point iterations, solve time and the step-0 force error against the
 //! exact optimum of each problem (one benchmark instance says little about the spread).
 use std::time::Instant;
@@ -9,6 +9,13 @@ use std::time::Instant;
 mod mpc_cases;
 #[path = "../tests/support/osqp_qp.rs"]
 mod osqp_qp;
+mod mpc_api {
+    pub use quad_controller::math::rot_z;
+    pub use quad_controller::mpc::*;
+    pub use quad_controller::NUM_LEGS;
+}
+#[path = "../tests/support/mpc_oracle.rs"]
+mod mpc_oracle;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use quad_controller::mpc::{ConvexMpc, MpcSolution, MpcStatus};
@@ -116,13 +123,11 @@ fn bench_mpc(c: &mut Criterion) {
     for (label, trot) in [("trot", true), ("stand", false)] {
         let mut problem = Problem::new(trot);
         let first = problem.solve();
+        let qp = mpc_oracle::condensed_qp(problem.mpc.params(), &problem.case.input());
         println!(
             "MPC horizon 10, {label}: {} QP variables ({} forces), {} inequality constraints, \
              {} iterations",
-            first.num_variables,
-            problem.mpc.last_qp().n,
-            problem.mpc.last_qp().m,
-            first.iterations
+            first.num_variables, qp.n, qp.m, first.iterations
         );
         report(&format!("clarabel {label}"), || {
             problem.solve().status == MpcStatus::Solved
@@ -130,13 +135,13 @@ fn bench_mpc(c: &mut Criterion) {
         c.bench_function(&format!("mpc_clarabel_h10_{label}"), |b| {
             b.iter(|| problem.solve().status)
         });
-        osqp_compare::run(c, label, problem.mpc.last_qp());
+        osqp_compare::run(c, label, &qp);
     }
 }
 
 mod osqp_compare {
+    use super::mpc_oracle::QpData;
     use criterion::Criterion;
-    use quad_controller::mpc::QpData;
 
     fn problem(qp: &QpData) -> osqp::Problem {
         super::osqp_qp::osqp_problem(qp, 1e-5).expect("OSQP setup")
@@ -189,7 +194,10 @@ fn random_problems(_: &mut Criterion) {
                 failures += 1;
                 continue;
             }
-            let exact = mpc_cases::reference_solution(mpc.last_qp());
+            let exact = mpc_cases::reference_solution(&mpc_oracle::condensed_qp(
+                mpc.params(),
+                &case.input(),
+            ));
             errors.push(mpc_cases::step0_force_error(&solution, &case, &exact));
             iterations.push(f64::from(solution.iterations));
             times.push(percentiles(samples).0);

@@ -31,8 +31,9 @@ use crate::api::{
     RobotState, GRAVITY, NUM_JOINTS, NUM_LEGS,
 };
 use crate::gait::{swing_trajectory, Gait, LegPhase};
-use crate::model::{wrap_angle, RobotModel};
-use crate::mpc::{ConvexMpc, MpcInput, MpcStatus, MPC_STATES};
+use crate::math::{rot_z, wrap_angle};
+use crate::model::RobotModel;
+use crate::mpc::{ConvexMpc, MpcInput, MpcParams, MpcStatus, MPC_STATES};
 
 /// Quantities derived from the measured state once per tick.
 #[derive(Clone, Debug)]
@@ -318,11 +319,6 @@ fn terrain_normal(reference: &Reference) -> Vector3<f64> {
     Vector3::new(-reference.terrain.slope_x, -reference.terrain.slope_y, 1.0).normalize()
 }
 
-fn rot_z(yaw: f64) -> Matrix3<f64> {
-    let (s, c) = yaw.sin_cos();
-    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
-}
-
 fn leg_slice<const N: usize>(values: &[f64; N], leg: Leg) -> [f64; 3] {
     let l = leg.index();
     [values[3 * l], values[3 * l + 1], values[3 * l + 2]]
@@ -346,7 +342,7 @@ impl Controller {
             stand_joint_positions[3 * leg.index()..3 * leg.index() + 3].copy_from_slice(&q);
         }
         let (inertia, com) = model.composite_inertia(&stand_joint_positions);
-        let mpc = ConvexMpc::new(config.mpc_params(model.total_mass(), inertia))
+        let mpc = ConvexMpc::new(MpcParams::from_config(&config, model.total_mass(), inertia))
             .map_err(ControllerError::Config)?;
         let n = config.mpc_horizon;
         Ok(Controller {

@@ -19,6 +19,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use crate::api::{Leg, ModelError, NUM_JOINTS, NUM_LEGS};
+use crate::math::wrap_angle;
 
 /// Rigid transform (rotation, translation) mapping child-frame coordinates to the parent frame.
 #[derive(Clone, Copy, Debug)]
@@ -806,18 +807,6 @@ impl RobotModel {
     }
 }
 
-/// Wrap an angle to (−π, π].
-pub fn wrap_angle(angle: f64) -> f64 {
-    let two_pi = std::f64::consts::TAU;
-    let mut a = angle % two_pi;
-    if a > std::f64::consts::PI {
-        a -= two_pi;
-    } else if a <= -std::f64::consts::PI {
-        a += two_pi;
-    }
-    a
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -838,11 +827,5 @@ mod tests {
         assert!((a.mass - 2.0).abs() < 1e-15);
         assert!((a.com.x - 0.1).abs() < 1e-15);
         assert!((a.inertia_com[(0, 0)] - 0.01).abs() < 1e-15);
-    }
-
-    #[test]
-    fn wrap_angle_range() {
-        assert!((wrap_angle(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
-        assert!((wrap_angle(-0.5) + 0.5).abs() < 1e-15);
     }
 }

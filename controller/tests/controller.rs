@@ -37,7 +37,7 @@ fn standing_mpc_forces(contacts: [bool; 4]) -> ([[f64; 3]; 4], f64, ControllerCo
     let (inertia, com) = model.composite_inertia(&ctrl.stand_joint_positions());
     let mut mpc = ConvexMpc::new(MpcParams {
         horizon: 10,
-        ..config.mpc_params(model.total_mass(), inertia)
+        ..MpcParams::from_config(&config, model.total_mass(), inertia)
     })
     .expect("valid MPC");
     let base_z = 0.28;

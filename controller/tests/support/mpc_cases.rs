@@ -4,12 +4,13 @@
 //! 1e-11, optimality conditions checked) and the step-0 force error of a solve against it.
 #![allow(dead_code)] // each includer uses a different part
 
+use super::mpc_oracle::QpData;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
 use quad_controller::gait::Gait;
-use quad_controller::mpc::{ConvexMpc, MpcInput, MpcParams, MpcSolution, QpData};
+use quad_controller::mpc::{ConvexMpc, MpcInput, MpcParams, MpcSolution};
 use quad_controller::{Controller, ControllerConfig, GaitKind, Leg, RobotModel, GRAVITY};
 
 pub const HORIZON: usize = 10;
@@ -103,7 +104,7 @@ pub fn mpc_and_cases(model: &RobotModel) -> (ConvexMpc, CaseBuilder) {
     let (inertia, com) = model.composite_inertia(&q);
     let mpc = ConvexMpc::new(MpcParams {
         horizon: HORIZON,
-        ..config.mpc_params(model.total_mass(), inertia)
+        ..MpcParams::from_config(&config, model.total_mass(), inertia)
     })
     .expect("MPC");
     let feet = Leg::ALL.map(|leg| {

@@ -1,6 +1,6 @@
 //! The condensed MPC QP ([`QpData`], `min ½uᵀPu + qᵀu s.t. Au ≤ b`) as an OSQP problem: shared
 //! by the MPC benchmark (solver comparison) and the MPC tests (cross-check of the optimum).
-use quad_controller::mpc::QpData;
+use super::mpc_oracle::QpData;
 
 /// OSQP with the given absolute/relative tolerance and solution polishing.
 pub fn osqp_problem(qp: &QpData, eps: f64) -> Result<osqp::Problem, osqp::SetupError> {
