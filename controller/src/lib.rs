@@ -29,6 +29,7 @@ pub mod api;
 pub mod controller;
 pub mod gait;
 pub mod limits;
+pub mod math;
 pub mod model;
 pub mod mpc;
 
