@@ -80,6 +80,20 @@ pub struct SwingSample {
     pub acceleration: [f64; 3],
 }
 
+/// Horizontal progress of the swing foot at swing progress `s ∈ [0, 1]`: the smoothstep
+/// 3s² − 2s³ (zero velocity at lift-off and touchdown).
+pub fn swing_blend(s: f64) -> f64 {
+    3.0 * s * s - 2.0 * s.powi(3)
+}
+
+/// Vertical bump of the swing foot above the straight lift-off → touchdown line for a unit apex,
+/// at swing progress `s ∈ [0, 1]`: 64 s³(1 − s)³, 1 at mid-swing, zero velocity and acceleration
+/// at both ends.
+pub fn swing_bump_shape(s: f64) -> f64 {
+    let u = s * (1.0 - s);
+    64.0 * u.powi(3)
+}
+
 /// Swing trajectory from `start` to `end` over `duration` seconds, sampled at progress `s ∈ [0,1]`:
 /// a smoothstep (3s² − 2s³) blend for every axis plus a vertical bump `h·64 s³(1 − s)³` that
 /// peaks at `h` mid-swing and has zero velocity and acceleration at both ends.
@@ -91,13 +105,13 @@ pub fn swing_trajectory(
     s: f64,
 ) -> SwingSample {
     let s = s.clamp(0.0, 1.0);
-    let blend = 3.0 * s * s - 2.0 * s.powi(3);
+    let blend = swing_blend(s);
     let blend_d = 6.0 * s - 6.0 * s * s;
     let blend_dd = 6.0 - 12.0 * s;
     let u = s * (1.0 - s);
     // bump = 64 h u³, u' = 1 − 2s, u'' = −2
     let du = 1.0 - 2.0 * s;
-    let bump = 64.0 * height * u.powi(3);
+    let bump = height * swing_bump_shape(s);
     let bump_d = 64.0 * height * 3.0 * u * u * du;
     let bump_dd = 64.0 * height * (6.0 * u * du * du - 6.0 * u * u);
     let inv_t = 1.0 / duration;

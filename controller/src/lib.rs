@@ -27,11 +27,17 @@
 //!   CoM offset from the base origin.
 pub mod api;
 pub mod controller;
+mod estimate;
+mod footholds;
+mod fsm;
 pub mod gait;
+mod leg_control;
 pub mod limits;
 pub mod math;
 pub mod model;
 pub mod mpc;
+mod mpc_schedule;
+mod validation;
 
 pub use api::*;
 pub use controller::Controller;

@@ -1,0 +1,223 @@
+//! Locomotion: the gait following the reference. Each tick runs the pipeline gait schedule →
+//! touchdown footholds of the swing legs → MPC forces for the stance legs → leg torque laws
+//! (stance `Jᵀ f`, swing trajectory tracking).
+
+use nalgebra::Vector3;
+
+use super::{Actuation, Stages};
+use crate::api::{ControllerConfig, FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::estimate::Estimate;
+use crate::footholds::{FootholdPlanner, MotionTarget};
+use crate::gait::{swing_trajectory, Gait, LegPhase};
+use crate::model::RobotModel;
+
+pub struct Locomotion {
+    gait: Gait,
+    mpc_dt: f64,
+    /// Time since entering locomotion, s (the gait's clock).
+    gait_time: f64,
+    /// Stance flags of the previous tick (edges start swings and stances).
+    contacts: [bool; NUM_LEGS],
+    /// Foot position at lift-off of each leg's current swing, world frame, m.
+    swing_start: [Vector3<f64>; NUM_LEGS],
+    /// Touchdown target of each leg's current (or last) swing, world frame, m.
+    footholds: [Vector3<f64>; NUM_LEGS],
+    /// Foot position at touchdown of each leg's current stance, world frame, m.
+    stance_anchor: [Vector3<f64>; NUM_LEGS],
+}
+
+impl Locomotion {
+    pub fn new(gait: Gait, config: &ControllerConfig) -> Self {
+        Locomotion {
+            gait,
+            mpc_dt: config.mpc_dt,
+            gait_time: 0.0,
+            contacts: [false; NUM_LEGS],
+            swing_start: [Vector3::zeros(); NUM_LEGS],
+            footholds: [Vector3::zeros(); NUM_LEGS],
+            stance_anchor: [Vector3::zeros(); NUM_LEGS],
+        }
+    }
+
+    pub fn enter(&mut self, estimate: &Estimate) {
+        self.gait_time = 0.0;
+        self.contacts = [true; NUM_LEGS];
+        self.stance_anchor = estimate.feet_world;
+        self.swing_start = estimate.feet_world;
+        self.footholds = estimate.feet_world;
+    }
+
+    pub fn run(
+        &mut self,
+        model: &RobotModel,
+        stages: &mut Stages,
+        estimate: &Estimate,
+        reference: &Reference,
+        dt: f64,
+    ) -> Actuation {
+        let t = self.gait_time;
+        let contacts = self.gait.contacts(t);
+        self.track_contact_edges(estimate, contacts);
+        let target = MotionTarget {
+            xy: [reference.x, reference.y],
+            yaw: reference.yaw,
+            velocity: [reference.vx, reference.vy],
+            yaw_rate: reference.yaw_rate,
+        };
+        self.plan_touchdowns(&stages.footholds, estimate, reference, &target);
+        let (gait, mpc_dt) = (self.gait, self.mpc_dt);
+        stages
+            .mpc
+            .set_schedule(|k| gait.contacts(t + k as f64 * mpc_dt));
+        let this = &*self;
+        stages.mpc.update_forces(
+            &stages.footholds,
+            estimate,
+            reference,
+            &target,
+            contacts,
+            |schedule, leg, k| {
+                this.planned_foot(
+                    &stages.footholds,
+                    estimate,
+                    reference,
+                    &target,
+                    schedule,
+                    leg,
+                    k,
+                )
+            },
+        );
+        let forces = stages.mpc.forces();
+        let mut torques = [0.0; NUM_JOINTS];
+        let mut feet = [[0.0; 3]; NUM_LEGS];
+        for leg in Leg::ALL {
+            let l = leg.index();
+            match self.gait.phase(leg, t) {
+                LegPhase::Stance(_) => {
+                    stages
+                        .legs
+                        .stance_torques(model, estimate, leg, forces[l], &mut torques);
+                    let a = self.stance_anchor[l];
+                    feet[l] = [a.x, a.y, a.z];
+                }
+                LegPhase::Swing(s) => {
+                    let start = self.swing_start[l];
+                    let end = self.footholds[l];
+                    let sample = swing_trajectory(
+                        [start.x, start.y, start.z],
+                        [end.x, end.y, end.z],
+                        stages.footholds.swing_apex(reference, &start, &end),
+                        self.gait.swing_time(),
+                        s,
+                    );
+                    stages
+                        .legs
+                        .swing_torques(model, estimate, leg, &sample, &mut torques);
+                    feet[l] = sample.position;
+                }
+            }
+        }
+        self.gait_time += dt;
+        Actuation {
+            torques,
+            contacts,
+            forces,
+            feet,
+        }
+    }
+
+    pub fn check_transition(
+        &self,
+        fault: impl Fn() -> Option<String>,
+        mode: ModeRequest,
+    ) -> Option<FsmState> {
+        if let Some(reason) = fault() {
+            tracing::warn!(%reason, "fault during locomotion: damping");
+            return Some(FsmState::Damping);
+        }
+        match mode {
+            ModeRequest::Passive => Some(FsmState::Passive),
+            ModeRequest::Stand => Some(FsmState::Stand),
+            ModeRequest::Locomotion => None,
+        }
+    }
+
+    /// Records where each swing starts (lift-off) and each stance is anchored (touchdown).
+    fn track_contact_edges(&mut self, estimate: &Estimate, contacts: [bool; NUM_LEGS]) {
+        for leg in Leg::ALL {
+            let l = leg.index();
+            if self.contacts[l] && !contacts[l] {
+                self.swing_start[l] = estimate.feet_world[l];
+            } else if !self.contacts[l] && contacts[l] {
+                self.stance_anchor[l] = estimate.feet_world[l];
+            }
+        }
+        self.contacts = contacts;
+    }
+
+    /// Touchdown targets of the legs in swing (Raibert heuristic, recomputed every tick).
+    fn plan_touchdowns(
+        &mut self,
+        planner: &FootholdPlanner,
+        estimate: &Estimate,
+        reference: &Reference,
+        target: &MotionTarget,
+    ) {
+        let stance_time = self.gait.stance_time();
+        for leg in Leg::ALL {
+            if let LegPhase::Swing(s) = self.gait.phase(leg, self.gait_time) {
+                let remaining = (1.0 - s) * self.gait.swing_time();
+                self.footholds[leg.index()] = planner.raibert_foothold(
+                    estimate,
+                    reference,
+                    target,
+                    leg,
+                    remaining,
+                    stance_time,
+                );
+            }
+        }
+    }
+
+    /// Foot of a leg at horizon step k: its current position in the current stance, its
+    /// touchdown target for the stance after the current swing, a nominal foothold afterwards.
+    #[allow(clippy::too_many_arguments)] // the MPC's foot callback needs every input of the plan
+    fn planned_foot(
+        &self,
+        planner: &FootholdPlanner,
+        estimate: &Estimate,
+        reference: &Reference,
+        target: &MotionTarget,
+        schedule: &[[bool; NUM_LEGS]],
+        leg: Leg,
+        k: usize,
+    ) -> Vector3<f64> {
+        let l = leg.index();
+        let mut liftoffs = 0;
+        let mut previous = self.contacts[l];
+        for stance in schedule.iter().take(k + 1).skip(1).map(|step| step[l]) {
+            if previous && !stance {
+                liftoffs += 1;
+            }
+            previous = stance;
+        }
+        if liftoffs == 0 {
+            if self.contacts[l] {
+                estimate.feet_world[l]
+            } else {
+                self.footholds[l]
+            }
+        } else {
+            let tk = k as f64 * self.mpc_dt;
+            planner.raibert_foothold(
+                estimate,
+                reference,
+                target,
+                leg,
+                tk,
+                self.gait.stance_time(),
+            )
+        }
+    }
+}

@@ -1,0 +1,82 @@
+//! Stand: four-leg balance with the MPC, holding the base where it was on entry.
+
+use super::{measured_feet, Actuation, Stages};
+use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::estimate::Estimate;
+use crate::footholds::MotionTarget;
+use crate::model::RobotModel;
+
+pub struct Stand {
+    /// Base pose held, taken on entry.
+    hold: MotionTarget,
+}
+
+impl Stand {
+    pub fn new() -> Self {
+        Stand {
+            hold: MotionTarget {
+                xy: [0.0; 2],
+                yaw: 0.0,
+                velocity: [0.0; 2],
+                yaw_rate: 0.0,
+            },
+        }
+    }
+
+    pub fn enter(&mut self, estimate: &Estimate) {
+        self.hold = MotionTarget {
+            xy: [estimate.position.x, estimate.position.y],
+            yaw: estimate.rpy.z,
+            velocity: [0.0; 2],
+            yaw_rate: 0.0,
+        };
+    }
+
+    pub fn run(
+        &mut self,
+        model: &RobotModel,
+        stages: &mut Stages,
+        estimate: &Estimate,
+        reference: &Reference,
+    ) -> Actuation {
+        let contacts = [true; NUM_LEGS];
+        stages.mpc.set_schedule(|_| contacts);
+        stages.mpc.update_forces(
+            &stages.footholds,
+            estimate,
+            reference,
+            &self.hold,
+            contacts,
+            |_, leg, _| estimate.feet_world[leg.index()],
+        );
+        let forces = stages.mpc.forces();
+        let mut torques = [0.0; NUM_JOINTS];
+        for leg in Leg::ALL {
+            stages
+                .legs
+                .stance_torques(model, estimate, leg, forces[leg.index()], &mut torques);
+        }
+        Actuation {
+            torques,
+            contacts,
+            forces,
+            feet: measured_feet(estimate),
+        }
+    }
+
+    pub fn check_transition(
+        &self,
+        fault: impl Fn() -> Option<String>,
+        mode: ModeRequest,
+    ) -> Option<FsmState> {
+        if let Some(reason) = fault() {
+            tracing::warn!(%reason, "fault while standing: damping");
+            return Some(FsmState::Damping);
+        }
+        match mode {
+            ModeRequest::Passive => Some(FsmState::Passive),
+            ModeRequest::Stand => None,
+            ModeRequest::Locomotion => Some(FsmState::Locomotion),
+        }
+    }
+}

@@ -1,0 +1,73 @@
+//! Stand-up: joint-space interpolation from the pose at entry to the standing pose over
+//! `stand_up_duration`, with a feed-forward of a growing share of the weight on each foot.
+
+use super::{measured_feet, Actuation, Stages};
+use crate::api::{FsmState, ModeRequest, GRAVITY, NUM_JOINTS, NUM_LEGS};
+use crate::estimate::Estimate;
+use crate::model::RobotModel;
+
+/// 3s² − 2s³ on s clamped to [0, 1]: starts and ends the interpolation at zero joint velocity.
+fn smoothstep(s: f64) -> f64 {
+    let s = s.clamp(0.0, 1.0);
+    s * s * (3.0 - 2.0 * s)
+}
+
+pub struct StandUp {
+    duration: f64,
+    /// Joint angles at entry, index 3·leg + j, rad.
+    start: [f64; NUM_JOINTS],
+}
+
+impl StandUp {
+    pub fn new(duration: f64) -> Self {
+        StandUp {
+            duration,
+            start: [0.0; NUM_JOINTS],
+        }
+    }
+
+    pub fn enter(&mut self, estimate: &Estimate) {
+        for (l, q) in estimate.q.iter().enumerate() {
+            self.start[3 * l..3 * l + 3].copy_from_slice(q);
+        }
+    }
+
+    pub fn run(
+        &mut self,
+        model: &RobotModel,
+        stages: &Stages,
+        estimate: &Estimate,
+        state_time: f64,
+    ) -> Actuation {
+        let s = smoothstep(state_time / self.duration);
+        let weight_share = model.total_mass() * GRAVITY / NUM_LEGS as f64 * s;
+        let (torques, forces) =
+            stages
+                .legs
+                .stand_up_torques(model, estimate, &self.start, s, weight_share);
+        Actuation {
+            torques,
+            contacts: [true; NUM_LEGS],
+            forces,
+            feet: measured_feet(estimate),
+        }
+    }
+
+    pub fn check_transition(
+        &self,
+        fault: impl Fn() -> Option<String>,
+        mode: ModeRequest,
+        state_time: f64,
+    ) -> Option<FsmState> {
+        if let Some(reason) = fault() {
+            tracing::warn!(%reason, "fault during stand-up: damping");
+            Some(FsmState::Damping)
+        } else if mode == ModeRequest::Passive {
+            Some(FsmState::Passive)
+        } else if state_time >= self.duration {
+            Some(FsmState::Stand)
+        } else {
+            None
+        }
+    }
+}
