@@ -1,5 +1,5 @@
 //! Public types of the controller: the contract shared with the FMU wrapper and the harness
-//! (see `CONTROLLER_API.md`). Everything here is plain data, `Copy` where cheap, and
+//! (documented on each item below). Everything here is plain data, `Copy` where cheap, and
 //! serialisable where the FMU ships it as a resource file.
 
 use serde::{Deserialize, Serialize};
@@ -416,7 +416,7 @@ pub struct Command {
     /// Ground reaction force acting ON the robot at each foot, world frame, N (zero for swing legs).
     pub desired_forces: [[f64; 3]; NUM_LEGS],
     /// Desired foot (sphere centre) positions, world frame, m: the swing trajectory sample for
-    /// swing legs, the stance foothold for stance legs. (Addition to CONTROLLER_API.md.)
+    /// swing legs, the stance foothold for stance legs.
     pub desired_foot_positions: [[f64; 3]; NUM_LEGS],
     /// Wall time of the last MPC solve, s (measured with `std::time::Instant`; diagnostic only,
     /// never fed back into the control law, so `step` stays deterministic).

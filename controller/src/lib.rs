@@ -9,11 +9,10 @@
 //! joint-space inverse dynamics + PD along the swing trajectory → torques clamped to the URDF
 //! effort limits.
 //!
-//! Deviations from `CONTROLLER_API.md` (all additive):
+//! API notes (the types are in [`api`]; this comment and the item docs are the reference):
 //! - [`Command::desired_foot_positions`] (world frame) is reported for the harness and tests.
-//! - [`ControllerConfig`] has more fields than listed there (MPC step, gait kind, force bounds,
-//!   stand-up gains, fault thresholds); `Default` is the tuned set, JSON field names = Rust names,
-//!   unknown fields are rejected.
+//! - [`ControllerConfig`]: `Default` is the tuned set, JSON field names = Rust names, unknown
+//!   fields are rejected.
 //! - [`Reference::body_height`] ≤ 0 selects the configured nominal height.
 //! - [`Controller::set_height_map`] takes a local elevation map ([`HeightMap`], 11×11 samples
 //!   around the robot; the FMU inputs `terrain.map.*`). With it footholds use the map's height and
@@ -21,10 +20,14 @@
 //!   xy follow the footholds and the friction normal is the ground's under the stance feet.
 //! - Leg dynamics take gravity in the base frame: `leg_bias(leg, q, dq, gravity_base)`.
 //! - The MPC is exposed as [`mpc::ConvexMpc`] (used by the benchmark and tests); the OSQP
-//!   comparison in `benches/mpc.rs` uses the `osqp` crate 0.6 behind the `osqp-bench` feature,
-//!   because `osqp-sys` 1.0 downloads qdldl from GitHub at build time (impossible offline).
+//!   comparison in `benches/mpc.rs` uses the `osqp` crate 0.6 (a dev-dependency), because
+//!   `osqp-sys` 1.0 downloads qdldl from GitHub at build time (impossible offline).
 //! - Base state velocities must be world-frame; the CoM is taken at the standing-pose composite
 //!   CoM offset from the base origin.
+//!
+//! Module layout: the pipeline stages of `Controller::step` are private modules (`estimate`,
+//! `fsm`, `footholds`, `mpc_schedule`, `leg_control`, `validation`); [`math`] holds the shared
+//! geometry helpers, so no two modules depend on each other.
 pub mod api;
 pub mod controller;
 mod estimate;
