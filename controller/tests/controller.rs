@@ -363,6 +363,55 @@ fn invalid_config_is_rejected() {
     }
 }
 
+/// What a locomotion command must satisfy whatever the gait phase (level ground, base upright):
+/// swing legs get no force; the stance forces carry the weight (Σf_z within 35 % of m·g: the MPC
+/// also accelerates the base towards the moving reference) inside the friction pyramid and the
+/// normal-force bounds; and each stance leg's torques realise its force through the stance law
+/// `τ = Jᵀ(−f) + h(q, q̇)` (R = I here) unless the effort clamp changed them.
+/// Returns how many stance joint torques were compared with the law.
+fn check_stance_forces_and_torques(ctrl: &Controller, state: &RobotState, cmd: &Command) -> usize {
+    let mut compared = 0;
+    let model = ctrl.model();
+    let config = ctrl.config();
+    let weight = model.total_mass() * GRAVITY;
+    let limits = model.effort_limits();
+    let fz: f64 = cmd.desired_forces.iter().map(|f| f[2]).sum();
+    assert!(
+        (fz - weight).abs() < 0.35 * weight,
+        "Σfz = {fz} vs m·g = {weight}"
+    );
+    for leg in Leg::ALL {
+        let l = leg.index();
+        let f = cmd.desired_forces[l];
+        if !cmd.contacts[l] {
+            assert_eq!(f, [0.0; 3], "swing leg {leg:?}");
+            continue;
+        }
+        // The QP is solved to 1e-6 in units of m·g (~1e-4 N): constraints hold to that.
+        let tolerance = 1e-3;
+        assert!(f[0].abs() <= config.mu * f[2] + tolerance, "{leg:?} {f:?}");
+        assert!(f[1].abs() <= config.mu * f[2] + tolerance, "{leg:?} {f:?}");
+        assert!(f[2] >= config.f_min - tolerance && f[2] <= config.f_max + tolerance);
+        let q = [0, 1, 2].map(|j| state.joint_positions[3 * l + j]);
+        let dq = [0, 1, 2].map(|j| state.joint_velocities[3 * l + j]);
+        let jacobian = model.foot_jacobian_body(leg, q);
+        let bias = model.leg_bias(leg, q, dq, [0.0, 0.0, -GRAVITY]);
+        for j in 0..3 {
+            let expected: f64 = (0..3).map(|r| jacobian[r][j] * -f[r]).sum::<f64>() + bias[j];
+            let limit = limits[3 * l + j];
+            if expected.abs() < limit {
+                let tau = cmd.joint_torques[3 * l + j];
+                assert!(
+                    (tau - expected).abs() < 1e-9 * (1.0 + expected.abs()),
+                    "{leg:?} joint {j}: τ = {tau}, Jᵀ(−f) + h = {expected}"
+                );
+                compared += 1;
+            }
+        }
+    }
+    compared
+}
+
 #[test]
 fn step_is_deterministic_and_torques_respect_effort_limits() {
     let run = || {
@@ -372,6 +421,7 @@ fn step_is_deterministic_and_torques_respect_effort_limits() {
         reference.vx = 0.4;
         reference.yaw_rate = 0.3;
         let mut outputs = Vec::new();
+        let mut compared = 0;
         for tick in 0..400 {
             let mut s = state;
             s.base_linear_velocity[0] = 0.001 * tick as f64;
@@ -379,14 +429,24 @@ fn step_is_deterministic_and_torques_respect_effort_limits() {
             for (tau, limit) in cmd.joint_torques.iter().zip(limits) {
                 assert!(tau.abs() <= limit);
             }
+            compared += check_stance_forces_and_torques(&ctrl, &s, &cmd);
             outputs.push((cmd.joint_torques, cmd.desired_forces, cmd.contacts));
         }
+        // Two stance legs of three joints on every tick, unless the clamp was active.
+        assert!(
+            compared > 400 * 6 / 2,
+            "only {compared} stance torques compared"
+        );
         outputs
     };
     let (a, b) = (run(), run());
     assert_eq!(a.len(), b.len());
     for (x, y) in a.iter().zip(&b) {
         assert_eq!(x.0.map(f64::to_bits), y.0.map(f64::to_bits));
+        assert_eq!(
+            x.1.map(|f| f.map(f64::to_bits)),
+            y.1.map(|f| f.map(f64::to_bits))
+        );
         assert_eq!(x.2, y.2);
     }
     // The gait actually alternates contacts.
