@@ -114,6 +114,48 @@ impl SrbSim {
         }
     }
 
+    /// Ground reaction force on the robot at the foot of a stance leg that the command's joint
+    /// torques produce, world frame: the foot is fixed, so the leg is static and
+    /// `τ = Jᵀ f_foot + h(q, q̇)` with `f_foot` the force the foot exerts on the ground (base
+    /// frame); the robot receives `−R f_foot`. This inverts the controller's stance law, so it
+    /// returns the MPC's force exactly when the law is right and the torques are not clamped.
+    pub fn stance_force_from_torques(&self, leg: Leg, torques: &[f64; NUM_JOINTS]) -> Vector3<f64> {
+        let l = leg.index();
+        let q = [self.q[3 * l], self.q[3 * l + 1], self.q[3 * l + 2]];
+        let dq = [self.dq[3 * l], self.dq[3 * l + 1], self.dq[3 * l + 2]];
+        let rotation = self.orientation.to_rotation_matrix();
+        let gravity_body = rotation.inverse() * Vector3::new(0.0, 0.0, -GRAVITY);
+        let bias =
+            self.model
+                .leg_bias(leg, q, dq, [gravity_body.x, gravity_body.y, gravity_body.z]);
+        let jacobian = Matrix3::from_fn(|r, c| self.model.foot_jacobian_body(leg, q)[r][c]);
+        let tau = Vector3::new(
+            torques[3 * l] - bias[0],
+            torques[3 * l + 1] - bias[1],
+            torques[3 * l + 2] - bias[2],
+        );
+        let foot_force_body = jacobian
+            .transpose()
+            .try_inverse()
+            .expect("stance leg away from a singular pose")
+            * tau;
+        -(rotation * foot_force_body)
+    }
+
+    /// Apply one command for `dt`, the stance forces being the ones the joint torques produce
+    /// (see [`SrbSim::stance_force_from_torques`]) instead of the command's desired forces.
+    pub fn apply_torques(&mut self, command: &Command, dt: f64, dynamics: bool) {
+        let mut from_torques = *command;
+        for leg in Leg::ALL {
+            let l = leg.index();
+            if command.contacts[l] && self.in_contact[l] {
+                let f = self.stance_force_from_torques(leg, &command.joint_torques);
+                from_torques.desired_forces[l] = [f.x, f.y, f.z];
+            }
+        }
+        self.apply(&from_torques, dt, dynamics);
+    }
+
     /// Apply one command for `dt`. The body is held while the controller is not balancing
     /// (passive, stand-up), as if lying on a support.
     pub fn apply(&mut self, command: &Command, dt: f64, dynamics: bool) {
