@@ -16,6 +16,7 @@
 
 use serde::Serialize;
 
+use crate::generators::SparseColumns;
 use crate::lp::LpProblem;
 
 /// Default bound of each relative residual and of the relative gap for a certified solution.

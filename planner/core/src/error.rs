@@ -58,7 +58,10 @@ pub enum PlanError {
     Infeasible { reason: String },
     /// The LP solver stopped without a solution (iteration/time limit, numerical trouble).
     #[error("P-F linear program failed with solver status {status}: {reason}")]
-    LpFailed { status: String, reason: String },
+    LpFailed {
+        status: crate::solve_status::LpStatus,
+        reason: String,
+    },
     /// The request's time limit passed during `phase`; nothing was kept from the phase.
     #[error("time limit of {limit_s} s reached during {phase}")]
     TimeLimit { phase: &'static str, limit_s: f64 },

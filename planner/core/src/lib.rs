@@ -20,6 +20,7 @@ pub mod plan;
 pub mod plot;
 pub mod report;
 pub mod scenarios;
+pub mod solve_status;
 pub mod ssp;
 pub mod trajectory;
 pub mod traversability;

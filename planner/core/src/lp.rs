@@ -39,7 +39,7 @@ use std::fmt;
 use std::str::FromStr;
 use std::time::Instant;
 
-use clarabel::algebra::CscMatrix;
+use clarabel::algebra::{BlockConcatenate, CscMatrix, MatrixMathMut};
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
@@ -48,7 +48,8 @@ use tracing::{debug, warn};
 use crate::certificate::{certify, Certificate};
 use crate::deadline::Deadline;
 use crate::error::PlanError;
-use crate::generators::Generators;
+use crate::generators::{Generators, SparseColumns};
+pub use crate::solve_status::{LpStatus, SolverUsed};
 use crate::ssp;
 
 /// Which solver handles the LP.
@@ -128,10 +129,10 @@ impl Default for LpSettings {
 /// What the solver reports about one LP solve.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LpReport {
-    /// `Solved` (exact solver, or Clarabel's own status: `Solved`, `AlmostSolved`, …).
-    pub status: String,
-    /// The method that produced the solution: `dijkstra`, `policy-iteration` or `clarabel`.
-    pub solver: String,
+    /// How the solve ended: `Trivial`, `Solved`, `AlmostSolved` (Clarabel) or `Uncertified`.
+    pub status: LpStatus,
+    /// The method that produced the solution.
+    pub solver: SolverUsed,
     /// Duality certificate of the returned primal-dual pair, checked in the original units.
     pub certificate: Certificate,
     /// Optimal value of the (unscaled) objective `Bᵀr + Σ Bᵀzₖ`.
@@ -253,10 +254,8 @@ struct Reduced {
     kept: Vec<usize>,
     /// (direction, function) of every flux variable.
     flux_vars: Vec<(usize, usize)>,
-    /// Mass-balance matrix `−h Lₖ` restricted to non-target rows, one CSC column per flux.
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
-    values: Vec<f64>,
+    /// Mass-balance matrix `−h Lₖ` restricted to non-target rows, one column per flux.
+    balance: CscMatrix<f64>,
     /// Scaled cost of each flux (`(1 + 1/u_max) Bᵢ / max B`).
     cost: Vec<f64>,
     /// Scaled right-hand side `t / max t`.
@@ -299,44 +298,14 @@ fn reduce(problem: &LpProblem<'_>, reduced_of: &[usize], kept: Vec<usize>, t_max
         }
     }
     let rhs = kept.iter().map(|&i| problem.start[i] / t_max).collect();
+    let balance = CscMatrix::new(kept.len(), flux_vars.len(), col_ptr, row_idx, values);
     Reduced {
         kept,
         flux_vars,
-        col_ptr,
-        row_idx,
-        values,
+        balance,
         cost,
         rhs,
     }
-}
-
-/// Transposes a CSC matrix (`nrows × ncols`) into CSC of its transpose.
-fn transpose(
-    nrows: usize,
-    col_ptr: &[usize],
-    row_idx: &[usize],
-    values: &[f64],
-) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
-    let ncols = col_ptr.len() - 1;
-    let mut t_ptr = vec![0usize; nrows + 1];
-    for &r in row_idx {
-        t_ptr[r + 1] += 1;
-    }
-    for r in 0..nrows {
-        t_ptr[r + 1] += t_ptr[r];
-    }
-    let mut next = t_ptr.clone();
-    let mut t_idx = vec![0usize; row_idx.len()];
-    let mut t_val = vec![0.0; row_idx.len()];
-    for c in 0..ncols {
-        for e in col_ptr[c]..col_ptr[c + 1] {
-            let r = row_idx[e];
-            t_idx[next[r]] = c;
-            t_val[next[r]] = values[e];
-            next[r] += 1;
-        }
-    }
-    (t_ptr, t_idx, t_val)
 }
 
 /// Solves the LP; an infeasible program (mass that cannot reach the target) is [`PlanError::Infeasible`].
@@ -367,8 +336,8 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
             flux: vec![vec![0.0; n]; k_count],
             potential: vec![0.0; n],
             report: LpReport {
-                status: "Trivial".into(),
-                solver: settings.solver.name().into(),
+                status: LpStatus::Trivial,
+                solver: SolverUsed::None,
                 certificate: Certificate::trivial(),
                 objective: 0.0,
                 primal_residual: 0.0,
@@ -397,11 +366,11 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
             );
             let report = LpReport {
                 status: if certificate.holds() {
-                    "Solved".into()
+                    LpStatus::Solved
                 } else {
-                    "Uncertified".into()
+                    LpStatus::Uncertified
                 },
-                solver: exact.method.into(),
+                solver: exact.method,
                 certificate,
                 objective: certificate.primal_objective,
                 primal_residual: certificate.primal_residual,
@@ -452,25 +421,16 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         .build()
         .map_err(|e| invalid("lp settings", e.to_string()))?;
     let setup_failed = |e: clarabel::solver::SolverError| PlanError::LpFailed {
-        status: "SetupFailed".into(),
+        status: LpStatus::SetupFailed,
         reason: e.to_string(),
     };
     let (mut solver, variables, constraints) = match settings.form {
         LpForm::Primal => {
-            // Variables ẑ; rows: m equalities, then ẑ ≥ 0.
-            let mut col_ptr = Vec::with_capacity(n_flux + 1);
-            let mut row_idx = Vec::with_capacity(red.row_idx.len() + n_flux);
-            let mut values = Vec::with_capacity(red.row_idx.len() + n_flux);
-            col_ptr.push(0);
-            for v in 0..n_flux {
-                let range = red.col_ptr[v]..red.col_ptr[v + 1];
-                row_idx.extend_from_slice(&red.row_idx[range.clone()]);
-                values.extend_from_slice(&red.values[range]);
-                row_idx.push(m + v);
-                values.push(-1.0);
-                col_ptr.push(row_idx.len());
-            }
-            let a = CscMatrix::new(m + n_flux, n_flux, col_ptr, row_idx, values);
+            // Variables ẑ; rows: m equalities, then ẑ ≥ 0 as −ẑ + s = 0, s ≥ 0.
+            let mut nonnegative = CscMatrix::<f64>::identity(n_flux);
+            nonnegative.negate();
+            let a = CscMatrix::vcat(&red.balance, &nonnegative)
+                .map_err(|e| invalid("lp assembly", e.to_string()))?;
             let p = CscMatrix::<f64>::zeros((n_flux, n_flux));
             let mut b = red.rhs.clone();
             b.resize(m + n_flux, 0.0);
@@ -484,8 +444,7 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         }
         LpForm::Dual => {
             // Variables ŷ (m, free); rows: Aᵀŷ + s = ĉ, s ≥ 0; minimise −t̂ᵀŷ.
-            let (t_ptr, t_idx, t_val) = transpose(m, &red.col_ptr, &red.row_idx, &red.values);
-            let a = CscMatrix::new(n_flux, m, t_ptr, t_idx, t_val);
+            let a = CscMatrix::from(red.balance.t());
             let p = CscMatrix::<f64>::zeros((m, m));
             let q: Vec<f64> = red.rhs.iter().map(|&t| -t).collect();
             let cones = [SupportedConeT::NonnegativeConeT(n_flux)];
@@ -504,10 +463,10 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         (LpForm::Dual, SolverStatus::AlmostPrimalInfeasible) => SolverStatus::AlmostDualInfeasible,
         (_, s) => s,
     };
-    let status_name = format!("{status:?}");
+    let lp_status = LpStatus::from(status);
     match status {
         SolverStatus::Solved => {}
-        SolverStatus::AlmostSolved => warn!(status = status_name, "P-F LP solved to reduced accuracy"),
+        SolverStatus::AlmostSolved => warn!(status = %lp_status, "P-F LP solved to reduced accuracy"),
         SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
             return Err(PlanError::Infeasible {
                 reason: "no flow carries the start density into the goal region without entering an obstacle or leaving the map (the goal is walled off)".into(),
@@ -521,7 +480,7 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
         }
         _ => {
             return Err(PlanError::LpFailed {
-                status: status_name,
+                status: lp_status,
                 reason: format!(
                     "after {} iterations (primal residual {:.2e}, dual residual {:.2e})",
                     sol.iterations, sol.r_prim, sol.r_dual
@@ -572,8 +531,8 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
     }
     let certificate = certify(problem, &flux, &potential);
     let report = LpReport {
-        status: status_name,
-        solver: "clarabel".into(),
+        status: lp_status,
+        solver: SolverUsed::Clarabel,
         certificate,
         objective: objective * obj_scale,
         primal_residual: sol.r_prim,

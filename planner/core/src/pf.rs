@@ -16,7 +16,7 @@ use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::feedback::integrate;
 pub use crate::feedback::{FeedbackField, IntegrationOutcome, IntegrationSettings};
-use crate::generators::Generators;
+use crate::generators::{Generators, SparseColumns};
 use crate::graph::endpoints;
 use crate::grid::{GoalRegion, PlanningGrid};
 use crate::lp::{self, LpProblem};

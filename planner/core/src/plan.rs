@@ -6,6 +6,7 @@
 
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Instant;
 
 use tracing::info;
@@ -141,6 +142,122 @@ pub struct Plan {
     pub lp: Option<LpReport>,
     /// Wall-clock time of the method (P-F: generators, unless cached, plus LP and integration), seconds.
     pub solve_time_s: f64,
+    /// Wall-clock time of the path metrics and the re-timed reference, seconds.
+    pub trajectory_time_s: f64,
+    /// Whether the P-F generators came from a cache (always false for graph methods).
+    pub generators_cached: bool,
+}
+
+/// Where the P-F generators of a plan come from: `(generators, taken from a cache)` for a grid,
+/// basis and direction count, built no later than the deadline. [`Planner`] keeps the last set;
+/// the LCM service shares an LRU cache between its workers.
+pub type GeneratorLookup<'a, E> = dyn FnMut(&PlanningGrid, &BasisKind, usize, Deadline) -> Result<(Arc<PfGenerators>, bool), E>
+    + 'a;
+
+/// A map prepared for planning, by reference: the one planning pipeline behind
+/// [`Planner::plan`] and the LCM service.
+pub struct PreparedMap<'a> {
+    /// The terrain.
+    pub map: &'a GridMap,
+    /// p on the map.
+    pub field: &'a TraversabilityField,
+    /// The planning grid resampled from `field`.
+    pub grid: &'a PlanningGrid,
+}
+
+impl PreparedMap<'_> {
+    /// Plans from `start` to `goal` with `method`; `deadline` bounds the P-F computation
+    /// (generators, unless cached, and the LP). Endpoints and options are checked first.
+    #[allow(clippy::too_many_arguments)]
+    pub fn plan<E: From<PlanError>>(
+        &self,
+        start: Point,
+        start_yaw: f64,
+        goal: &GoalRegion,
+        method: Method,
+        options: &PlannerOptions,
+        deadline: Deadline,
+        generators: &mut GeneratorLookup<'_, E>,
+    ) -> Result<Plan, E> {
+        let trajectory_options = TrajectoryOptions {
+            speed: options.speed,
+            dt: options.dt,
+            ..TrajectoryOptions::default()
+        };
+        trajectory_options.validate()?;
+        let connectivity = Connectivity::from_directions(options.directions)?;
+        check_endpoints(self.map, start, start_yaw, goal)?;
+        let started = Instant::now();
+        let mut generators_cached = false;
+        let (path, planner_cost, expanded, lp) = match method {
+            Method::Dijkstra | Method::AStar => {
+                let found = if method == Method::Dijkstra {
+                    dijkstra_path(self.grid, start, goal, connectivity)?
+                } else {
+                    astar_path(self.grid, start, goal, connectivity)?
+                };
+                (found.points, found.cost, Some(found.expanded), None)
+            }
+            Method::Pf => {
+                options.basis.validate()?;
+                let built = Instant::now();
+                let (pf_generators, cached) =
+                    generators(self.grid, &options.basis, options.directions, deadline)?;
+                generators_cached = cached;
+                let generator_time_s = if cached {
+                    0.0
+                } else {
+                    built.elapsed().as_secs_f64()
+                };
+                deadline.check("the generator build")?;
+                let pf_options = PfOptions {
+                    u_max: options.u_max,
+                    start_density: options.start_density,
+                    lp: LpSettings {
+                        solver: options.solver,
+                        time_limit_s: deadline.remaining_s(),
+                        ..LpSettings::default()
+                    },
+                    ..PfOptions::default()
+                };
+                let solution = pf::solve(&pf_generators, self.grid, start, goal, &pf_options)?;
+                if !solution.outcome.reached_goal() {
+                    return Err(PlanError::TrajectoryFailed {
+                        reason: format!("{:?}", solution.outcome),
+                    }
+                    .into());
+                }
+                let mut lp = solution.lp;
+                lp.generator_time_s = generator_time_s;
+                (solution.path, solution.weighted_length, None, Some(lp))
+            }
+        };
+        let solve_time_s = started.elapsed().as_secs_f64();
+        let retimed = Instant::now();
+        let metrics = evaluate_path(self.map, self.field, &path);
+        let trajectory = build_trajectory(self.map, &path, start_yaw, &trajectory_options)?;
+        let trajectory_time_s = retimed.elapsed().as_secs_f64();
+        info!(
+            %method,
+            cost_integral = metrics.cost_integral,
+            length = metrics.length,
+            solve_time_s,
+            generators_cached,
+            "plan ready"
+        );
+        Ok(Plan {
+            method,
+            path,
+            trajectory,
+            metrics,
+            planner_cost,
+            expanded,
+            lp,
+            solve_time_s,
+            trajectory_time_s,
+            generators_cached,
+        })
+    }
 }
 
 /// A map prepared for planning: traversability, planning grid and cached P-F generators.
@@ -150,7 +267,7 @@ pub struct Planner {
     grid_size: usize,
     field: TraversabilityField,
     grid: PlanningGrid,
-    pf_cache: Option<(BasisKind, usize, PfGenerators)>,
+    pf_cache: Option<(BasisKind, usize, Arc<PfGenerators>)>,
 }
 
 impl Planner {
@@ -197,129 +314,77 @@ impl Planner {
         method: Method,
         options: &PlannerOptions,
     ) -> Result<Plan, PlanError> {
-        let trajectory_options = TrajectoryOptions {
-            speed: options.speed,
-            dt: options.dt,
-            ..TrajectoryOptions::default()
-        };
-        trajectory_options.validate()?;
-        let connectivity = Connectivity::from_directions(options.directions)?;
         if options.grid_size != self.grid_size || options.traversability != self.traversability {
             *self = Planner::new(self.map.clone(), options.traversability, options.grid_size)?;
         }
-        self.check_endpoints(start, start_yaw, goal)?;
-        let started = Instant::now();
-        let (path, planner_cost, expanded, lp) = match method {
-            Method::Dijkstra | Method::AStar => {
-                let found = if method == Method::Dijkstra {
-                    dijkstra_path(&self.grid, start, goal, connectivity)?
-                } else {
-                    astar_path(&self.grid, start, goal, connectivity)?
-                };
-                (found.points, found.cost, Some(found.expanded), None)
-            }
-            Method::Pf => {
-                options.basis.validate()?;
-                let cached = matches!(&self.pf_cache, Some((b, d, g)) if *b == options.basis && *d == options.directions && g.matches(&self.grid));
-                let mut generator_time_s = 0.0;
-                // max_solve_time bounds the whole P-F computation: generators, then the LP.
-                let deadline = Deadline::after(started, options.max_solve_time);
-                if !cached {
-                    let t0 = Instant::now();
-                    let built = PfGenerators::build_until(
-                        &self.grid,
-                        &options.basis,
-                        options.directions,
-                        deadline,
-                    )?;
-                    generator_time_s = t0.elapsed().as_secs_f64();
-                    self.pf_cache = Some((options.basis, options.directions, built));
-                }
-                let generators = match &self.pf_cache {
-                    Some((_, _, g)) => g,
-                    None => {
-                        return Err(PlanError::InvalidOption {
-                            name: "basis",
-                            reason: "P-F generators could not be prepared".into(),
-                        })
-                    }
-                };
-                let pf_options = PfOptions {
-                    u_max: options.u_max,
-                    start_density: options.start_density,
-                    lp: LpSettings {
-                        solver: options.solver,
-                        time_limit_s: deadline.remaining_s(),
-                        ..LpSettings::default()
-                    },
-                    ..PfOptions::default()
-                };
-                let solution = pf::solve(generators, &self.grid, start, goal, &pf_options)?;
-                if !solution.outcome.reached_goal() {
-                    return Err(PlanError::TrajectoryFailed {
-                        reason: format!("{:?}", solution.outcome),
-                    });
-                }
-                let mut lp = solution.lp;
-                lp.generator_time_s = generator_time_s;
-                (solution.path, solution.weighted_length, None, Some(lp))
-            }
+        // max_solve_time bounds the whole P-F computation: generators, then the LP.
+        let deadline = Deadline::after(Instant::now(), options.max_solve_time);
+        let prepared = PreparedMap {
+            map: &self.map,
+            field: &self.field,
+            grid: &self.grid,
         };
-        let solve_time_s = started.elapsed().as_secs_f64();
-        let metrics = evaluate_path(&self.map, &self.field, &path);
-        let trajectory = build_trajectory(&self.map, &path, start_yaw, &trajectory_options)?;
-        info!(
-            %method,
-            cost_integral = metrics.cost_integral,
-            length = metrics.length,
-            solve_time_s,
-            "plan ready"
-        );
-        Ok(Plan {
+        let cache = &mut self.pf_cache;
+        let mut last_set = |grid: &PlanningGrid,
+                            basis: &BasisKind,
+                            directions: usize,
+                            deadline: Deadline|
+         -> Result<(Arc<PfGenerators>, bool), PlanError> {
+            if let Some((b, d, g)) = cache.as_ref() {
+                if b == basis && *d == directions && g.matches(grid) {
+                    return Ok((Arc::clone(g), true));
+                }
+            }
+            let built = Arc::new(PfGenerators::build_until(
+                grid, basis, directions, deadline,
+            )?);
+            *cache = Some((*basis, directions, Arc::clone(&built)));
+            Ok((built, false))
+        };
+        prepared.plan(
+            start,
+            start_yaw,
+            goal,
             method,
-            path,
-            trajectory,
-            metrics,
-            planner_cost,
-            expanded,
-            lp,
-            solve_time_s,
-        })
+            options,
+            deadline,
+            &mut last_set,
+        )
     }
+}
 
-    /// Start and goal against the map itself (the grid adds its padding later).
-    fn check_endpoints(
-        &self,
-        start: Point,
-        start_yaw: f64,
-        goal: &GoalRegion,
-    ) -> Result<(), PlanError> {
-        if !self.map.contains(start) {
-            return Err(PlanError::StartOffMap { point: start });
-        }
-        if !start_yaw.is_finite() {
-            return Err(PlanError::InvalidOption {
-                name: "start_yaw",
-                reason: format!("{start_yaw} is not finite"),
-            });
-        }
-        if self.map.is_obstacle_at(start) {
-            return Err(PlanError::StartInObstacle { point: start });
-        }
-        if !self.map.contains(goal.center) {
-            return Err(PlanError::GoalOffMap { point: goal.center });
-        }
-        if !(goal.radius.is_finite() && goal.radius >= 0.0) {
-            return Err(PlanError::InvalidOption {
-                name: "goal.radius",
-                reason: format!("{} must be finite and >= 0", goal.radius),
-            });
-        }
-        if self.map.is_obstacle_at(goal.center) {
-            return Err(PlanError::GoalInObstacle { point: goal.center });
-        }
-        Ok(())
+/// Start and goal against the map itself (the grid adds its padding later).
+fn check_endpoints(
+    map: &GridMap,
+    start: Point,
+    start_yaw: f64,
+    goal: &GoalRegion,
+) -> Result<(), PlanError> {
+    if !map.contains(start) {
+        return Err(PlanError::StartOffMap { point: start });
     }
+    if !start_yaw.is_finite() {
+        return Err(PlanError::InvalidOption {
+            name: "start_yaw",
+            reason: format!("{start_yaw} is not finite"),
+        });
+    }
+    if map.is_obstacle_at(start) {
+        return Err(PlanError::StartInObstacle { point: start });
+    }
+    if !map.contains(goal.center) {
+        return Err(PlanError::GoalOffMap { point: goal.center });
+    }
+    if !(goal.radius.is_finite() && goal.radius >= 0.0) {
+        return Err(PlanError::InvalidOption {
+            name: "goal.radius",
+            reason: format!("{} must be finite and >= 0", goal.radius),
+        });
+    }
+    if map.is_obstacle_at(goal.center) {
+        return Err(PlanError::GoalInObstacle { point: goal.center });
+    }
+    Ok(())
 }
 
 /// One-shot planning: prepares the map and plans once.

@@ -40,7 +40,9 @@ use tracing::debug;
 
 use crate::deadline::Deadline;
 use crate::error::PlanError;
+use crate::generators::SparseColumns;
 use crate::lp::LpProblem;
+use crate::solve_status::{LpStatus, SolverUsed};
 
 /// Transition mass below this (in absolute value) is treated as zero when reading Uₖ back from Lₖ.
 const TRANSITION_EPS: f64 = 1e-12;
@@ -301,8 +303,8 @@ pub struct SspSolution {
     pub flux: Vec<Vec<f64>>,
     /// The optimal cost-to-go V* (0 on targets, +∞ where the target cannot be reached).
     pub potential: Vec<f64>,
-    /// Which method ran: "dijkstra" or "policy-iteration".
-    pub method: &'static str,
+    /// Which method ran: Dijkstra or policy iteration.
+    pub method: SolverUsed,
     /// Policy evaluations (0 for Dijkstra).
     pub iterations: u32,
 }
@@ -367,13 +369,13 @@ fn deterministic_moves(problem: &LpProblem<'_>) -> Option<Vec<u32>> {
     for (k, l) in gens.generators.iter().enumerate() {
         let step = gens.directions[k].step;
         for i in (0..n).filter(|&i| !problem.target[i]) {
-            let range = l.col_ptr[i]..l.col_ptr[i + 1];
+            let range = l.colptr[i]..l.colptr[i + 1];
             match range.len() {
                 0 => {}
                 2 => {
                     let (mut stay, mut to) = (f64::NAN, (usize::MAX, f64::NAN));
                     for e in range {
-                        let (j, v) = (l.row_idx[e], l.values[e]);
+                        let (j, v) = (l.rowval[e], l.nzval[e]);
                         if j == i {
                             stay = 1.0 + step * v;
                         } else {
@@ -469,7 +471,7 @@ fn solve_deterministic(
     Ok(SspSolution {
         flux,
         potential: value,
-        method: "dijkstra",
+        method: SolverUsed::Dijkstra,
         iterations: 0,
     })
 }
@@ -621,13 +623,13 @@ fn policy_iteration(
             return Ok(SspSolution {
                 flux,
                 potential: value,
-                method: "policy-iteration",
+                method: SolverUsed::PolicyIteration,
                 iterations,
             });
         }
         if iterations as usize >= MAX_POLICY_ITERATIONS {
             return Err(PlanError::LpFailed {
-                status: "MaxIterations".into(),
+                status: LpStatus::MaxIterations,
                 reason: format!(
                     "policy iteration did not settle after {iterations} evaluations ({changed} states still switching)"
                 ),
@@ -805,7 +807,7 @@ fn factor(
         }
     }
     let failed = |reason: String| PlanError::LpFailed {
-        status: "NumericalError".into(),
+        status: LpStatus::NumericalError,
         reason,
     };
     let matrix =

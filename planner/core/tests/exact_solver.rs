@@ -4,9 +4,9 @@ mod support;
 
 use pf_planner::basis::BasisKind;
 use pf_planner::certificate::certify;
-use pf_planner::generators::{Generators, SparseMatrix};
+use pf_planner::generators::{Generators, SparseColumns, SparseMatrix};
 use pf_planner::grid::{GoalRegion, PlanningGrid};
-use pf_planner::lp::{self, LpProblem, LpSettings, LpSolution, LpSolver};
+use pf_planner::lp::{self, LpProblem, LpSettings, LpSolution, LpSolver, LpStatus, SolverUsed};
 use pf_planner::pf::{self, PfGenerators, PfOptions, StartDensity};
 use pf_planner::ssp::{self, Structure};
 use rand::{Rng, SeedableRng};
@@ -55,7 +55,12 @@ fn slippery(gens: &Generators) -> Generators {
 }
 
 fn assert_certified(label: &str, sol: &LpSolution) {
-    assert_eq!(sol.report.status, "Solved", "{label}: {:?}", sol.report);
+    assert_eq!(
+        sol.report.status,
+        LpStatus::Solved,
+        "{label}: {:?}",
+        sol.report
+    );
     assert!(
         sol.report.certificate.holds(),
         "{label}: certificate {:?}",
@@ -88,11 +93,11 @@ fn exact_solver_and_clarabel_agree_on_random_maps() {
         };
         let problem = prepared.problem(&gens, u_max);
         let exact = lp::solve(&problem, &settings(LpSolver::Exact)).expect("exact");
-        if exact.report.status == "Trivial" {
+        if exact.report.status == LpStatus::Trivial {
             continue; // the start lies in the goal region
         }
         let clarabel = lp::solve(&problem, &settings(LpSolver::Clarabel)).expect("clarabel");
-        assert_eq!(exact.report.solver, "dijkstra");
+        assert_eq!(exact.report.solver, SolverUsed::Dijkstra);
         assert_certified("exact", &exact);
         assert_certified("clarabel", &clarabel);
         let (a, b) = (exact.report.objective, clarabel.report.objective);
@@ -139,7 +144,7 @@ fn policy_iteration_matches_clarabel_on_stochastic_generators() {
         assert_eq!(ssp::structure(&problem), Structure::Stochastic);
         let exact = lp::solve(&problem, &settings(LpSolver::Exact)).expect("exact");
         let clarabel = lp::solve(&problem, &settings(LpSolver::Clarabel)).expect("clarabel");
-        assert_eq!(exact.report.solver, "policy-iteration");
+        assert_eq!(exact.report.solver, SolverUsed::PolicyIteration);
         assert!(exact.report.iterations >= 1);
         assert_certified("policy iteration", &exact);
         assert_certified("clarabel", &clarabel);
@@ -232,7 +237,7 @@ fn generators_with_negative_mass_are_left_to_clarabel() {
         .expect("no error")
         .is_none());
     let sol = lp::solve(&problem, &settings(LpSolver::Exact)).expect("Clarabel fallback");
-    assert_eq!(sol.report.solver, "clarabel");
+    assert_eq!(sol.report.solver, SolverUsed::Clarabel);
 }
 
 #[test]

@@ -10,7 +10,7 @@ mod support;
 use pf_planner::basis::BasisKind;
 use pf_planner::graph::{distances_to_targets, Connectivity};
 use pf_planner::grid::{GoalRegion, PlanningGrid};
-use pf_planner::lp::{LpForm, LpSettings, LpSolver};
+use pf_planner::lp::{LpForm, LpSettings, LpSolver, LpStatus};
 use pf_planner::pf::{self, PfGenerators, PfOptions, StartDensity};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -131,7 +131,7 @@ fn check_with(
         }
         Err(e) => panic!("P-F ({solver}) failed: {e}"),
     };
-    assert_eq!(sol.lp.status, "Solved", "{solver}: {:?}", sol.lp);
+    assert_eq!(sol.lp.status, LpStatus::Solved, "{solver}: {:?}", sol.lp);
     assert!(
         sol.lp.mass_balance_residual < 1e-7,
         "{solver}: {:?}",

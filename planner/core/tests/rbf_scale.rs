@@ -5,7 +5,7 @@ mod support;
 
 use pf_planner::basis::BasisKind;
 use pf_planner::grid::PlanningGrid;
-use pf_planner::lp::{self, LpSolver};
+use pf_planner::lp::{self, LpSolver, SolverUsed};
 use pf_planner::pf::{self, PfGenerators, PfOptions, StartDensity};
 use pf_planner::scenarios;
 use pf_planner::ssp::{self, Structure};
@@ -33,7 +33,7 @@ fn policy_iteration_and_clarabel_agree_on_rbf_generators() {
         assert_eq!(ssp::structure(&problem), Structure::Stochastic, "{name}");
         let exact = lp::solve(&problem, &settings(LpSolver::Exact)).expect("exact");
         let clarabel = lp::solve(&problem, &settings(LpSolver::Clarabel)).expect("clarabel");
-        assert_eq!(exact.report.solver, "policy-iteration", "{name}");
+        assert_eq!(exact.report.solver, SolverUsed::PolicyIteration, "{name}");
         assert!(
             exact.report.certificate.holds(),
             "{name}: {:?}",

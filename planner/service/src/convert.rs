@@ -10,6 +10,7 @@ use pf_planner::grid::GoalRegion;
 use pf_planner::lp::LpSolver;
 use pf_planner::map::{GridMap, Point};
 use pf_planner::pf::StartDensity;
+use pf_planner::plan::Method;
 use pf_planner::trajectory::{MAX_SAMPLES, MAX_SPEED};
 
 /// Why a message is not planned: the reply status (`PlanReply::STATUS_*`) and the reason.
@@ -125,14 +126,6 @@ pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<GridMap, R
         obstacles,
     )
     .map_err(|e| Rejection::invalid_map(e.to_string()))
-}
-
-/// The planning method of a request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum MethodChoice {
-    Pf,
-    AStar,
-    Dijkstra,
 }
 
 /// Defaults the service applies to `plan_options_t` fields left at 0.
@@ -288,7 +281,7 @@ pub struct ValidatedRequest {
     pub request_id: i64,
     /// The method code as sent (echoed in the reply).
     pub method_code: i8,
-    pub method: MethodChoice,
+    pub method: Method,
     pub map: Arc<GridMap>,
     /// `header.seq` of the map planned on.
     pub map_seq: i64,
@@ -319,9 +312,9 @@ pub fn validate_request(
     }
     check_frame(&msg.header.frame_id, "request").map_err(Rejection::invalid_request)?;
     let method = match msg.method {
-        PlanRequest::METHOD_PF => MethodChoice::Pf,
-        PlanRequest::METHOD_ASTAR => MethodChoice::AStar,
-        PlanRequest::METHOD_DIJKSTRA => MethodChoice::Dijkstra,
+        PlanRequest::METHOD_PF => Method::Pf,
+        PlanRequest::METHOD_ASTAR => Method::AStar,
+        PlanRequest::METHOD_DIJKSTRA => Method::Dijkstra,
         other => {
             return Err(Rejection::invalid_request(format!(
                 "unknown method {other} (0 pf, 1 astar, 2 dijkstra)"
@@ -445,7 +438,7 @@ mod tests {
     fn a_valid_request_resolves_defaults() {
         let v = validate_request(&request(), &NoMaps, 100, &OptionDefaults::default()).unwrap();
         assert_eq!(v.request_id, 9);
-        assert_eq!(v.method, MethodChoice::Dijkstra);
+        assert_eq!(v.method, Method::Dijkstra);
         assert_eq!(v.map_seq, 3);
         assert_eq!((v.map.width, v.map.height), (4, 3));
         assert_eq!(v.map.origin, [-1.0, 2.0]);

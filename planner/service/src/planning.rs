@@ -13,17 +13,14 @@ use lcm_types::pfnav::{PlanMetrics, PlanReply, TrajectorySample};
 use pf_planner::basis::BasisKind;
 use pf_planner::deadline::Deadline;
 use pf_planner::error::PlanError;
-use pf_planner::graph::{self, Connectivity};
-use pf_planner::grid::PlanningGrid;
-use pf_planner::lp::LpSettings;
-use pf_planner::map::Point;
-use pf_planner::metrics::evaluate_path;
-use pf_planner::pf::{self, PfGenerators, PfOptions};
-use pf_planner::trajectory::{build_trajectory, TrajectoryOptions};
+use pf_planner::grid::{GoalRegion, PlanningGrid};
+use pf_planner::lp::{LpStatus, SolverUsed};
+use pf_planner::pf::PfGenerators;
+use pf_planner::plan::{Plan, PlannerOptions, PreparedMap};
 use pf_planner::traversability::{TraversabilityField, TraversabilityParams};
 
 use crate::cache::BuildCache;
-use crate::convert::{MethodChoice, Rejection, ValidatedRequest};
+use crate::convert::{Rejection, ResolvedOptions, ValidatedRequest};
 
 /// Identity of a generator set: the planning grid's geometry (by content hash; not its
 /// traversability) and the basis settings.
@@ -146,30 +143,61 @@ pub fn rejection_of(error: &PlanError) -> Rejection {
     Rejection::new(status, error.to_string())
 }
 
-/// The LP report's status names mapped to `plan_metrics_t.LP_*`.
-/// The LP report's solver names mapped to `plan_metrics_t.SOLVER_*`.
-fn lp_solver_code(solver: &str) -> i8 {
-    match solver {
-        "dijkstra" => PlanMetrics::SOLVER_DIJKSTRA,
-        "policy-iteration" => PlanMetrics::SOLVER_POLICY_ITERATION,
-        "clarabel" => PlanMetrics::SOLVER_CLARABEL,
-        _ => PlanMetrics::SOLVER_NONE,
-    }
-}
-
-fn lp_status_code(status: &str) -> i8 {
+/// The LP status mapped to `plan_metrics_t.LP_*`.
+fn lp_status_code(status: LpStatus) -> i8 {
     match status {
-        "Solved" | "Trivial" => PlanMetrics::LP_SOLVED,
-        "AlmostSolved" => PlanMetrics::LP_ALMOST_SOLVED,
-        s if s.contains("Infeasible") => PlanMetrics::LP_INFEASIBLE,
-        "MaxIterations" | "AlmostMaxIterations" => PlanMetrics::LP_MAX_ITERATIONS,
-        "MaxTime" => PlanMetrics::LP_MAX_TIME,
-        _ => PlanMetrics::LP_NUMERICAL_ERROR,
+        LpStatus::Solved | LpStatus::Trivial => PlanMetrics::LP_SOLVED,
+        LpStatus::AlmostSolved => PlanMetrics::LP_ALMOST_SOLVED,
+        LpStatus::PrimalInfeasible | LpStatus::DualInfeasible => PlanMetrics::LP_INFEASIBLE,
+        LpStatus::MaxIterations => PlanMetrics::LP_MAX_ITERATIONS,
+        LpStatus::MaxTime => PlanMetrics::LP_MAX_TIME,
+        LpStatus::Uncertified
+        | LpStatus::NumericalError
+        | LpStatus::InsufficientProgress
+        | LpStatus::SetupFailed
+        | LpStatus::Unsolved => PlanMetrics::LP_NUMERICAL_ERROR,
     }
 }
 
-/// Plans `request` on the traversability model `traversability` (the service's configuration:
-/// the wire contract has no field for it).
+/// The method behind an LP solution mapped to `plan_metrics_t.SOLVER_*`.
+fn lp_solver_code(solver: SolverUsed) -> i8 {
+    match solver {
+        SolverUsed::None => PlanMetrics::SOLVER_NONE,
+        SolverUsed::Dijkstra => PlanMetrics::SOLVER_DIJKSTRA,
+        SolverUsed::PolicyIteration => PlanMetrics::SOLVER_POLICY_ITERATION,
+        SolverUsed::Clarabel => PlanMetrics::SOLVER_CLARABEL,
+    }
+}
+
+impl From<PlanError> for Rejection {
+    fn from(error: PlanError) -> Self {
+        rejection_of(&error)
+    }
+}
+
+/// The planner's options for a validated request, with the service's traversability model (the
+/// wire contract has no field for it). The LP's speed bound stays the library's default (it
+/// scales the objective and the feedback field); the reference is timed at `options.speed`.
+fn planner_options(
+    options: &ResolvedOptions,
+    traversability: &TraversabilityParams,
+) -> PlannerOptions {
+    PlannerOptions {
+        grid_size: options.grid_size,
+        directions: options.directions,
+        basis: options.basis,
+        speed: options.speed,
+        start_density: options.start_density,
+        traversability: *traversability,
+        dt: options.sample_period,
+        solver: options.solver,
+        max_solve_time: options.max_solve_time,
+        ..PlannerOptions::default()
+    }
+}
+
+/// Plans `request` through the planner's own pipeline ([`PreparedMap::plan`]), with the
+/// generators from the service's shared cache.
 pub fn plan(
     request: &ValidatedRequest,
     cache: &GeneratorCache,
@@ -177,107 +205,89 @@ pub fn plan(
 ) -> Result<PlanOutcome, Rejection> {
     let started = Instant::now();
     let map = &*request.map;
-    let opts = &request.options;
-    let reject = |e: PlanError| rejection_of(&e);
+    let options = planner_options(&request.options, traversability);
     // max_solve_time bounds the P-F computation from the moment a worker takes the request:
-    // generators (unless cached), then the LP, checked inside both.
-    let deadline = Deadline::after(started, opts.max_solve_time);
-    let field = TraversabilityField::from_map(map, traversability).map_err(reject)?;
-    let grid = PlanningGrid::from_field(map, &field, opts.grid_size).map_err(reject)?;
+    // traversability and grid, generators (unless cached), then the LP, checked inside both.
+    let deadline = Deadline::after(started, options.max_solve_time);
+    let field = TraversabilityField::from_map(map, traversability)?;
+    let grid = PlanningGrid::from_field(map, &field, options.grid_size)?;
+    let prepared = PreparedMap {
+        map,
+        field: &field,
+        grid: &grid,
+    };
+    let mut from_cache = |grid: &PlanningGrid, basis: &BasisKind, directions: usize, deadline| {
+        let (generators, hit) = cache.get(grid, basis, directions, deadline);
+        generators.map(|g| (g, hit))
+    };
+    let plan = prepared.plan(
+        request.start,
+        request.start_yaw,
+        &request.goal,
+        request.method,
+        &options,
+        deadline,
+        &mut from_cache,
+    )?;
+    let samples: Vec<TrajectorySample> = plan
+        .trajectory
+        .iter()
+        .map(|s| TrajectorySample {
+            t: s.t,
+            x: s.x,
+            y: s.y,
+            z: s.z,
+            yaw: s.yaw,
+            vx: s.vx,
+            vy: s.vy,
+            yaw_rate: s.yaw_rate,
+        })
+        .collect();
+    Ok(PlanOutcome {
+        metrics: plan_metrics(&plan, &request.goal),
+        samples,
+        cache_hit: plan.generators_cached,
+    })
+}
+
+/// The reply's metrics of a plan.
+fn plan_metrics(plan: &Plan, goal: &GoalRegion) -> PlanMetrics {
     let mut metrics = PlanMetrics {
         lp_status: PlanMetrics::LP_NOT_APPLICABLE,
+        cache_hit: plan.generators_cached,
+        cost: plan.metrics.cost_integral,
+        length: plan.metrics.length,
+        duration: plan.trajectory.last().map_or(0.0, |s| s.t),
+        reached_goal: plan.path.last().is_some_and(|&p| goal.contains(p)),
         ..PlanMetrics::default()
     };
-    let mut cache_hit = false;
-    let path: Vec<Point> = match request.method {
-        MethodChoice::Dijkstra | MethodChoice::AStar => {
-            let conn = Connectivity::from_directions(opts.directions).map_err(reject)?;
-            let searched = Instant::now();
-            let found = if request.method == MethodChoice::Dijkstra {
-                graph::dijkstra_path(&grid, request.start, &request.goal, conn)
-            } else {
-                graph::astar_path(&grid, request.start, &request.goal, conn)
-            }
-            .map_err(reject)?;
-            metrics.solve_phase_time = searched.elapsed().as_secs_f64();
-            metrics.objective = found.cost;
-            metrics.expanded_nodes = i64::try_from(found.expanded).unwrap_or(i64::MAX);
-            found.points
+    match &plan.lp {
+        None => {
+            metrics.solve_phase_time = plan.solve_time_s;
+            metrics.path_time = plan.trajectory_time_s;
+            metrics.objective = plan.planner_cost;
+            metrics.expanded_nodes = plan
+                .expanded
+                .map_or(0, |n| i64::try_from(n).unwrap_or(i64::MAX));
         }
-        MethodChoice::Pf => {
-            let built = Instant::now();
-            let (gens, hit) = cache.get(&grid, &opts.basis, opts.directions, deadline);
-            cache_hit = hit;
-            let gens = gens?;
-            if !hit {
-                metrics.generator_time = built.elapsed().as_secs_f64();
-            }
-            deadline.check("the generator build").map_err(reject)?;
-            // The LP's speed bound stays the library's (it scales the objective and the feedback
-            // field); the reference is re-timed at `opts.speed` below, as `pf-plan` does.
-            let pf_options = PfOptions {
-                start_density: opts.start_density,
-                lp: LpSettings {
-                    time_limit_s: deadline.remaining_s(),
-                    solver: opts.solver,
-                    ..LpSettings::default()
-                },
-                ..PfOptions::default()
-            };
-            let solved = Instant::now();
-            let solution = pf::solve(&gens, &grid, request.start, &request.goal, &pf_options)
-                .map_err(reject)?;
-            let lp = &solution.lp;
+        Some(lp) => {
+            metrics.generator_time = lp.generator_time_s;
             metrics.solve_phase_time = lp.solve_time_s;
-            metrics.path_time = solved.elapsed().as_secs_f64() - lp.solve_time_s;
+            // The feedback-law integration (what the method took beyond generators and LP)
+            // plus the path metrics and the re-timed reference.
+            metrics.path_time = (plan.solve_time_s - lp.generator_time_s - lp.solve_time_s)
+                .max(0.0)
+                + plan.trajectory_time_s;
             metrics.objective = lp.objective;
-            metrics.lp_status = lp_status_code(&lp.status);
+            metrics.lp_status = lp_status_code(lp.status);
             metrics.lp_iterations = i32::try_from(lp.iterations).unwrap_or(i32::MAX);
-            metrics.lp_solver = lp_solver_code(&lp.solver);
+            metrics.lp_solver = lp_solver_code(lp.solver);
             metrics.primal_residual = lp.certificate.primal_residual;
             metrics.dual_residual = lp.certificate.dual_residual;
             metrics.duality_gap = lp.certificate.duality_gap;
             metrics.certified = lp.certificate.holds();
             metrics.certificate_tolerance = lp.certificate.tolerance;
-            if !solution.outcome.reached_goal() {
-                return Err(rejection_of(&PlanError::TrajectoryFailed {
-                    reason: format!("{:?}", solution.outcome),
-                }));
-            }
-            solution.path
         }
-    };
-    let retimed = Instant::now();
-    let path_metrics = evaluate_path(map, &field, &path);
-    let trajectory_options = TrajectoryOptions {
-        speed: opts.speed,
-        dt: opts.sample_period,
-        ..TrajectoryOptions::default()
-    };
-    let samples: Vec<TrajectorySample> =
-        build_trajectory(map, &path, request.start_yaw, &trajectory_options)
-            .map_err(reject)?
-            .into_iter()
-            .map(|s| TrajectorySample {
-                t: s.t,
-                x: s.x,
-                y: s.y,
-                z: s.z,
-                yaw: s.yaw,
-                vx: s.vx,
-                vy: s.vy,
-                yaw_rate: s.yaw_rate,
-            })
-            .collect();
-    metrics.path_time += retimed.elapsed().as_secs_f64();
-    metrics.cache_hit = cache_hit;
-    metrics.cost = path_metrics.cost_integral;
-    metrics.length = path_metrics.length;
-    metrics.duration = samples.last().map_or(0.0, |s| s.t);
-    metrics.reached_goal = path.last().is_some_and(|&p| request.goal.contains(p));
-    Ok(PlanOutcome {
-        samples,
-        metrics,
-        cache_hit,
-    })
+    }
+    metrics
 }

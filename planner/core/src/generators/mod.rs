@@ -24,6 +24,7 @@
 
 use std::time::Instant;
 
+use clarabel::algebra::CscMatrix;
 use tracing::debug;
 
 use crate::basis::{Basis, BasisKind};
@@ -90,69 +91,58 @@ pub(crate) fn flow(x: Point, d: [f64; 2], t: f64) -> Point {
     [x[0] + t * d[0], x[1] + t * d[1]]
 }
 
-/// A compressed-sparse-column matrix (the generators and the LP constraint blocks).
-#[derive(Debug, Clone, PartialEq)]
-pub struct SparseMatrix {
-    /// Rows.
-    pub nrows: usize,
-    /// Columns.
-    pub ncols: usize,
-    /// Start of each column in `row_idx`/`values` (length `ncols + 1`).
-    pub col_ptr: Vec<usize>,
-    /// Row index of each stored entry, increasing within a column.
-    pub row_idx: Vec<usize>,
-    /// Value of each stored entry.
-    pub values: Vec<f64>,
+/// A compressed-sparse-column matrix: Clarabel's, so generator blocks reach the LP solver as
+/// they are.
+pub type SparseMatrix = CscMatrix<f64>;
+
+/// Column-wise access the planner needs on top of [`CscMatrix`].
+pub trait SparseColumns {
+    /// Builds a CSC matrix from per-column `(row, value)` lists (rows sorted here, duplicates summed).
+    fn from_columns(nrows: usize, columns: Vec<Vec<(usize, f64)>>) -> Self;
+    /// Stored entries of column `j` as `(row, value)`.
+    fn column(&self, j: usize) -> impl Iterator<Item = (usize, f64)> + '_;
+    /// `y = self · x`.
+    fn mul_vec(&self, x: &[f64]) -> Vec<f64>;
 }
 
-impl SparseMatrix {
-    /// Builds a CSC matrix from per-column `(row, value)` lists (rows sorted here, duplicates summed).
-    pub fn from_columns(nrows: usize, columns: Vec<Vec<(usize, f64)>>) -> Self {
+impl SparseColumns for SparseMatrix {
+    fn from_columns(nrows: usize, columns: Vec<Vec<(usize, f64)>>) -> Self {
         let ncols = columns.len();
         let mut col_ptr = Vec::with_capacity(ncols + 1);
-        let mut row_idx = Vec::new();
-        let mut values = Vec::new();
+        let mut row_idx: Vec<usize> = Vec::new();
+        let mut values: Vec<f64> = Vec::new();
         col_ptr.push(0);
         for mut col in columns {
             col.sort_unstable_by_key(|e| e.0);
+            let column_start = row_idx.len();
             for (row, value) in col {
                 debug_assert!(row < nrows, "row {row} out of {nrows}");
-                if row_idx.len() > *col_ptr.last().unwrap_or(&0) && row_idx.last() == Some(&row) {
-                    *values.last_mut().unwrap_or(&mut 0.0) += value;
-                } else {
-                    row_idx.push(row);
-                    values.push(value);
+                match (row_idx.last(), values.last_mut()) {
+                    (Some(&last), Some(sum)) if row_idx.len() > column_start && last == row => {
+                        *sum += value
+                    }
+                    _ => {
+                        row_idx.push(row);
+                        values.push(value);
+                    }
                 }
             }
             col_ptr.push(row_idx.len());
         }
-        Self {
-            nrows,
-            ncols,
-            col_ptr,
-            row_idx,
-            values,
-        }
+        CscMatrix::new(nrows, ncols, col_ptr, row_idx, values)
     }
 
-    /// Stored entries of column `j` as `(row, value)`.
-    pub fn column(&self, j: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        let range = self.col_ptr[j]..self.col_ptr[j + 1];
-        self.row_idx[range.clone()]
+    fn column(&self, j: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let range = self.colptr[j]..self.colptr[j + 1];
+        self.rowval[range.clone()]
             .iter()
             .copied()
-            .zip(self.values[range].iter().copied())
+            .zip(self.nzval[range].iter().copied())
     }
 
-    /// Number of stored entries.
-    pub fn nnz(&self) -> usize {
-        self.row_idx.len()
-    }
-
-    /// `y = self · x`.
-    pub fn mul_vec(&self, x: &[f64]) -> Vec<f64> {
-        let mut y = vec![0.0; self.nrows];
-        for (j, &xj) in x.iter().enumerate().take(self.ncols) {
+    fn mul_vec(&self, x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; self.m];
+        for (j, &xj) in x.iter().enumerate().take(self.n) {
             if xj != 0.0 {
                 for (i, v) in self.column(j) {
                     y[i] += v * xj;

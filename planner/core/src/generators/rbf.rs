@@ -308,22 +308,13 @@ fn transfer(
         touched.clear();
         col_ptr.push(row_idx.len());
     }
-    (
-        SparseMatrix {
-            nrows: n,
-            ncols: n,
-            col_ptr,
-            row_idx,
-            values,
-        },
-        stats,
-    )
+    (SparseMatrix::new(n, n, col_ptr, row_idx, values), stats)
 }
 
 #[cfg(test)]
 mod tests {
     use super::super::test_grids::open_grid;
-    use super::super::Generators;
+    use super::super::{Generators, SparseColumns};
     use crate::basis::BasisKind;
 
     /// The transfer is Markov (non-negative, rows of U summing to one, columns of L to zero) and
@@ -335,7 +326,7 @@ mod tests {
         let basis = &gens.basis;
         let h = grid.cell_size;
         for (dir, l) in gens.directions.iter().zip(&gens.generators) {
-            for i in 0..l.ncols {
+            for i in 0..l.n {
                 let column: Vec<(usize, f64)> = l.column(i).collect();
                 let sum: f64 = column.iter().map(|e| e.1).sum();
                 assert!(sum.abs() < 1e-9 / dir.step, "column sum {sum}");
@@ -409,7 +400,7 @@ mod tests {
         let gens = Generators::build(&grid, BasisKind::DEFAULT_RBF, 8).expect("generators");
         let n = gens.basis.len();
         for l in &gens.generators {
-            assert_eq!(l.nrows, n);
+            assert_eq!(l.m, n);
             for i in 0..n {
                 let sum: f64 = l.column(i).map(|e| e.1).sum();
                 assert!(sum.abs() < 1e-9, "column sum {sum}");

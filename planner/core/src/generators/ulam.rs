@@ -92,13 +92,7 @@ fn ulam_direction(
         col_ptr.push(row_idx.len());
     }
     Some(UlamDirection {
-        generator: SparseMatrix {
-            nrows: n,
-            ncols: n,
-            col_ptr,
-            row_idx,
-            values,
-        },
+        generator: SparseMatrix::new(n, n, col_ptr, row_idx, values),
         walls,
     })
 }
@@ -106,7 +100,7 @@ fn ulam_direction(
 #[cfg(test)]
 mod tests {
     use super::super::test_grids::open_grid;
-    use super::super::Generators;
+    use super::super::{Generators, SparseColumns};
     use crate::basis::BasisKind;
 
     #[test]
@@ -138,7 +132,7 @@ mod tests {
         assert!(col.contains(&(idx(1, 1), 1.0 / diag)));
         // Every column of every Lₖ sums to zero: mass is conserved.
         for l in &gens.generators {
-            for j in 0..l.ncols {
+            for j in 0..l.n {
                 let s: f64 = l.column(j).map(|e| e.1).sum();
                 assert!(s.abs() < 1e-12);
             }
