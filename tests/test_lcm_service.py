@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -354,6 +354,35 @@ def test_garbage_then_a_valid_request_is_answered(
     assert client.pump(lambda: client.statuses[-1].malformed_messages > 1000, 5.0)
 
 
+
+def _wait_for(condition: Callable[[], bool], timeout: float) -> bool:
+    """Polls `condition` until it holds or `timeout` seconds pass."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return condition()
+
+
+def _publish_probe(publisher: lcm.LCM) -> bool:
+    publisher.publish("LOGGER_PROBE", b"probe")
+    return True
+
+
+def _logged_channels(log_file: Path) -> list[str]:
+    """Channels of the events in an LCM log so far (a partly written last event is skipped)."""
+    if not log_file.exists():
+        return []
+    channels: list[str] = []
+    try:
+        for event in lcm.EventLog(str(log_file), "r"):
+            channels.append(event.channel)
+    except (OSError, ValueError):
+        pass
+    return channels
+
+
 def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
     url_a, url_b = udpm_url(7970), udpm_url(7971)
     prefix = "REPLAY_"
@@ -370,10 +399,12 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
             str(log_file),
         ]
     )
-    deadline = time.monotonic() + 10.0
-    while not log_file.exists() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    time.sleep(0.5)  # the logger subscribes right after creating its file
+    # The logger is listening once a probe published after its start is in its file.
+    probe = lcm.LCM(url_a)
+    assert _wait_for(
+        lambda: _publish_probe(probe) and "LOGGER_PROBE" in _logged_channels(log_file),
+        10.0,
+    ), "lcm-logger did not record a probe message"
     service_a = Service(url_a, prefix, tmp_path / "a.log")
     client = Client(url_a, prefix)
     try:
@@ -400,7 +431,10 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
         ]
         for msg in msgs:
             client.request(msg, timeout=60.0)
-        time.sleep(0.3)  # let the logger flush
+        assert _wait_for(
+            lambda: _logged_channels(log_file).count(prefix + "PLAN_REPLY") >= len(msgs),
+            10.0,
+        ), "lcm-logger did not record every reply"
     finally:
         service_a.stop()
         logger.terminate()

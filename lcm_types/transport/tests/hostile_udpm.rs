@@ -64,6 +64,7 @@ fn regression_liblcm_fragment_offset_wrap_and_short_packet_without_nul_leave_a_s
     let received: Arc<Mutex<Vec<Vec<u8>>>> = Arc::default();
     let sink = Arc::clone(&received);
     let stop = Arc::new(AtomicBool::new(false));
+    let (subscribed_tx, subscribed) = std::sync::mpsc::channel();
     let handler_thread = {
         let receiver = Arc::clone(&receiver);
         let stop = Arc::clone(&stop);
@@ -73,12 +74,16 @@ fn regression_liblcm_fragment_offset_wrap_and_short_packet_without_nul_leave_a_s
                     sink.lock().unwrap().push(bytes.to_vec())
                 })
                 .unwrap();
+            subscribed_tx.send(()).unwrap();
             while !stop.load(Ordering::SeqCst) {
                 receiver.handle_timeout(Duration::from_millis(20)).unwrap();
             }
         })
     };
-    std::thread::sleep(Duration::from_millis(100)); // subscribed before the packets arrive
+    // The hostile packets must reach a subscribed handler, not an empty channel table.
+    subscribed
+        .recv_timeout(Duration::from_secs(10))
+        .expect("the handler thread subscribed");
 
     let socket = UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
     socket.set_multicast_loop_v4(true).unwrap();
