@@ -13,6 +13,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -25,6 +26,7 @@ if _generated.is_dir() and str(_generated) not in sys.path:
 from pfnav_harness import paths
 from pfnav_harness.cli import in_private_network_namespace
 from pfnav_harness.errors import MissingArtifactError
+from pfnav_harness.fmu_runner import FmuContract, read_contract
 from pfnav_harness.pipeline import PAPER_SCENARIOS, export_scenario
 from pfnav_harness.planner_client import Plan, PlannerClient
 from pfnav_harness.scenario import Scenario
@@ -55,6 +57,28 @@ def planner_service_bin() -> Path:
 @pytest.fixture(scope="session")
 def fmu_file() -> Path:
     return _artifact(paths.fmu_path)
+
+
+@pytest.fixture(scope="session")
+def fmu_unzipped(fmu_file: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The FMU archive extracted once per session (FMU2Slave instances load from it)."""
+    from fmpy import extract
+
+    return Path(extract(str(fmu_file), unzipdir=str(tmp_path_factory.mktemp("fmu"))))
+
+
+@pytest.fixture(scope="session")
+def fmu_model_description(fmu_file: Path) -> Any:
+    """fmpy's reading of the FMU's modelDescription.xml."""
+    from fmpy import read_model_description
+
+    return read_model_description(str(fmu_file))
+
+
+@pytest.fixture(scope="session")
+def fmu_contract(fmu_file: Path) -> FmuContract:
+    """The FMU variables, value references and enumeration codes the harness uses, checked."""
+    return read_contract(fmu_file)
 
 
 @pytest.fixture(scope="session")

@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pfnav_harness.cosim import CoSimConfig
+from pfnav_harness.fmu_runner import read_contract
 from pfnav_harness.pipeline import PAPER_SCENARIOS, simulate
 from pfnav_harness.planner_client import Plan
 from pfnav_harness.scenario import Scenario
 
 SHORT_SECONDS = 6.0
 STAND_SECONDS = 1.5
-FSM_LOCOMOTION = 3
 
 
 @pytest.mark.parametrize(("name", "comm_step"), [*((n, 0.001) for n in PAPER_SCENARIOS), ("mountain_pass", 0.005)])
@@ -52,7 +52,7 @@ def test_short_pf_run(
     assert not m.fell, m.fall_reason
     assert m.duration == pytest.approx(SHORT_SECONDS, abs=0.01)
     # The controller reached locomotion and the robot walked along the plan.
-    assert np.any(log["fsm"] == FSM_LOCOMOTION)
+    assert np.any(log["fsm"] == read_contract(fmu_file).fsm.Locomotion)
     walked = np.hypot(*(log["base_pos"][-1, :2] - log["base_pos"][0, :2]))
     expected = float(np.hypot(*(log["ref"][-1, :2] - log["ref"][0, :2])))
     assert walked > 0.5 * expected

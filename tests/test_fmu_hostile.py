@@ -18,34 +18,22 @@ PFNAV_FMU overrides the FMU path; scripts/setup.sh builds it.
 from __future__ import annotations
 
 import math
-import os
 import random
 import re
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
-from ctypes import byref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pytest
-from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (
-    FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
-)
-from fmpy.fmi2 import calloc as fmi_calloc
-from fmpy.fmi2 import free as fmi_free
-from fmpy.logging import addLoggerProxy
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions
+from fmu_support import STATUS_ERROR, logging_callbacks, new_slave
+from pfnav_harness.fmu_runner import FmuContract, enumeration
 
-REPO = Path(__file__).resolve().parents[1]
 CALL_LIMIT_S = 1.0
-STATUS_ERROR = 3
 FUZZ_SEED = 20261125
 FUZZ_CALLS = 5000
 FUZZ_WALL_LIMIT_S = 60.0
@@ -60,31 +48,13 @@ WORST: dict[str, tuple[float, str]] = {}
 
 
 @pytest.fixture(scope="module")
-def fmu_path() -> Path:
-    path = Path(os.environ.get("PFNAV_FMU", REPO / "target" / "fmu" / "QuadController.fmu"))
-    if not path.is_file():
-        pytest.fail(f"{path} does not exist: run scripts/setup.sh (or set PFNAV_FMU)")
-    return path
+def variables(fmu_model_description: Any) -> dict[str, Any]:
+    return {v.name: v for v in fmu_model_description.modelVariables}
 
 
 @pytest.fixture(scope="module")
-def unzipped(fmu_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return Path(extract(str(fmu_path), unzipdir=str(tmp_path_factory.mktemp("fmu_hostile"))))
-
-
-@pytest.fixture(scope="module")
-def md(fmu_path: Path) -> Any:
-    return read_model_description(str(fmu_path))
-
-
-@pytest.fixture(scope="module")
-def variables(md: Any) -> dict[str, Any]:
-    return {v.name: v for v in md.modelVariables}
-
-
-@pytest.fixture(scope="module")
-def parameters(md: Any) -> list[Any]:
-    return [v for v in md.modelVariables if v.causality == "parameter"]
+def parameters(fmu_model_description: Any) -> list[Any]:
+    return [v for v in fmu_model_description.modelVariables if v.causality == "parameter"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -153,25 +123,9 @@ class Session:
             self.freed = True
 
 
-def new_session(unzipped: Path, md: Any, clock: Clock, name: str = "hostile") -> Session:
-    session = Session(
-        FMU2Slave(
-            guid=md.guid,
-            unzipDirectory=str(unzipped),
-            modelIdentifier=md.coSimulation.modelIdentifier,
-            instanceName=name,
-        ),
-        clock,
-    )
-
-    def log(_env: Any, _instance: bytes, status: int, _category: bytes, message: bytes) -> None:
-        session.messages.append((status, message.decode(errors="replace")))
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(log)
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmi_calloc)
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmi_free)
-    addLoggerProxy(byref(callbacks))
+def new_session(fmu_unzipped: Path, fmu_model_description: Any, clock: Clock, name: str = "hostile") -> Session:
+    session = Session(new_slave(fmu_unzipped, fmu_model_description, name), clock)
+    callbacks = logging_callbacks(lambda status, _category, message: session.messages.append((status, message)))
     session.callbacks = callbacks
     session.ok(
         "fmi2Instantiate",
@@ -201,8 +155,8 @@ def max_ticks_logged(s: Session) -> int:
     raise AssertionError(f"no tick cap in the log: {s.messages}")
 
 
-def assert_fresh_instance_works(unzipped: Path, md: Any, clock: Clock) -> None:
-    s = new_session(unzipped, md, clock, "fresh")
+def assert_fresh_instance_works(fmu_unzipped: Path, fmu_model_description: Any, clock: Clock) -> None:
+    s = new_session(fmu_unzipped, fmu_model_description, clock, "fresh")
     initialise(s)
     for k in range(10):
         s.ok("fmi2DoStep", s.slave.doStep, k * 0.01, 0.01)
@@ -246,7 +200,7 @@ def integer_probes(lo: int, hi: int) -> list[int]:
 def test_every_parameter_declares_a_range_holding_its_start(parameters: list[Any]) -> None:
     assert len(parameters) == 43
     for v in parameters:
-        assert v.type in ("Real", "Integer"), v.name
+        assert v.type in ("Real", "Integer", "Enumeration"), v.name
         lo, hi = bounds(v)
         assert math.isfinite(lo) and math.isfinite(hi) and lo < hi, v.name
         assert lo <= float(v.start) <= hi, v.name
@@ -255,9 +209,9 @@ def test_every_parameter_declares_a_range_holding_its_start(parameters: list[Any
     assert bounds(by_name["mpc.horizon"]) == (10, 40)
 
 
-def test_extreme_values_of_every_parameter_are_refused_cleanly(unzipped: Path, md: Any, parameters: list[Any], clock: Clock) -> None:
+def test_extreme_values_of_every_parameter_are_refused_cleanly(fmu_unzipped: Path, fmu_model_description: Any, parameters: list[Any], clock: Clock) -> None:
     for v in parameters:
-        s = new_session(unzipped, md, clock, f"param-{v.name}")
+        s = new_session(fmu_unzipped, fmu_model_description, clock, f"param-{v.name}")
         lo, hi = bounds(v)
         vr = [v.valueReference]
         if v.type == "Real":
@@ -298,11 +252,11 @@ def test_extreme_values_of_every_parameter_are_refused_cleanly(unzipped: Path, m
         s.ok("fmi2DoStep", s.slave.doStep, 0.0, 0.001)
         s.ok("fmi2Terminate", s.slave.terminate)
         s.free()
-    assert_fresh_instance_works(unzipped, md, clock)
+    assert_fresh_instance_works(fmu_unzipped, fmu_model_description, clock)
 
 
-def test_parameters_cannot_change_after_initialisation(unzipped: Path, md: Any, variables: dict[str, Any], clock: Clock) -> None:
-    s = new_session(unzipped, md, clock)
+def test_parameters_cannot_change_after_initialisation(fmu_unzipped: Path, fmu_model_description: Any, variables: dict[str, Any], clock: Clock) -> None:
+    s = new_session(fmu_unzipped, fmu_model_description, clock)
     initialise(s)
     s.refused(
         "set control.dt while running",
@@ -326,8 +280,8 @@ def test_parameters_cannot_change_after_initialisation(unzipped: Path, md: Any, 
     ],
     ids=["dt_1e-12_hang", "dt_1e-9_slow", "dt_10_no_tick", "dt_1e300_no_tick"],
 )
-def test_regression_control_dt(dt: float, symptom: str, unzipped: Path, md: Any, variables: dict[str, Any], clock: Clock) -> None:
-    s = new_session(unzipped, md, clock)
+def test_regression_control_dt(dt: float, symptom: str, fmu_unzipped: Path, fmu_model_description: Any, variables: dict[str, Any], clock: Clock) -> None:
+    s = new_session(fmu_unzipped, fmu_model_description, clock)
     message = s.refused(
         f"control.dt = {dt} ({symptom})",
         s.slave.setReal,
@@ -340,7 +294,7 @@ def test_regression_control_dt(dt: float, symptom: str, unzipped: Path, md: Any,
     initialise(s)
     s.ok("fmi2DoStep", s.slave.doStep, 0.0, 0.001)
     s.free()
-    assert_fresh_instance_works(unzipped, md, clock)
+    assert_fresh_instance_works(fmu_unzipped, fmu_model_description, clock)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -352,17 +306,17 @@ def test_regression_control_dt(dt: float, symptom: str, unzipped: Path, md: Any,
     [1e12, 1e13, 1e14, 1e15, 1000.0],
     ids=["h_1e12_hang", "h_1e13_hang", "h_1e14_hang", "h_1e15_hang", "h_1000_27s"],
 )
-def test_regression_huge_step_is_refused_at_once(h: float, unzipped: Path, md: Any, clock: Clock) -> None:
-    s = new_session(unzipped, md, clock)
+def test_regression_huge_step_is_refused_at_once(h: float, fmu_unzipped: Path, fmu_model_description: Any, clock: Clock) -> None:
+    s = new_session(fmu_unzipped, fmu_model_description, clock)
     initialise(s)
     s.refused(f"doStep(h = {h})", s.slave.doStep, 0.0, h, reason="use shorter steps")
     s.ok("fmi2DoStep", s.slave.doStep, 0.0, 0.01)
     s.free()
-    assert_fresh_instance_works(unzipped, md, clock)
+    assert_fresh_instance_works(fmu_unzipped, fmu_model_description, clock)
 
 
-def test_extreme_step_sizes_and_communication_points(unzipped: Path, md: Any, clock: Clock) -> None:
-    s = new_session(unzipped, md, clock)
+def test_extreme_step_sizes_and_communication_points(fmu_unzipped: Path, fmu_model_description: Any, clock: Clock) -> None:
+    s = new_session(fmu_unzipped, fmu_model_description, clock)
     initialise(s)
     cap = max_ticks_logged(s)
     # About a third of a second at 1 ms ticks with the default parameters (fmu/src/budget.rs).
@@ -394,12 +348,12 @@ def test_extreme_step_sizes_and_communication_points(unzipped: Path, md: Any, cl
     s.ok("doStep after the cap", s.slave.doStep, t, 0.01)
     s.ok("fmi2Terminate", s.slave.terminate)
     s.free()
-    assert_fresh_instance_works(unzipped, md, clock)
+    assert_fresh_instance_works(fmu_unzipped, fmu_model_description, clock)
 
 
-def test_extreme_experiment_times_return_at_once(unzipped: Path, md: Any, clock: Clock) -> None:
+def test_extreme_experiment_times_return_at_once(fmu_unzipped: Path, fmu_model_description: Any, clock: Clock) -> None:
     for start, stop in [(math.nan, None), (math.inf, None), (0.0, math.nan), (1.0, 0.5), (0.0, -math.inf)]:
-        s = new_session(unzipped, md, clock)
+        s = new_session(fmu_unzipped, fmu_model_description, clock)
         s.refused(
             f"setupExperiment({start}, {stop})",
             s.slave.setupExperiment,
@@ -410,7 +364,7 @@ def test_extreme_experiment_times_return_at_once(unzipped: Path, md: Any, clock:
         )
         s.free()
     for start in [1e15, 1e300, -1e300, 5e-324]:
-        s = new_session(unzipped, md, clock)
+        s = new_session(fmu_unzipped, fmu_model_description, clock)
         initialise(s, start)
         # The tick grid cannot resolve 1 ms at 1e300: no tick runs, nothing hangs.
         s.call(f"doStep at start {start}", s.slave.doStep, start, 0.5)
@@ -423,18 +377,19 @@ EXTREME_WEIGHTS = {f"mpc.q[{i}]": 1e5 for i in range(1, 14)} | {"mpc.r": 1e-8}
 
 @pytest.mark.parametrize("weights", [{}, EXTREME_WEIGHTS], ids=["default_weights", "extreme_weights"])
 def test_tick_cap_of_the_most_expensive_parameters_keeps_calls_under_a_second(
-    weights: dict[str, float], unzipped: Path, md: Any, variables: dict[str, Any], clock: Clock
+    weights: dict[str, float], fmu_unzipped: Path, fmu_model_description: Any, variables: dict[str, Any], fmu_contract: FmuContract, clock: Clock
 ) -> None:
-    s = new_session(unzipped, md, clock)
+    s = new_session(fmu_unzipped, fmu_model_description, clock)
     vr = {name: v.valueReference for name, v in variables.items()}
     reals = {"control.dt": 1e-4, "gait.period": 0.05, "stand.upDuration": 0.01} | weights
     s.ok("set worst reals", s.slave.setReal, [vr[n] for n in reals], list(reals.values()))
-    ints = {"mpc.everyTicks": 1, "mpc.horizon": 40, "gait.kind": 1}
+    ints = {"mpc.everyTicks": 1, "mpc.horizon": 40, "gait.kind": int(enumeration(fmu_model_description, "GaitKind").Walk)}
     s.ok("set worst integers", s.slave.setInteger, [vr[n] for n in ints], list(ints.values()))
     state = {"base.pos.z": 0.28, "ref.vx": 0.3, "ref.bodyHeight": 0.28}
     state |= {f"joint.q[{i + 1}]": q for i, q in enumerate(STAND_JOINTS)}
     s.ok("set state", s.slave.setReal, [vr[n] for n in state], list(state.values()))
-    s.ok("cmd.mode = locomotion", s.slave.setInteger, [vr["cmd.mode"]], [2])
+    fsm, modes = fmu_contract.fsm, fmu_contract.mode
+    s.ok("cmd.mode = locomotion", s.slave.setInteger, [vr["cmd.mode"]], [modes.Locomotion])
     initialise(s)
     cap = max_ticks_logged(s)
     assert cap == 8, "most expensive parameters: see fmu/src/budget.rs"
@@ -447,7 +402,7 @@ def test_tick_cap_of_the_most_expensive_parameters_keeps_calls_under_a_second(
         t += h
         solved += s.ok("get mpc.solved", s.slave.getBoolean, [vr["mpc.solved"]])[0]
     # The MPC really ran (otherwise the timing proves nothing): locomotion with solves.
-    assert s.ok("get fsm", s.slave.getInteger, [vr["fsm.state"]]) == [3]
+    assert s.ok("get fsm", s.slave.getInteger, [vr["fsm.state"]]) == [fsm.Locomotion]
     assert solved > 0
     # A rough local height map adds the foothold search on it to every tick and horizon step.
     rng = random.Random(7)
@@ -457,7 +412,7 @@ def test_tick_cap_of_the_most_expensive_parameters_keeps_calls_under_a_second(
     for _ in range(60):
         s.ok(f"doStep({cap} ticks, MPC every tick, horizon 40, height map)", s.slave.doStep, t, h)
         t += h
-    assert s.ok("get fsm", s.slave.getInteger, [vr["fsm.state"]]) == [3]
+    assert s.ok("get fsm", s.slave.getInteger, [vr["fsm.state"]]) == [fsm.Locomotion]
     assert clock.worst_s < CALL_LIMIT_S
     s.free()
 
@@ -494,8 +449,8 @@ class Fuzzer:
     Sane calls (valid lifecycle, in-range parameters, a standing state, millisecond steps) keep
     the instance ticking, so the hostile ones also hit a running controller."""
 
-    unzipped: Path
-    md: Any
+    fmu_unzipped: Path
+    fmu_model_description: Any
     clock: Clock
     rng: random.Random
     session: Session | None = None
@@ -507,7 +462,7 @@ class Fuzzer:
     vr: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for v in self.md.modelVariables:
+        for v in self.fmu_model_description.modelVariables:
             self.vr[v.name] = v.valueReference
             if v.causality == "parameter":
                 self.parameters.append(v)
@@ -518,7 +473,7 @@ class Fuzzer:
         if self.session is not None:
             self.session.free()
         self.instances += 1
-        self.session = new_session(self.unzipped, self.md, self.clock, f"fuzz{self.instances}")
+        self.session = new_session(self.fmu_unzipped, self.fmu_model_description, self.clock, f"fuzz{self.instances}")
         self.time = 0.0
         return self.session
 
@@ -532,7 +487,7 @@ class Fuzzer:
             value = self.rng.choice(pool)
         else:
             value = self.rng.uniform(lo, hi)
-        if v.type == "Integer":
+        if v.type in ("Integer", "Enumeration"):
             return int(min(max(value, -(2**31)), 2**31 - 1)) if math.isfinite(value) else self.rng.choice([0, -(2**31), 2**31 - 1])
         return value
 
@@ -570,7 +525,8 @@ class Fuzzer:
             state |= {f"joint.q[{i + 1}]": q for i, q in enumerate(STAND_JOINTS)}
             state |= {f"joint.dq[{i + 1}]": 0.0 for i in range(12)}
             self.call(op, "standing state", slave.setReal, [self.vr[n] for n in state], list(state.values()))
-            self.call(op, "cmd.mode", slave.setInteger, [self.vr["cmd.mode"]], [rng.choice([1, 2])])
+            modes = enumeration(self.fmu_model_description, "ModeRequest")
+            self.call(op, "cmd.mode", slave.setInteger, [self.vr["cmd.mode"]], [rng.choice([modes.Stand, modes.Locomotion])])
         elif op == "setBoolean":
             self.call(op, "setBoolean contact[1]", slave.setBoolean, [self.vr["contact[1]"]], [True])
         elif op == "get":
@@ -607,8 +563,8 @@ class Fuzzer:
             self.fresh()
 
 
-def test_random_call_sequence_never_crashes_or_hangs(unzipped: Path, md: Any, clock: Clock) -> None:
-    fuzzer = Fuzzer(unzipped, md, clock, random.Random(FUZZ_SEED))
+def test_random_call_sequence_never_crashes_or_hangs(fmu_unzipped: Path, fmu_model_description: Any, clock: Clock) -> None:
+    fuzzer = Fuzzer(fmu_unzipped, fmu_model_description, clock, random.Random(FUZZ_SEED))
     began = time.perf_counter()
     for _ in range(FUZZ_CALLS):
         fuzzer.step()
@@ -620,4 +576,4 @@ def test_random_call_sequence_never_crashes_or_hangs(unzipped: Path, md: Any, cl
     # The sequence reached a running controller and exercised both outcomes of the key calls.
     for key in ("doStep ok", "doStep refused", "setParameter ok", "setParameter refused", "initialise ok", "setInputs refused"):
         assert fuzzer.outcomes[key] >= 20, (key, fuzzer.outcomes)
-    assert_fresh_instance_works(unzipped, md, clock)
+    assert_fresh_instance_works(fmu_unzipped, fmu_model_description, clock)

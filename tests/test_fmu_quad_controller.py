@@ -20,32 +20,23 @@ import sys
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable, Iterator
-from ctypes import byref
 from dataclasses import dataclass, field
+from enum import IntEnum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (
-    FMU2Slave,
-    fmi2CallbackAllocateMemoryTYPE,
-    fmi2CallbackFreeMemoryTYPE,
-    fmi2CallbackFunctions,
-    fmi2CallbackLoggerTYPE,
-)
-from fmpy.fmi2 import calloc as fmi_calloc
-from fmpy.fmi2 import free as fmi_free
-from fmpy.logging import addLoggerProxy
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions
 from fmpy.validation import validate_fmu
+from fmu_support import STATUS_ERROR, logging_callbacks, new_slave
+from pfnav_harness.fmu_runner import FmuContract
 
 REPO = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
 GRAVITY = 9.81
 LEGS = ("FR", "FL", "RR", "RL")
-STATUS_ERROR = 3
 
 
 def _path_from_env(variable: str, default: Path) -> Path:
@@ -56,11 +47,6 @@ def _path_from_env(variable: str, default: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def fmu_path() -> Path:
-    return _path_from_env("PFNAV_FMU", REPO / "target" / "fmu" / "QuadController.fmu")
-
-
-@pytest.fixture(scope="module")
 def direct_reference() -> Path:
     return _path_from_env(
         "PFNAV_FMU_DIRECT_REFERENCE", REPO / "target" / "release" / "fmu-direct-reference"
@@ -68,18 +54,20 @@ def direct_reference() -> Path:
 
 
 @pytest.fixture(scope="module")
-def unzipped(fmu_path: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return Path(extract(str(fmu_path), unzipdir=str(tmp_path_factory.mktemp("fmu"))))
+def fsm(fmu_contract: FmuContract) -> type[IntEnum]:
+    """FSM state codes by name (the FsmState enumeration of the modelDescription)."""
+    return fmu_contract.fsm
 
 
 @pytest.fixture(scope="module")
-def model_description(fmu_path: Path) -> Any:
-    return read_model_description(str(fmu_path))
+def modes(fmu_contract: FmuContract) -> type[IntEnum]:
+    """Mode request codes by name (the ModeRequest enumeration of the modelDescription)."""
+    return fmu_contract.mode
 
 
 @pytest.fixture(scope="module")
-def value_refs(model_description: Any) -> dict[str, int]:
-    return {v.name: v.valueReference for v in model_description.modelVariables}
+def value_refs(fmu_model_description: Any) -> dict[str, int]:
+    return {v.name: v.valueReference for v in fmu_model_description.modelVariables}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -102,24 +90,8 @@ def make_slave(
     unzip_dir: Path, md: Any, name: str, guid: str | None = None
 ) -> tuple[LoggedSlave, Callable[[], None]]:
     """Creates and instantiates a slave; returns it and a function that instantiates it."""
-    logged = LoggedSlave(
-        FMU2Slave(
-            guid=guid or md.guid,
-            unzipDirectory=str(unzip_dir),
-            modelIdentifier=md.coSimulation.modelIdentifier,
-            instanceName=name,
-        )
-    )
-
-    def log(_env: Any, _instance: bytes, status: int, category: bytes, message: bytes) -> None:
-        logged.messages.append((status, category.decode(), message.decode()))
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(log)
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmi_calloc)
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmi_free)
-    # The proxy formats the printf-style message before it reaches Python.
-    addLoggerProxy(byref(callbacks))
+    logged = LoggedSlave(new_slave(unzip_dir, md, name, guid))
+    callbacks = logging_callbacks(lambda *message: logged.messages.append(message))
     logged.callbacks = callbacks
 
     def instantiate() -> None:
@@ -129,8 +101,8 @@ def make_slave(
 
 
 @pytest.fixture
-def running(unzipped: Path, model_description: Any) -> Iterator[LoggedSlave]:
-    logged, instantiate = make_slave(unzipped, model_description, "running")
+def running(fmu_unzipped: Path, fmu_model_description: Any) -> Iterator[LoggedSlave]:
+    logged, instantiate = make_slave(fmu_unzipped, fmu_model_description, "running")
     instantiate()
     s = logged.slave
     s.setupExperiment(startTime=0.0)
@@ -151,7 +123,8 @@ class Inputs:
     joints: list[float]
     joint_velocities: list[float] = field(default_factory=lambda: [0.0] * 12)
     reference: dict[str, float] = field(default_factory=dict)
-    mode: int = 1
+    # A ModeRequest item name (the serde name of the direct call is the same).
+    mode: str = "Stand"
 
     def fmu_reals(self, refs: dict[str, int]) -> tuple[list[int], list[float]]:
         names = [f"base.pos.{a}" for a in "xyz"] + [f"base.quat.{c}" for c in "wxyz"]
@@ -165,10 +138,10 @@ class Inputs:
             values.append(value)
         return [refs[n] for n in names], values
 
-    def apply(self, slave: FMU2Slave, refs: dict[str, int]) -> None:
+    def apply(self, slave: FMU2Slave, refs: dict[str, int], modes: type[IntEnum]) -> None:
         vrs, values = self.fmu_reals(refs)
         slave.setReal(vrs, values)
-        slave.setInteger([refs["cmd.mode"]], [self.mode])
+        slave.setInteger([refs["cmd.mode"]], [modes[self.mode]])
 
     def direct_json(self) -> dict[str, Any]:
         r = self.reference
@@ -194,7 +167,7 @@ class Inputs:
                     "slope_x": r.get("terrain.dzdx", 0.0),
                     "slope_y": r.get("terrain.dzdy", 0.0),
                 },
-                "mode": ["Passive", "Stand", "Locomotion"][self.mode],
+                "mode": self.mode,
             },
         }
 
@@ -238,14 +211,11 @@ def outputs(slave: FMU2Slave, refs: dict[str, int]) -> dict[str, Any]:
     }
 
 
-FSM_CODES = {"Passive": 0, "StandUp": 1, "Stand": 2, "Locomotion": 3, "Damping": 4}
-
-
-def assert_matches_direct(fmu: dict[str, Any], command: dict[str, Any]) -> None:
+def assert_matches_direct(fmu: dict[str, Any], command: dict[str, Any], fsm: type[IntEnum]) -> None:
     np.testing.assert_allclose(fmu["tau"], command["joint_torques"], rtol=0, atol=1e-12)
     np.testing.assert_allclose(fmu["forces"], command["desired_forces"], rtol=0, atol=1e-12)
     assert fmu["contacts"] == command["contacts"]
-    assert fmu["fsm"] == FSM_CODES[command["fsm_state"]]
+    assert fmu["fsm"] == fsm[command["fsm_state"]]
     assert fmu["solved"] == command["mpc_solved"]
 
 
@@ -341,18 +311,18 @@ class UrdfLegs:
 # Tests
 
 
-def test_fmpy_validate_finds_no_problems(fmu_path: Path) -> None:
-    assert validate_fmu(str(fmu_path)) == []
+def test_fmpy_validate_finds_no_problems(fmu_file: Path) -> None:
+    assert validate_fmu(str(fmu_file)) == []
     done = subprocess.run(
-        [str(VENV_BIN / "fmpy"), "validate", str(fmu_path)], capture_output=True, text=True, check=False
+        [str(VENV_BIN / "fmpy"), "validate", str(fmu_file)], capture_output=True, text=True, check=False
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert "No problems found" in done.stdout
 
 
-def test_fmutool_check_finds_no_problems(fmu_path: Path) -> None:
+def test_fmutool_check_finds_no_problems(fmu_file: Path) -> None:
     done = subprocess.run(
-        [str(VENV_BIN / "fmutool"), "-input", str(fmu_path), "-check"],
+        [str(VENV_BIN / "fmutool"), "-input", str(fmu_file), "-check"],
         check=False,
         capture_output=True,
         text=True,
@@ -365,8 +335,8 @@ def test_fmutool_check_finds_no_problems(fmu_path: Path) -> None:
     assert "ERROR" not in text, text
 
 
-def test_package_layout_and_description(fmu_path: Path, model_description: Any) -> None:
-    with zipfile.ZipFile(fmu_path) as archive:
+def test_package_layout_and_description(fmu_file: Path, fmu_model_description: Any) -> None:
+    with zipfile.ZipFile(fmu_file) as archive:
         names = set(archive.namelist())
         urdf = archive.read("resources/quadruped.urdf")
         config = json.loads(archive.read("resources/controller.json"))
@@ -379,7 +349,7 @@ def test_package_layout_and_description(fmu_path: Path, model_description: Any) 
     } <= names
     assert all("\\" not in n for n in names)
     assert urdf == (REPO / "robot" / "quadruped.urdf").read_bytes()
-    md = model_description
+    md = fmu_model_description
     assert md.fmiVersion == "2.0"
     assert md.coSimulation.modelIdentifier == "QuadController"
     assert md.coSimulation.canHandleVariableCommunicationStepSize
@@ -390,7 +360,8 @@ def test_package_layout_and_description(fmu_path: Path, model_description: Any) 
     assert float(by_name["gait.period"].start) == config["gait_period"]
     assert int(by_name["mpc.horizon"].start) == config["mpc_horizon"]
     assert float(by_name["mpc.q[6]"].start) == config["mpc_q"][5]
-    assert by_name["cmd.mode"].type == "Integer" and by_name["contact[1]"].type == "Boolean"
+    assert by_name["cmd.mode"].type == "Enumeration" and by_name["contact[1]"].type == "Boolean"
+    assert by_name["mpc.horizon"].type == "Integer" and by_name["gait.kind"].declaredType.name == "GaitKind"
     outputs_ = [u.variable.name for u in md.outputs]
     assert len(outputs_) == 31 and "joint.tau[12]" in outputs_ and "mpc.solveTime" in outputs_
 
@@ -400,10 +371,12 @@ def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
     value_refs: dict[str, int],
     direct_reference: Path,
     stand_pose: list[float],
+    fsm: type[IntEnum],
+    modes: type[IntEnum],
 ) -> None:
     s = running.slave
     inputs = standing(stand_pose)
-    inputs.apply(s, value_refs)
+    inputs.apply(s, value_refs, modes)
     # 1.2 s in 10 ms communication steps (the stand-up takes 1 s), then 0.3 s in 1.5 ms steps.
     t = 0.0
     for _ in range(120):
@@ -416,9 +389,9 @@ def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
     second = outputs(s, value_refs)
     total_ticks = round(t / 0.001)
     direct = run_direct(direct_reference, [(inputs, 1200, 0.01), (inputs, total_ticks - 1200, 0.0015)])
-    assert_matches_direct(first, direct["commands"][0])
-    assert_matches_direct(second, direct["commands"][1])
-    assert second["fsm"] == FSM_CODES["Stand"] and second["contacts"] == [True] * 4
+    assert_matches_direct(first, direct["commands"][0], fsm)
+    assert_matches_direct(second, direct["commands"][1], fsm)
+    assert second["fsm"] == fsm.Stand and second["contacts"] == [True] * 4
 
     legs = UrdfLegs(REPO / "robot" / "quadruped.urdf")
     assert legs.total_mass == pytest.approx(direct["total_mass"], rel=1e-12)
@@ -436,21 +409,21 @@ def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
     np.testing.assert_allclose(ground_forces_arr, second["forces"], atol=0.02 * weight / 4)
 
 
-def test_simulate_fmu_runs_with_fmpy_master(fmu_path: Path, stand_pose: list[float]) -> None:
+def test_simulate_fmu_runs_with_fmpy_master(fmu_file: Path, stand_pose: list[float], fsm: type[IntEnum], modes: type[IntEnum]) -> None:
     from fmpy import simulate_fmu
 
     start = {f"joint.q[{i + 1}]": q for i, q in enumerate(stand_pose)}
-    start.update({"base.pos.z": 0.28, "cmd.mode": 1})
+    start.update({"base.pos.z": 0.28, "cmd.mode": int(modes.Stand)})
     result = simulate_fmu(
-        str(fmu_path),
+        str(fmu_file),
         stop_time=1.2,
         output_interval=0.004,
         start_values=start,
         output=["fsm.state", "joint.tau[3]", "force[1].z"],
     )
     assert result["time"][-1] == pytest.approx(1.2)
-    assert result["fsm.state"][0] == 0
-    assert result["fsm.state"][-1] == FSM_CODES["Stand"]
+    assert result["fsm.state"][0] == fsm.Passive
+    assert result["fsm.state"][-1] == fsm.Stand
     assert np.all(np.isfinite(result["joint.tau[3]"]))
 
 
@@ -500,9 +473,9 @@ def _expect_error(logged: LoggedSlave, call: Callable[[], Any], reason: str) -> 
 
 
 def test_misuse_gives_errors_with_reasons_and_the_instance_lives_on(
-    unzipped: Path, model_description: Any, value_refs: dict[str, int]
+    fmu_unzipped: Path, fmu_model_description: Any, value_refs: dict[str, int], modes: type[IntEnum]
 ) -> None:
-    logged, instantiate = make_slave(unzipped, model_description, "misuse")
+    logged, instantiate = make_slave(fmu_unzipped, fmu_model_description, "misuse")
     instantiate()
     s = logged.slave
     for _, call, reason in MISUSE:
@@ -517,7 +490,7 @@ def test_misuse_gives_errors_with_reasons_and_the_instance_lives_on(
     # Still usable, and the rejected values were not stored.
     s.doStep(0.0, 0.01)
     assert s.getReal([value_refs["base.pos.x"], value_refs["joint.q[5]"]]) == [0.0, 0.0]
-    assert s.getInteger([value_refs["cmd.mode"]]) == [1]
+    assert s.getInteger([value_refs["cmd.mode"]]) == [modes.Stand]
     s.terminate()
     _expect_error(logged, lambda: s.doStep(0.01, 0.01), "fmi2DoStep is not allowed in state terminated")
     _expect_error(logged, lambda: s.setReal([value_refs["ref.x"]], [1.0]), "fmi2SetReal is not allowed in state terminated")
@@ -529,13 +502,13 @@ def test_misuse_gives_errors_with_reasons_and_the_instance_lives_on(
     s.freeInstance()
 
 
-def test_rejected_state_switches_to_damping(running: LoggedSlave, value_refs: dict[str, int]) -> None:
+def test_rejected_state_switches_to_damping(running: LoggedSlave, value_refs: dict[str, int], fsm: type[IntEnum]) -> None:
     s = running.slave
     s.setReal([value_refs[f"base.quat.{c}"] for c in "wxyz"], [0.0, 0.0, 0.0, 0.0])
     s.setReal([value_refs["joint.dq[4]"]], [1.5])
     _expect_error(running, lambda: s.doStep(0.0, 0.01), "base_orientation norm 0 is not")
     out = outputs(s, value_refs)
-    assert out["fsm"] == FSM_CODES["Damping"]
+    assert out["fsm"] == fsm.Damping
     assert out["tau"][3] == pytest.approx(-2.0 * 1.5)
     assert s.getRealStatus(2) == 0.0  # fmi2LastSuccessfulTime
     assert s.getBooleanStatus(3) is False  # fmi2Terminated
@@ -543,24 +516,24 @@ def test_rejected_state_switches_to_damping(running: LoggedSlave, value_refs: di
     s.terminate()
 
 
-def test_wrong_guid_gives_null_with_a_reason(unzipped: Path, model_description: Any) -> None:
+def test_wrong_guid_gives_null_with_a_reason(fmu_unzipped: Path, fmu_model_description: Any) -> None:
     logged, instantiate = make_slave(
-        unzipped, model_description, "guid", guid="{00000000-0000-0000-0000-000000000000}"
+        fmu_unzipped, fmu_model_description, "guid", guid="{00000000-0000-0000-0000-000000000000}"
     )
     with pytest.raises(Exception, match="Failed to instantiate"):
         instantiate()
     (message,) = [m for status, _, m in logged.messages if status == STATUS_ERROR]
-    assert "GUID" in message and model_description.guid in message
+    assert "GUID" in message and fmu_model_description.guid in message
     logged.slave.freeLibrary()
 
 
 def test_missing_resources_give_null_with_a_reason(
-    unzipped: Path, model_description: Any, tmp_path: Path
+    fmu_unzipped: Path, fmu_model_description: Any, tmp_path: Path
 ) -> None:
     copy = tmp_path / "no_resources"
-    shutil.copytree(unzipped, copy)
+    shutil.copytree(fmu_unzipped, copy)
     shutil.rmtree(copy / "resources")
-    logged, instantiate = make_slave(copy, model_description, "nores")
+    logged, instantiate = make_slave(copy, fmu_model_description, "nores")
     with pytest.raises(Exception, match="Failed to instantiate"):
         instantiate()
     (message,) = [m for status, _, m in logged.messages if status == STATUS_ERROR]
@@ -569,14 +542,16 @@ def test_missing_resources_give_null_with_a_reason(
 
 
 def test_two_instances_in_one_process_are_independent(
-    unzipped: Path,
-    model_description: Any,
+    fmu_unzipped: Path,
+    fmu_model_description: Any,
     value_refs: dict[str, int],
     direct_reference: Path,
     stand_pose: list[float],
+    fsm: type[IntEnum],
+    modes: type[IntEnum],
 ) -> None:
-    a, instantiate_a = make_slave(unzipped, model_description, "a")
-    b, instantiate_b = make_slave(unzipped, model_description, "b")
+    a, instantiate_a = make_slave(fmu_unzipped, fmu_model_description, "a")
+    b, instantiate_b = make_slave(fmu_unzipped, fmu_model_description, "b")
     instantiate_a()
     instantiate_b()
     inputs_a = standing(stand_pose)
@@ -586,7 +561,7 @@ def test_two_instances_in_one_process_are_independent(
         s = logged.slave
         s.setupExperiment(startTime=0.0)
         s.enterInitializationMode()
-        inputs.apply(s, value_refs)
+        inputs.apply(s, value_refs, modes)
         s.exitInitializationMode()
     t = 0.0
     for _ in range(50):
@@ -595,7 +570,7 @@ def test_two_instances_in_one_process_are_independent(
         t += 0.02
     for logged, inputs in ((a, inputs_a), (b, inputs_b)):
         direct = run_direct(direct_reference, [(inputs, 1000, 0.02)])
-        assert_matches_direct(outputs(logged.slave, value_refs), direct["commands"][0])
+        assert_matches_direct(outputs(logged.slave, value_refs), direct["commands"][0], fsm)
         logged.slave.terminate()
     a.slave.freeInstance()
     b.slave.freeInstance()

@@ -59,117 +59,48 @@ impl Leg {
     }
 }
 
-/// Which gait the locomotion state uses.
+/// Which gait the locomotion state uses. The discriminant is the stable integer code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum GaitKind {
     /// Diagonal pairs (FR+RL, FL+RR) in anti-phase, duty factor 0.5.
-    Trot,
+    Trot = 0,
     /// Static walk, one leg in swing at a time (RR, FR, RL, FL), duty factor 0.75.
-    Walk,
+    Walk = 1,
 }
 
-/// Controller tuning. `Default` is the tuning used with the DART model of `robot/quadruped.urdf`
-/// at a 1 kHz control rate; JSON-(de)serialisable (the FMU ships it as `resources/controller.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ControllerConfig {
-    /// Nominal leg control tick, s (the `dt` passed to `step` should match it).
-    pub control_dt: f64,
-    /// The MPC is solved on every k-th call of `step` (k ≥ 1); forces are held in between.
-    pub mpc_every_ticks: usize,
-    /// MPC horizon length in prediction steps (≥ 10).
-    pub mpc_horizon: usize,
-    /// MPC prediction step, s (horizon covers `mpc_horizon · mpc_dt`).
-    pub mpc_dt: f64,
-    /// Gait used in the locomotion state.
-    pub gait: GaitKind,
-    /// Gait cycle period, s.
-    pub gait_period: f64,
-    /// Swing-foot apex height above the straight line between lift-off and touchdown, m.
-    pub swing_height: f64,
-    /// Friction coefficient used by the MPC's friction pyramid.
-    pub mu: f64,
-    /// Minimum normal force on a stance foot, N.
-    pub f_min: f64,
-    /// Maximum normal force on a stance foot, N.
-    pub f_max: f64,
-    /// Nominal standing height of the base above the terrain, m (used when the reference gives ≤ 0).
-    pub body_height: f64,
-    /// MPC state weights: roll, pitch, yaw, x, y, z, ωx, ωy, ωz, vx, vy, vz, gravity state.
-    pub mpc_q: [f64; 13],
-    /// MPC force weight (same for every force component).
-    pub mpc_r: f64,
-    /// Swing-leg joint stiffness (abduction, hip, knee), N·m/rad.
-    pub kp_swing: [f64; 3],
-    /// Swing-leg joint damping (abduction, hip, knee), N·m·s/rad.
-    pub kd_swing: [f64; 3],
-    /// Joint stiffness used by the stand-up interpolation, N·m/rad.
-    pub kp_stand: [f64; 3],
-    /// Joint damping used by the stand-up interpolation, N·m·s/rad.
-    pub kd_stand: [f64; 3],
-    /// Duration of the stand-up motion, s.
-    pub stand_up_duration: f64,
-    /// Raibert foothold velocity-feedback gain k in p = p_hip + v·T_stance/2 + k (v − v_ref), s.
-    pub raibert_gain: f64,
-    /// Tilt (angle between body z and world z) above which the FSM enters damping, rad.
-    pub max_tilt: f64,
-    /// Joint position margin beyond the URDF limits tolerated before damping, rad.
-    pub joint_limit_margin: f64,
-    /// Joint damping of the damping (safe) state, N·m·s/rad.
-    pub damping_kd: f64,
-    /// Largest body pitch the terrain-following reference may ask for, rad.
-    pub max_terrain_pitch: f64,
-}
+impl GaitKind {
+    /// Every gait with its name and description (the code is the discriminant): the one list the FMU's
+    /// `GaitKind` enumeration type (`gait.kind`) is generated from.
+    pub const ALL: [(GaitKind, &'static str, &'static str); 2] = [
+        (
+            GaitKind::Trot,
+            "Trot",
+            "Diagonal pairs in anti-phase, duty factor 0.5",
+        ),
+        (
+            GaitKind::Walk,
+            "Walk",
+            "Static walk, one leg in swing at a time, duty factor 0.75",
+        ),
+    ];
 
-impl ControllerConfig {
-    /// The MPC's fixed parameters for a robot of `mass` kg with body-frame inertia
-    /// `inertia_body` (about its centre of mass), at this configuration's horizon.
-    pub fn mpc_params(&self, mass: f64, inertia_body: [[f64; 3]; 3]) -> crate::mpc::MpcParams {
-        crate::mpc::MpcParams {
-            horizon: self.mpc_horizon,
-            dt: self.mpc_dt,
-            mass,
-            inertia_body,
-            q_weights: self.mpc_q,
-            r_weight: self.mpc_r,
-            mu: self.mu,
-            f_min: self.f_min,
-            f_max: self.f_max,
-        }
+    /// Stable integer code (the discriminant).
+    pub fn as_code(self) -> i32 {
+        self as i32
+    }
+
+    /// Inverse of [`GaitKind::as_code`].
+    pub fn from_code(code: i32) -> Option<GaitKind> {
+        GaitKind::ALL
+            .iter()
+            .find(|&&(v, ..)| v.as_code() == code)
+            .map(|&(gait, ..)| gait)
     }
 }
 
-impl Default for ControllerConfig {
-    fn default() -> Self {
-        ControllerConfig {
-            control_dt: 0.001,
-            mpc_every_ticks: 10,
-            mpc_horizon: 10,
-            mpc_dt: 0.03,
-            gait: GaitKind::Trot,
-            gait_period: 0.3,
-            swing_height: 0.08,
-            mu: 0.6,
-            f_min: 5.0,
-            f_max: 150.0,
-            body_height: 0.28,
-            mpc_q: [
-                10.0, 10.0, 5.0, 50.0, 50.0, 50.0, 0.05, 0.05, 0.3, 1.0, 1.0, 0.5, 0.0,
-            ],
-            mpc_r: 1e-5,
-            kp_swing: [60.0, 60.0, 60.0],
-            kd_swing: [2.0, 2.0, 2.0],
-            kp_stand: [80.0, 80.0, 80.0],
-            kd_stand: [3.0, 3.0, 3.0],
-            stand_up_duration: 1.0,
-            raibert_gain: 0.03,
-            max_tilt: 0.9,
-            joint_limit_margin: 0.15,
-            damping_kd: 2.0,
-            max_terrain_pitch: 0.35,
-        }
-    }
-}
+/// Declared in [`crate::config`] (one declaration per field); re-exported here with the rest of
+/// the contract.
+pub use crate::config::ControllerConfig;
 
 /// Measured state of the robot.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -293,35 +224,46 @@ impl HeightMap {
     }
 }
 
-/// What the master asks for; the FSM decides (stand-up first, damping on faults).
+/// What the master asks for; the FSM decides (stand-up first, damping on faults). The
+/// discriminant is the stable integer code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ModeRequest {
     /// Zero torque.
-    Passive,
+    Passive = 0,
     /// Stand still (stand-up first when coming from passive).
-    Stand,
+    Stand = 1,
     /// Walk/trot following the reference (stand-up and stand first).
-    Locomotion,
+    Locomotion = 2,
 }
 
 impl ModeRequest {
-    /// Stable integer code: Passive 0, Stand 1, Locomotion 2.
+    /// Every mode with its name and description (the code is the discriminant): the one list the FMU's
+    /// `ModeRequest` enumeration type (`cmd.mode`) is generated from.
+    pub const ALL: [(ModeRequest, &'static str, &'static str); 3] = [
+        (ModeRequest::Passive, "Passive", "Zero torque"),
+        (
+            ModeRequest::Stand,
+            "Stand",
+            "Stand still (stand-up first when coming from passive)",
+        ),
+        (
+            ModeRequest::Locomotion,
+            "Locomotion",
+            "Follow the reference with the gait (stand-up and stand first)",
+        ),
+    ];
+
+    /// Stable integer code (the discriminant).
     pub fn as_code(self) -> i32 {
-        match self {
-            ModeRequest::Passive => 0,
-            ModeRequest::Stand => 1,
-            ModeRequest::Locomotion => 2,
-        }
+        self as i32
     }
 
     /// Inverse of [`ModeRequest::as_code`].
     pub fn from_code(code: i32) -> Option<ModeRequest> {
-        match code {
-            0 => Some(ModeRequest::Passive),
-            1 => Some(ModeRequest::Stand),
-            2 => Some(ModeRequest::Locomotion),
-            _ => None,
-        }
+        ModeRequest::ALL
+            .iter()
+            .find(|&&(v, ..)| v.as_code() == code)
+            .map(|&(mode, ..)| mode)
     }
 }
 
@@ -364,43 +306,59 @@ impl Default for Reference {
     }
 }
 
-/// Gait state machine state.
+/// Gait state machine state. The discriminant is the stable integer code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum FsmState {
     /// Zero torque.
-    Passive,
+    Passive = 0,
     /// Joint-space interpolation from the current pose to the standing pose.
-    StandUp,
+    StandUp = 1,
     /// Four-leg balance with the MPC, zero velocity.
-    Stand,
+    Stand = 2,
     /// Gait following the reference.
-    Locomotion,
+    Locomotion = 3,
     /// Safe state after a fault (tilt, joint limit, bad input): joint damping only.
-    Damping,
+    Damping = 4,
 }
 
 impl FsmState {
-    /// Stable integer code: Passive 0, StandUp 1, Stand 2, Locomotion 3, Damping 4.
+    /// Every state with its name and description (the code is the discriminant): the one list the FMU's
+    /// `FsmState` enumeration type (`fsm.state`) is generated from.
+    pub const ALL: [(FsmState, &'static str, &'static str); 5] = [
+        (FsmState::Passive, "Passive", "Zero torque"),
+        (
+            FsmState::StandUp,
+            "StandUp",
+            "Joint-space interpolation from the current pose to the standing pose",
+        ),
+        (
+            FsmState::Stand,
+            "Stand",
+            "Four-leg balance with the MPC, zero velocity",
+        ),
+        (
+            FsmState::Locomotion,
+            "Locomotion",
+            "Gait following the reference",
+        ),
+        (
+            FsmState::Damping,
+            "Damping",
+            "Safe state after a fault (tilt, joint limit, bad input): joint damping only",
+        ),
+    ];
+
+    /// Stable integer code (the discriminant).
     pub fn as_code(self) -> i32 {
-        match self {
-            FsmState::Passive => 0,
-            FsmState::StandUp => 1,
-            FsmState::Stand => 2,
-            FsmState::Locomotion => 3,
-            FsmState::Damping => 4,
-        }
+        self as i32
     }
 
     /// Inverse of [`FsmState::as_code`].
     pub fn from_code(code: i32) -> Option<FsmState> {
-        match code {
-            0 => Some(FsmState::Passive),
-            1 => Some(FsmState::StandUp),
-            2 => Some(FsmState::Stand),
-            3 => Some(FsmState::Locomotion),
-            4 => Some(FsmState::Damping),
-            _ => None,
-        }
+        FsmState::ALL
+            .iter()
+            .find(|&&(v, ..)| v.as_code() == code)
+            .map(|&(state, ..)| state)
     }
 }
 

@@ -29,6 +29,7 @@
 //! `fsm`, `footholds`, `mpc_schedule`, `leg_control`, `validation`); [`math`] holds the shared
 //! geometry helpers, so no two modules depend on each other.
 pub mod api;
+pub mod config;
 pub mod controller;
 mod estimate;
 mod footholds;

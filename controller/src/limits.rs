@@ -1,7 +1,9 @@
 //! Accepted ranges (inclusive) of the [`ControllerConfig`](crate::ControllerConfig) fields: the
-//! operating envelope the controller is tuned and timed for. The FMU declares them as the
-//! parameters' `min`/`max` in `modelDescription.xml` and refuses values outside them; this is
-//! their only definition.
+//! operating envelope the controller is tuned and timed for. This is their only definition; each
+//! is named once, by its field's declaration in [`crate::config`], and reaches from there
+//! [`ControllerConfig::check_ranges`](crate::ControllerConfig::check_ranges) and the FMU, which
+//! declares them as the parameters' `min`/`max` in `modelDescription.xml` and refuses values
+//! outside them.
 //!
 //! [`Controller::new`](crate::Controller::new) enforces the hard part of them (positivity where a
 //! zero would divide, finiteness, `MPC_HORIZON`, `f_min < f_max`, a reachable standing pose); the

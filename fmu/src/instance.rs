@@ -10,8 +10,8 @@ use crate::ffi::Fmi2Status;
 use crate::logger::Logger;
 use crate::resources::Resources;
 use crate::variables::{
-    check_value, initial_command, initial_inputs, read_input, read_output, table, write_input,
-    Binding, Causality, ScalarType, Value,
+    check_value, initial_command, initial_inputs, read_input, read_output, read_parameter, table,
+    write_input, write_parameter, Binding, Causality, ScalarType, Value,
 };
 use crate::FmuError;
 
@@ -220,7 +220,9 @@ impl Instance {
         for (k, &vr) in vrs.iter().enumerate() {
             let variable = lookup(vr, expected)?;
             let value = match variable.binding {
-                Binding::Parameter(param) => Some(param.read(&self.config)),
+                Binding::Parameter { field, element } => {
+                    Some(read_parameter(field, element, &self.config))
+                }
                 b => read_output(b, &self.command)
                     .or_else(|| read_input(b, &self.state, &self.reference, &self.height_map)),
             };
@@ -267,7 +269,9 @@ impl Instance {
         }
         for (variable, value) in checked {
             match variable.binding {
-                Binding::Parameter(param) => param.write(&mut self.config, value),
+                Binding::Parameter { field, element } => {
+                    write_parameter(field, element, &mut self.config, value)
+                }
                 b => write_input(
                     b,
                     value,

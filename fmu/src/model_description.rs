@@ -4,7 +4,7 @@ use std::collections::BTreeSet;
 use std::fmt::Write;
 
 use crate::logger::LOG_CATEGORIES;
-use crate::variables::{table, Causality, Variable};
+use crate::variables::{enum_types, table, Causality, Variable};
 use crate::{DEFAULT_STEP_SIZE, DEFAULT_STOP_TIME, GUID, MODEL_IDENTIFIER};
 
 /// Escapes text for XML attribute values and element content.
@@ -38,7 +38,18 @@ fn scalar_variable(out: &mut String, v: &Variable) {
     if v.causality == Causality::Output {
         out.push_str(" initial=\"exact\"");
     }
-    let _ = write!(out, ">\n      <{}", v.scalar_type().xml_name());
+    match v.declared_type {
+        Some(type_name) => {
+            let _ = write!(
+                out,
+                ">\n      <Enumeration declaredType=\"{}\"",
+                xml_escape(type_name)
+            );
+        }
+        None => {
+            let _ = write!(out, ">\n      <{}", v.scalar_type().xml_name());
+        }
+    }
     if let Some(unit) = v.unit {
         let _ = write!(out, " unit=\"{}\"", xml_escape(unit.name()));
     }
@@ -99,6 +110,28 @@ pub fn model_description_xml() -> String {
     }
     out.push_str("  </UnitDefinitions>\n");
 
+    // Enumeration types (FMI 2.0: their variables are read and written as Integer).
+    out.push_str("  <TypeDefinitions>\n");
+    for t in enum_types() {
+        let _ = writeln!(
+            out,
+            "    <SimpleType name=\"{}\" description=\"{}\">\n      <Enumeration>",
+            xml_escape(t.name),
+            xml_escape(t.description)
+        );
+        for item in &t.items {
+            let _ = writeln!(
+                out,
+                "        <Item name=\"{}\" value=\"{}\" description=\"{}\"/>",
+                xml_escape(item.name),
+                item.value,
+                xml_escape(item.description)
+            );
+        }
+        out.push_str("      </Enumeration>\n    </SimpleType>\n");
+    }
+    out.push_str("  </TypeDefinitions>\n");
+
     out.push_str("  <LogCategories>\n");
     for (name, description) in LOG_CATEGORIES {
         let _ = writeln!(
@@ -150,7 +183,8 @@ pub fn documentation_html() -> String {
             v.value_reference,
             v.causality.xml_name(),
             v.variability.xml_name(),
-            v.scalar_type().xml_name(),
+            v.declared_type
+                .map_or_else(|| v.scalar_type().xml_name().to_owned(), |t| format!("Enumeration {t}")),
             v.start.xml_text(),
             v.min.map(|b| format!("{b:?}")).unwrap_or_default(),
             v.max.map(|b| format!("{b:?}")).unwrap_or_default(),
@@ -192,6 +226,21 @@ mod tests {
         assert_eq!(with_range, parameters);
         assert!(xml.contains("unit=\"s\" min=\"0.0001\" max=\"0.05\" start=\"0.001\""));
         assert!(xml.contains("<Integer min=\"10\" max=\"40\" start=\"10\"/>"));
+        // The FSM states, mode requests and gaits are enumeration types, listed from the
+        // controller's own lists.
+        assert!(xml.contains("<SimpleType name=\"FsmState\""));
+        for (state, name, _) in quad_controller::FsmState::ALL {
+            assert!(xml.contains(&format!(
+                "<Item name=\"{name}\" value=\"{}\"",
+                state.as_code()
+            )));
+        }
+        assert!(xml.contains("<Enumeration declaredType=\"FsmState\" start=\"0\"/>"));
+        assert!(xml.contains(
+            "<Enumeration declaredType=\"ModeRequest\" min=\"0\" max=\"2\" start=\"1\"/>"
+        ));
+        assert!(xml
+            .contains("<Enumeration declaredType=\"GaitKind\" min=\"0\" max=\"1\" start=\"0\"/>"));
     }
 
     #[test]

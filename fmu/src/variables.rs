@@ -4,12 +4,12 @@
 //! Value references are the table index (unique across types), so the `index` attribute used in
 //! `<ModelStructure>` is always `value_reference + 1`.
 
-use std::ops::RangeInclusive;
 use std::sync::OnceLock;
 
+use quad_controller::config::{FieldKind, FieldValue};
 use quad_controller::{
-    limits, Command, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference,
-    RobotState, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
+    Command, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference, RobotState,
+    HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
 };
 
 use crate::FmuError;
@@ -182,182 +182,128 @@ impl Unit {
     }
 }
 
-/// Parameters: fields of [`ControllerConfig`]; each knows how to read and write its field.
+/// An item of an enumeration type.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Param {
-    /// `control_dt`.
-    ControlDt,
-    /// `mpc_every_ticks`.
-    MpcEveryTicks,
-    /// `mpc_horizon`.
-    MpcHorizon,
-    /// `mpc_dt`.
-    MpcDt,
-    /// `gait` (0 trot, 1 walk).
-    Gait,
-    /// `gait_period`.
-    GaitPeriod,
-    /// `swing_height`.
-    SwingHeight,
-    /// `mu`.
-    Mu,
-    /// `f_min`.
-    ForceMin,
-    /// `f_max`.
-    ForceMax,
-    /// `body_height`.
-    BodyHeight,
-    /// `mpc_q[i]`.
-    MpcQ(usize),
-    /// `mpc_r`.
-    MpcR,
-    /// `kp_swing[j]`.
-    KpSwing(usize),
-    /// `kd_swing[j]`.
-    KdSwing(usize),
-    /// `kp_stand[j]`.
-    KpStand(usize),
-    /// `kd_stand[j]`.
-    KdStand(usize),
-    /// `stand_up_duration`.
-    StandUpDuration,
-    /// `raibert_gain`.
-    RaibertGain,
-    /// `max_tilt`.
-    MaxTilt,
-    /// `joint_limit_margin`.
-    JointLimitMargin,
-    /// `damping_kd`.
-    DampingKd,
-    /// `max_terrain_pitch`.
-    MaxTerrainPitch,
+pub struct EnumItem {
+    /// Item name (the Rust variant name).
+    pub name: &'static str,
+    /// Integer code, as read and written with `fmi2GetInteger`/`fmi2SetInteger`.
+    pub value: i32,
+    /// Human description.
+    pub description: &'static str,
 }
 
-fn gait_code(gait: GaitKind) -> i32 {
-    match gait {
-        GaitKind::Trot => 0,
-        GaitKind::Walk => 1,
-    }
+/// An enumeration type of `<TypeDefinitions>` (FMI 2.0 `<SimpleType>` with `<Enumeration>`),
+/// generated from the controller's own list of the variants.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct EnumType {
+    /// Type name, used as `declaredType` by the variables of this type.
+    pub name: &'static str,
+    /// Human description.
+    pub description: &'static str,
+    /// Items in code order.
+    pub items: Vec<EnumItem>,
 }
 
-/// A `usize` range of `quad_controller::limits` as FMI bounds.
-fn count_range(range: RangeInclusive<usize>) -> (f64, f64) {
-    // The bounds are small counts (≤ 1000), exact as f64.
-    (*range.start() as f64, *range.end() as f64)
-}
-
-/// An `f64` range of `quad_controller::limits` as FMI bounds.
-fn real_range(range: RangeInclusive<f64>) -> (f64, f64) {
-    (*range.start(), *range.end())
-}
-
-impl Param {
-    /// The inclusive range `fmi2Set*` accepts (`min`/`max` in `modelDescription.xml`), taken from
-    /// `quad_controller::limits`, the one definition of the controller's operating envelope.
-    pub fn range(self) -> (f64, f64) {
-        match self {
-            Param::ControlDt => real_range(limits::CONTROL_DT),
-            Param::MpcEveryTicks => count_range(limits::MPC_EVERY_TICKS),
-            Param::MpcHorizon => count_range(limits::MPC_HORIZON),
-            Param::MpcDt => real_range(limits::MPC_DT),
-            // 0 trot, 1 walk (see `gait_code`).
-            Param::Gait => (0.0, 1.0),
-            Param::GaitPeriod => real_range(limits::GAIT_PERIOD),
-            Param::SwingHeight => real_range(limits::SWING_HEIGHT),
-            Param::Mu => real_range(limits::MU),
-            Param::ForceMin => real_range(limits::F_MIN),
-            Param::ForceMax => real_range(limits::F_MAX),
-            Param::BodyHeight => real_range(limits::BODY_HEIGHT),
-            Param::MpcQ(_) => real_range(limits::MPC_Q),
-            Param::MpcR => real_range(limits::MPC_R),
-            Param::KpSwing(_) | Param::KpStand(_) => real_range(limits::JOINT_KP),
-            Param::KdSwing(_) | Param::KdStand(_) | Param::DampingKd => {
-                real_range(limits::JOINT_KD)
-            }
-            Param::StandUpDuration => real_range(limits::STAND_UP_DURATION),
-            Param::RaibertGain => real_range(limits::RAIBERT_GAIN),
-            Param::MaxTilt => real_range(limits::MAX_TILT),
-            Param::JointLimitMargin => real_range(limits::JOINT_LIMIT_MARGIN),
-            Param::MaxTerrainPitch => real_range(limits::MAX_TERRAIN_PITCH),
+impl EnumType {
+    fn new<T: Copy>(
+        name: &'static str,
+        description: &'static str,
+        all: &[(T, &'static str, &'static str)],
+        code: impl Fn(T) -> i32,
+    ) -> EnumType {
+        let items = all
+            .iter()
+            .map(|&(variant, name, description)| EnumItem {
+                name,
+                value: code(variant),
+                description,
+            })
+            .collect();
+        EnumType {
+            name,
+            description,
+            items,
         }
     }
 
-    /// Current value of the field in `config`.
-    pub fn read(self, config: &ControllerConfig) -> Value {
-        let as_int = |v: usize| Value::Integer(i32::try_from(v).unwrap_or(i32::MAX));
-        match self {
-            Param::ControlDt => Value::Real(config.control_dt),
-            Param::MpcEveryTicks => as_int(config.mpc_every_ticks),
-            Param::MpcHorizon => as_int(config.mpc_horizon),
-            Param::MpcDt => Value::Real(config.mpc_dt),
-            Param::Gait => Value::Integer(gait_code(config.gait)),
-            Param::GaitPeriod => Value::Real(config.gait_period),
-            Param::SwingHeight => Value::Real(config.swing_height),
-            Param::Mu => Value::Real(config.mu),
-            Param::ForceMin => Value::Real(config.f_min),
-            Param::ForceMax => Value::Real(config.f_max),
-            Param::BodyHeight => Value::Real(config.body_height),
-            Param::MpcQ(i) => Value::Real(config.mpc_q[i]),
-            Param::MpcR => Value::Real(config.mpc_r),
-            Param::KpSwing(j) => Value::Real(config.kp_swing[j]),
-            Param::KdSwing(j) => Value::Real(config.kd_swing[j]),
-            Param::KpStand(j) => Value::Real(config.kp_stand[j]),
-            Param::KdStand(j) => Value::Real(config.kd_stand[j]),
-            Param::StandUpDuration => Value::Real(config.stand_up_duration),
-            Param::RaibertGain => Value::Real(config.raibert_gain),
-            Param::MaxTilt => Value::Real(config.max_tilt),
-            Param::JointLimitMargin => Value::Real(config.joint_limit_margin),
-            Param::DampingKd => Value::Real(config.damping_kd),
-            Param::MaxTerrainPitch => Value::Real(config.max_terrain_pitch),
-        }
+    /// `(min, max)` of the item codes.
+    pub fn range(&self) -> (f64, f64) {
+        let codes = self.items.iter().map(|item| item.value);
+        let min = codes.clone().min().unwrap_or(0);
+        let max = codes.max().unwrap_or(0);
+        (f64::from(min), f64::from(max))
     }
+}
 
-    /// Writes `value` (already type- and range-checked against the table) into `config`.
-    pub fn write(self, config: &mut ControllerConfig, value: Value) {
-        match (self, value) {
-            (Param::MpcEveryTicks, Value::Integer(v)) => {
-                config.mpc_every_ticks = usize::try_from(v).unwrap_or(0)
-            }
-            (Param::MpcHorizon, Value::Integer(v)) => {
-                config.mpc_horizon = usize::try_from(v).unwrap_or(0)
-            }
-            (Param::Gait, Value::Integer(v)) => {
-                config.gait = if v == 0 {
-                    GaitKind::Trot
-                } else {
-                    GaitKind::Walk
-                }
-            }
-            (param, Value::Real(v)) => {
-                let field = match param {
-                    Param::ControlDt => &mut config.control_dt,
-                    Param::MpcDt => &mut config.mpc_dt,
-                    Param::GaitPeriod => &mut config.gait_period,
-                    Param::SwingHeight => &mut config.swing_height,
-                    Param::Mu => &mut config.mu,
-                    Param::ForceMin => &mut config.f_min,
-                    Param::ForceMax => &mut config.f_max,
-                    Param::BodyHeight => &mut config.body_height,
-                    Param::MpcQ(i) => &mut config.mpc_q[i],
-                    Param::MpcR => &mut config.mpc_r,
-                    Param::KpSwing(j) => &mut config.kp_swing[j],
-                    Param::KdSwing(j) => &mut config.kd_swing[j],
-                    Param::KpStand(j) => &mut config.kp_stand[j],
-                    Param::KdStand(j) => &mut config.kd_stand[j],
-                    Param::StandUpDuration => &mut config.stand_up_duration,
-                    Param::RaibertGain => &mut config.raibert_gain,
-                    Param::MaxTilt => &mut config.max_tilt,
-                    Param::JointLimitMargin => &mut config.joint_limit_margin,
-                    Param::DampingKd => &mut config.damping_kd,
-                    Param::MaxTerrainPitch => &mut config.max_terrain_pitch,
-                    Param::MpcEveryTicks | Param::MpcHorizon | Param::Gait => return,
-                };
-                *field = v;
-            }
-            // The table gives every parameter exactly one type; other pairs cannot be requested.
-            _ => {}
-        }
+/// Name of the enumeration type of `fsm.state`.
+pub const FSM_STATE_TYPE: &str = "FsmState";
+/// Name of the enumeration type of `cmd.mode`.
+pub const MODE_REQUEST_TYPE: &str = "ModeRequest";
+/// Name of the enumeration type of `gait.kind`.
+pub const GAIT_KIND_TYPE: &str = "GaitKind";
+
+/// The enumeration types, built once (order of `<TypeDefinitions>`).
+pub fn enum_types() -> &'static [EnumType] {
+    static TYPES: OnceLock<Vec<EnumType>> = OnceLock::new();
+    TYPES.get_or_init(|| {
+        vec![
+            EnumType::new(
+                FSM_STATE_TYPE,
+                "State of the controller's gait state machine",
+                &FsmState::ALL,
+                FsmState::as_code,
+            ),
+            EnumType::new(
+                MODE_REQUEST_TYPE,
+                "Mode requested by the master; the state machine decides the state",
+                &ModeRequest::ALL,
+                ModeRequest::as_code,
+            ),
+            EnumType::new(
+                GAIT_KIND_TYPE,
+                "Gait of the locomotion state",
+                &GaitKind::ALL,
+                GaitKind::as_code,
+            ),
+        ]
+    })
+}
+
+/// The enumeration type called `name`.
+pub fn enum_type(name: &str) -> Option<&'static EnumType> {
+    enum_types().iter().find(|t| t.name == name)
+}
+
+/// Reads element `element` of the config field `field` (index into
+/// [`ControllerConfig::FIELDS`]) as an FMI value.
+pub fn read_parameter(field: usize, element: usize, config: &ControllerConfig) -> Value {
+    let f = &ControllerConfig::FIELDS[field];
+    match f.get(config, element) {
+        FieldValue::Real(v) => Value::Real(v),
+        FieldValue::Count(n) => Value::Integer(i32::try_from(n).unwrap_or(i32::MAX)),
+        FieldValue::Gait(g) => Value::Integer(g.as_code()),
     }
+}
+
+/// Writes `value` (already type- and range-checked against the table) into element `element` of
+/// the config field `field`.
+pub fn write_parameter(field: usize, element: usize, config: &mut ControllerConfig, value: Value) {
+    let f = &ControllerConfig::FIELDS[field];
+    let converted = match (f.kind, value) {
+        (FieldKind::Real, Value::Real(v)) => FieldValue::Real(v),
+        (FieldKind::Count, Value::Integer(v)) => match usize::try_from(v) {
+            Ok(n) => FieldValue::Count(n),
+            Err(_) => return,
+        },
+        (FieldKind::Gait, Value::Integer(v)) => match GaitKind::from_code(v) {
+            Some(g) => FieldValue::Gait(g),
+            None => return,
+        },
+        // The table gives every parameter exactly one type; other pairs cannot be requested.
+        _ => return,
+    };
+    f.set(config, element, converted);
 }
 
 /// What a variable is connected to inside the FMU.
@@ -415,8 +361,13 @@ pub enum Binding {
     MpcSolveTime,
     /// `Command::mpc_solved`.
     MpcSolved,
-    /// A field of `ControllerConfig`.
-    Parameter(Param),
+    /// Element `element` of the field `field` (index into [`ControllerConfig::FIELDS`]).
+    Parameter {
+        /// Index into [`ControllerConfig::FIELDS`].
+        field: usize,
+        /// Element of an array field (0 for scalars).
+        element: usize,
+    },
 }
 
 /// One row of the table.
@@ -436,6 +387,8 @@ pub struct Variable {
     pub description: String,
     /// Unit, if dimensional.
     pub unit: Option<Unit>,
+    /// Enumeration type (an [`EnumType`] name) of an Integer variable, if it has one.
+    pub declared_type: Option<&'static str>,
     /// Inclusive lower bound checked by `fmi2Set*`.
     pub min: Option<f64>,
     /// Inclusive upper bound checked by `fmi2Set*`.
@@ -517,10 +470,19 @@ impl TableBuilder {
             start,
             description,
             unit,
+            declared_type: None,
             min: range.0,
             max: range.1,
             binding,
         });
+    }
+
+    /// Gives the row pushed last the enumeration type `type_name`.
+    fn of_type(&mut self, type_name: &'static str) {
+        debug_assert!(enum_type(type_name).is_some(), "{type_name}");
+        if let Some(row) = self.rows.last_mut() {
+            row.declared_type = Some(type_name);
+        }
     }
 
     fn input(
@@ -567,25 +529,33 @@ impl TableBuilder {
         );
     }
 
-    fn parameter(
-        &mut self,
-        name: String,
-        param: Param,
-        config: &ControllerConfig,
-        description: String,
-        unit: Option<Unit>,
-    ) {
-        let (min, max) = param.range();
-        self.push(
-            name,
-            Causality::Parameter,
-            Variability::Fixed,
-            param.read(config),
-            description,
-            unit,
-            (Some(min), Some(max)),
-            Binding::Parameter(param),
-        );
+    /// One parameter per element of every field of [`ControllerConfig::FIELDS`], in order.
+    fn parameters(&mut self) {
+        let config = ControllerConfig::default();
+        for (field, f) in ControllerConfig::FIELDS.iter().enumerate() {
+            let (min, max) = f.range();
+            let unit = f.unit.map(|name| {
+                Unit::ALL
+                    .into_iter()
+                    .find(|u| u.name() == name)
+                    .unwrap_or_else(|| panic!("unit {name} of {} is not declared", f.name))
+            });
+            for element in 0..f.len {
+                self.push(
+                    f.fmi_element_name(element),
+                    Causality::Parameter,
+                    Variability::Fixed,
+                    read_parameter(field, element, &config),
+                    f.element_description(element),
+                    unit,
+                    (Some(min), Some(max)),
+                    Binding::Parameter { field, element },
+                );
+                if f.kind == FieldKind::Gait {
+                    self.of_type(GAIT_KIND_TYPE);
+                }
+            }
+        }
     }
 }
 
@@ -603,7 +573,6 @@ fn build_table() -> Vec<Variable> {
     let mut t = TableBuilder { rows: Vec::new() };
     let (state, reference) = initial_inputs();
     let command = initial_command();
-    let config = ControllerConfig::default();
 
     // Inputs: measured state.
     for (i, axis) in AXES.iter().enumerate() {
@@ -740,16 +709,19 @@ fn build_table() -> Vec<Variable> {
             Binding::HeightMapHeight(i),
         );
     }
+    let mode_range = enum_type(MODE_REQUEST_TYPE)
+        .map_or((None, None), |e| (Some(e.range().0), Some(e.range().1)));
     t.push(
         "cmd.mode".to_owned(),
         Causality::Input,
         Variability::Discrete,
         Value::Integer(reference.mode.as_code()),
-        "Requested mode: 0 passive, 1 stand, 2 locomotion (the FSM stands up first and may enter damping on faults)".to_owned(),
+        "Requested mode (the FSM stands up first and may enter damping on faults)".to_owned(),
         None,
-        (Some(0.0), Some(2.0)),
+        mode_range,
         Binding::ModeRequest,
     );
+    t.of_type(MODE_REQUEST_TYPE);
 
     // Outputs.
     for i in 0..NUM_JOINTS {
@@ -776,10 +748,11 @@ fn build_table() -> Vec<Variable> {
     t.output(
         "fsm.state".to_owned(),
         Value::Integer(command.fsm_state.as_code()),
-        "Controller state: 0 passive, 1 stand-up, 2 stand, 3 locomotion, 4 damping".to_owned(),
+        "Controller state".to_owned(),
         None,
         Binding::FsmState,
     );
+    t.of_type(FSM_STATE_TYPE);
     for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
         for (axis, axis_name) in AXES.iter().enumerate() {
             t.output(
@@ -808,196 +781,7 @@ fn build_table() -> Vec<Variable> {
 
     // Parameters are all fixed: `Controller` is built from them in fmi2ExitInitializationMode
     // (MPC matrices, standing pose, gait) and offers no way to change them afterwards.
-    let c = &config;
-    t.parameter(
-        "control.dt".into(),
-        Param::ControlDt,
-        c,
-        "Leg control tick; a doStep runs round(h / control.dt) ticks".into(),
-        Some(Second),
-    );
-    t.parameter(
-        "mpc.everyTicks".into(),
-        Param::MpcEveryTicks,
-        c,
-        "The MPC is solved every k-th control tick".into(),
-        None,
-    );
-    t.parameter(
-        "mpc.horizon".into(),
-        Param::MpcHorizon,
-        c,
-        "MPC horizon length in prediction steps".into(),
-        None,
-    );
-    t.parameter(
-        "mpc.dt".into(),
-        Param::MpcDt,
-        c,
-        "MPC prediction step".into(),
-        Some(Second),
-    );
-    t.parameter(
-        "gait.kind".into(),
-        Param::Gait,
-        c,
-        "Gait of the locomotion state: 0 trot, 1 walk".into(),
-        None,
-    );
-    t.parameter(
-        "gait.period".into(),
-        Param::GaitPeriod,
-        c,
-        "Gait cycle period".into(),
-        Some(Second),
-    );
-    t.parameter(
-        "gait.swingHeight".into(),
-        Param::SwingHeight,
-        c,
-        "Swing-foot apex height".into(),
-        Some(Metre),
-    );
-    t.parameter(
-        "mpc.mu".into(),
-        Param::Mu,
-        c,
-        "Friction coefficient of the MPC friction pyramid".into(),
-        None,
-    );
-    t.parameter(
-        "mpc.fMin".into(),
-        Param::ForceMin,
-        c,
-        "Minimum normal force on a stance foot".into(),
-        Some(Newton),
-    );
-    t.parameter(
-        "mpc.fMax".into(),
-        Param::ForceMax,
-        c,
-        "Maximum normal force on a stance foot".into(),
-        Some(Newton),
-    );
-    t.parameter(
-        "stand.bodyHeight".into(),
-        Param::BodyHeight,
-        c,
-        "Nominal standing height above the terrain (used when ref.bodyHeight <= 0)".into(),
-        Some(Metre),
-    );
-    let q_names = [
-        "roll",
-        "pitch",
-        "yaw",
-        "x",
-        "y",
-        "z",
-        "omega x",
-        "omega y",
-        "omega z",
-        "vx",
-        "vy",
-        "vz",
-        "gravity state",
-    ];
-    for (i, q) in q_names.iter().enumerate() {
-        t.parameter(
-            format!("mpc.q[{}]", i + 1),
-            Param::MpcQ(i),
-            c,
-            format!("MPC state weight: {q}"),
-            None,
-        );
-    }
-    t.parameter(
-        "mpc.r".into(),
-        Param::MpcR,
-        c,
-        "MPC force weight".into(),
-        None,
-    );
-    /// (name prefix, parameter of joint j, description, unit)
-    type GainRow = (&'static str, fn(usize) -> Param, &'static str, Unit);
-    let gains: [GainRow; 4] = [
-        (
-            "swing.kp",
-            Param::KpSwing,
-            "Swing-leg joint stiffness",
-            NewtonMetrePerRadian,
-        ),
-        (
-            "swing.kd",
-            Param::KdSwing,
-            "Swing-leg joint damping",
-            NewtonMetreSecondPerRadian,
-        ),
-        (
-            "stand.kp",
-            Param::KpStand,
-            "Stand-up joint stiffness",
-            NewtonMetrePerRadian,
-        ),
-        (
-            "stand.kd",
-            Param::KdStand,
-            "Stand-up joint damping",
-            NewtonMetreSecondPerRadian,
-        ),
-    ];
-    for (prefix, param, description, unit) in gains {
-        for (j, joint) in JOINT_NAMES.iter().enumerate() {
-            t.parameter(
-                format!("{prefix}[{}]", j + 1),
-                param(j),
-                c,
-                format!("{description}, {joint}"),
-                Some(unit),
-            );
-        }
-    }
-    t.parameter(
-        "stand.upDuration".into(),
-        Param::StandUpDuration,
-        c,
-        "Duration of the stand-up motion".into(),
-        Some(Second),
-    );
-    t.parameter(
-        "gait.raibertGain".into(),
-        Param::RaibertGain,
-        c,
-        "Raibert foothold velocity-feedback gain".into(),
-        Some(Second),
-    );
-    t.parameter(
-        "safety.maxTilt".into(),
-        Param::MaxTilt,
-        c,
-        "Tilt above which the FSM enters damping".into(),
-        Some(Radian),
-    );
-    t.parameter(
-        "safety.jointLimitMargin".into(),
-        Param::JointLimitMargin,
-        c,
-        "Joint position margin beyond the URDF limits before damping".into(),
-        Some(Radian),
-    );
-    t.parameter(
-        "safety.dampingKd".into(),
-        Param::DampingKd,
-        c,
-        "Joint damping of the damping state".into(),
-        Some(NewtonMetreSecondPerRadian),
-    );
-    t.parameter(
-        "terrain.maxPitch".into(),
-        Param::MaxTerrainPitch,
-        c,
-        "Largest body pitch the terrain-following reference may ask for".into(),
-        Some(Radian),
-    );
+    t.parameters();
     t.rows
 }
 
@@ -1028,8 +812,8 @@ pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
 /// resources must lie in the same envelope as values set through `fmi2Set*`.
 pub fn check_parameters(config: &ControllerConfig) -> Result<(), FmuError> {
     for v in table() {
-        if let Binding::Parameter(param) = v.binding {
-            check_value(v, param.read(config))?;
+        if let Binding::Parameter { field, element } = v.binding {
+            check_value(v, read_parameter(field, element, config))?;
         }
     }
     Ok(())
@@ -1124,6 +908,7 @@ pub fn read_output(binding: Binding, command: &Command) -> Option<Value> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use quad_controller::config::ConfigField;
     use std::collections::HashSet;
 
     #[test]
@@ -1182,10 +967,15 @@ mod tests {
                 Value::Boolean(b) => Value::Boolean(!b),
             };
             match v.binding {
-                Binding::Parameter(param) => {
-                    assert_eq!(param.read(&config), v.start, "{}", v.name);
-                    param.write(&mut config, probe);
-                    assert_eq!(param.read(&config), probe, "{}", v.name);
+                Binding::Parameter { field, element } => {
+                    assert_eq!(
+                        read_parameter(field, element, &config),
+                        v.start,
+                        "{}",
+                        v.name
+                    );
+                    write_parameter(field, element, &mut config, probe);
+                    assert_eq!(read_parameter(field, element, &config), probe, "{}", v.name);
                 }
                 b if v.causality == Causality::Input => {
                     assert_eq!(
@@ -1226,9 +1016,12 @@ mod tests {
         -next_up(-x)
     }
 
-    fn parameters() -> impl Iterator<Item = (&'static Variable, Param)> {
+    /// Every parameter with its config field and element.
+    fn parameters() -> impl Iterator<Item = (&'static Variable, &'static ConfigField, usize)> {
         table().iter().filter_map(|v| match v.binding {
-            Binding::Parameter(p) => Some((v, p)),
+            Binding::Parameter { field, element } => {
+                Some((v, &ControllerConfig::FIELDS[field], element))
+            }
             _ => None,
         })
     }
@@ -1236,8 +1029,8 @@ mod tests {
     #[test]
     fn every_parameter_has_a_range_holding_its_start_value() {
         assert_eq!(parameters().count(), 43);
-        for (v, param) in parameters() {
-            let (min, max) = param.range();
+        for (v, field, _) in parameters() {
+            let (min, max) = field.range();
             assert_eq!((v.min, v.max), (Some(min), Some(max)), "{}", v.name);
             assert!(
                 min.is_finite() && max.is_finite() && min < max,
@@ -1251,8 +1044,8 @@ mod tests {
 
     #[test]
     fn values_just_outside_a_range_and_non_finite_values_are_refused() {
-        for (v, param) in parameters() {
-            let (min, max) = param.range();
+        for (v, field, _) in parameters() {
+            let (min, max) = field.range();
             let (below, above) = match v.start {
                 Value::Real(_) => (Value::Real(next_down(min)), Value::Real(next_up(max))),
                 _ => (
@@ -1299,22 +1092,28 @@ mod tests {
                 .join("quadruped.urdf"),
         )
         .unwrap();
-        for (v, param) in parameters() {
-            let (min, max) = param.range();
+        for (v, field, element) in parameters() {
+            let (min, max) = field.range();
+            let index = ControllerConfig::FIELDS
+                .iter()
+                .position(|f| f.name == field.name)
+                .unwrap();
             for end in [min, max] {
                 let mut config = ControllerConfig::default();
                 let value = match v.start {
                     Value::Real(_) => Value::Real(end),
                     _ => Value::Integer(end as i32),
                 };
-                param.write(&mut config, value);
-                match (param, end == max) {
-                    (Param::ForceMin, true) => config.f_max = end + 1.0,
-                    (Param::ForceMax, false) => config.f_min = 0.0,
+                write_parameter(index, element, &mut config, value);
+                assert_eq!(read_parameter(index, element, &config), value);
+                config.check_ranges().unwrap();
+                match (field.name, end == max) {
+                    ("f_min", true) => config.f_max = end + 1.0,
+                    ("f_max", false) => config.f_min = 0.0,
                     _ => {}
                 }
                 let result = Controller::new(model.clone(), config.clone());
-                if param == Param::BodyHeight && end == max {
+                if field.name == "body_height" && end == max {
                     assert!(result.is_err(), "legs of 0.4 m cannot stand 0.5 m high");
                 } else {
                     result.unwrap_or_else(|e| panic!("{} = {end}: {e}", v.name));

@@ -1,62 +1,16 @@
 //! Loads the bundled FMU with the `fmi` crate (an independent FMI 2.0 importer), steps it and
 //! compares with a direct `Controller::step`; checks the exported symbols and misuse handling.
 
-mod common;
-
-use std::sync::Mutex;
+mod support;
 
 use fmi::fmi2::import::Fmi2Import;
 use fmi::fmi2::instance::{CoSimulation, Common, InstanceCS};
 use fmi::traits::FmiImport;
 use quad_controller::{Command, Reference, RobotState, NUM_JOINTS};
-use quad_controller_fmu::variables::by_name;
-
-use common::{direct_controller, fmu_path, shared_library, stand_reference, standing_state};
-
-/// Error messages the FMU sent to the importer's logger (the `fmi` crate forwards them to `log`).
-static LOGGED: Mutex<Vec<String>> = Mutex::new(Vec::new());
-
-struct CaptureLogger;
-
-impl log::Log for CaptureLogger {
-    fn enabled(&self, _: &log::Metadata) -> bool {
-        true
-    }
-    fn log(&self, record: &log::Record) {
-        // Errors only: the informational messages depend on loggingOn.
-        if record.module_path() == Some("logger") && record.level() == log::Level::Error {
-            LOGGED
-                .lock()
-                .unwrap()
-                .push(format!("{}: {}", record.target(), record.args()));
-        }
-    }
-    fn flush(&self) {}
-}
-
-fn install_logger() {
-    static LOGGER: CaptureLogger = CaptureLogger;
-    let _ = log::set_logger(&LOGGER);
-    log::set_max_level(log::LevelFilter::Trace);
-}
-
-fn logged_since(mark: usize, instance: &str) -> Vec<String> {
-    LOGGED.lock().unwrap()[mark..]
-        .iter()
-        .filter(|m| m.starts_with(&format!("{instance}: ")))
-        .cloned()
-        .collect()
-}
-
-fn log_mark() -> usize {
-    LOGGED.lock().unwrap().len()
-}
-
-fn vr(name: &str) -> u32 {
-    by_name(name)
-        .unwrap_or_else(|| panic!("variable {name}"))
-        .value_reference
-}
+use support::{
+    direct_controller, fmu_path, install_logger, log_mark, logged_since, shared_library,
+    stand_reference, standing_state, vr,
+};
 
 fn set_inputs(instance: &mut InstanceCS, state: &RobotState, reference: &Reference) {
     let mut names = Vec::new();
@@ -258,7 +212,7 @@ fn fmi_crate_steps_the_fmu_like_a_direct_controller_call() {
     assert_eq!(fsm(&mut instance), 2, "standing after the stand-up");
     assert_same_command(&torques(&mut instance), &forces(&mut instance), &command);
     let weight: f64 = forces(&mut instance).chunks(3).map(|f| f[2]).sum();
-    let mg = common::model().total_mass() * quad_controller::GRAVITY;
+    let mg = support::model().total_mass() * quad_controller::GRAVITY;
     assert!(
         (weight - mg).abs() < 0.05 * mg,
         "desired forces carry {weight} N of {mg} N"

@@ -2,9 +2,8 @@
 //! `fmi` crate): each is refused with fmi2Error and a logged reason, every call returns well
 //! within 1 s, and the instance stays usable afterwards.
 
-mod common;
+mod support;
 
-use std::sync::Mutex;
 use std::time::Instant;
 
 use fmi::fmi2::import::Fmi2Import;
@@ -13,46 +12,10 @@ use quad_controller::{ControllerConfig, GaitKind};
 use quad_controller_fmu::budget::max_ticks_per_step;
 use quad_controller_fmu::variables::{table, Binding, Value};
 
-use common::fmu_path;
+use support::{errors_of, fmu_path, install_logger, vr};
 
 /// Longest any call may take, s.
 const CALL_LIMIT_S: f64 = 1.0;
-
-static LOGGED: Mutex<Vec<String>> = Mutex::new(Vec::new());
-
-struct CaptureLogger;
-
-impl log::Log for CaptureLogger {
-    fn enabled(&self, _: &log::Metadata) -> bool {
-        true
-    }
-    fn log(&self, record: &log::Record) {
-        if record.module_path() == Some("logger") && record.level() == log::Level::Error {
-            LOGGED
-                .lock()
-                .unwrap()
-                .push(format!("{}: {}", record.target(), record.args()));
-        }
-    }
-    fn flush(&self) {}
-}
-
-fn install_logger() {
-    static LOGGER: CaptureLogger = CaptureLogger;
-    let _ = log::set_logger(&LOGGER);
-    log::set_max_level(log::LevelFilter::Trace);
-}
-
-fn errors_of(instance: &str) -> Vec<String> {
-    let prefix = format!("{instance}: ");
-    LOGGED
-        .lock()
-        .unwrap()
-        .iter()
-        .filter(|m| m.starts_with(&prefix))
-        .cloned()
-        .collect()
-}
 
 /// Runs `call`, asserts it took less than [`CALL_LIMIT_S`] and returns whether it succeeded.
 fn timed<T, E>(what: &str, call: impl FnOnce() -> Result<T, E>) -> bool {
@@ -61,12 +24,6 @@ fn timed<T, E>(what: &str, call: impl FnOnce() -> Result<T, E>) -> bool {
     let elapsed = start.elapsed().as_secs_f64();
     assert!(elapsed < CALL_LIMIT_S, "{what} took {elapsed} s");
     ok
-}
-
-fn vr(name: &str) -> u32 {
-    quad_controller_fmu::variables::by_name(name)
-        .unwrap_or_else(|| panic!("variable {name}"))
-        .value_reference
 }
 
 fn next_up(x: f64) -> f64 {
@@ -97,7 +54,7 @@ fn every_parameter_refuses_values_outside_its_range_with_a_reason() {
         .expect("fmi2Instantiate");
     let mut refused = 0;
     for v in table() {
-        let Binding::Parameter(_) = v.binding else {
+        let Binding::Parameter { .. } = v.binding else {
             continue;
         };
         let (min, max) = (v.min.expect("min"), v.max.expect("max"));
@@ -208,7 +165,7 @@ fn the_tick_cap_of_the_most_expensive_parameters_holds_through_the_c_api() {
             &[1, 40, 1],
         )
         .expect("worst integers");
-    let stand = common::direct_controller().stand_joint_positions();
+    let stand = support::direct_controller().stand_joint_positions();
     let q: Vec<u32> = (1..=12).map(|i| vr(&format!("joint.q[{i}]"))).collect();
     instance.set_real(&q, &stand).expect("joints");
     instance

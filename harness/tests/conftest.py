@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pfnav_harness import fmu_runner, paths
+from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.scenario import Scenario, load_scenario
 
 
@@ -60,3 +62,12 @@ def ramp_scenario(tmp_path: Path) -> Scenario:
     xs = (np.arange(nx) + 0.5) * res
     heights = np.tile(0.1 + 0.2 * xs, (ny, 1))
     return load_scenario(write_scenario(tmp_path, "ramp", heights, res, start=(0.5, 1.0), goal=(2.5, 1.0)))
+
+
+@pytest.fixture(scope="session")
+def fmu_contract() -> fmu_runner.FmuContract:
+    """Names, value references and enumeration codes of the bundled FMU (target/fmu, or PFNAV_FMU)."""
+    try:
+        return fmu_runner.read_contract(paths.fmu_path())
+    except MissingArtifactError as err:
+        pytest.fail(str(err), pytrace=False)

@@ -23,9 +23,10 @@ from pfnav_harness.world import DEFAULT_STANCE
 class PdStandIn:
     """Joint PD to the crouched stance: what a controller FMU looks like to the master."""
 
-    def __init__(self, kp: float = 120.0, kd: float = 3.0) -> None:
-        self.real_inputs = np.zeros(fr.N_REAL_INPUTS)
-        self.real_outputs = np.zeros(fr.N_REAL_OUTPUTS)
+    def __init__(self, contract: fr.FmuContract, kp: float = 120.0, kd: float = 3.0) -> None:
+        self.contract = contract
+        self.inputs = fr.NamedVector(fr.REAL_INPUTS)
+        self.outputs = fr.NamedVector(fr.REAL_OUTPUTS)
         self.kp, self.kd = kp, kd
         self.steps: list[tuple[float, float]] = []
         self.modes: list[int] = []
@@ -39,20 +40,20 @@ class PdStandIn:
 
     def do_step(self, time: float, step: float) -> None:
         self.steps.append((time, step))
-        q = self.real_inputs[13:25]
-        dq = self.real_inputs[25:37]
-        self.real_outputs[0:12] = self.kp * (DEFAULT_STANCE - q) - self.kd * dq
+        q = self.inputs.view(fr.JOINT_Q)
+        dq = self.inputs.view(fr.JOINT_DQ)
+        self.torques[:] = self.kp * (DEFAULT_STANCE - q) - self.kd * dq
 
     def read_outputs(self) -> None:
         pass
 
     @property
     def torques(self) -> np.ndarray:
-        return self.real_outputs[0:12]
+        return self.outputs.view(fr.TORQUE_OUTPUTS)
 
     @property
     def forces(self) -> np.ndarray:
-        return self.real_outputs[12:24]
+        return self.outputs.view(fr.FORCE_OUTPUTS)
 
     @property
     def solve_time(self) -> float:
@@ -68,7 +69,7 @@ class PdStandIn:
 
     @property
     def fsm_state(self) -> int:
-        return 2
+        return int(self.contract.fsm.Stand)
 
     def close(self) -> None:
         self.closed = True
@@ -80,8 +81,8 @@ def standing_plan(x: float, y: float) -> Plan:
     return Plan("pf", t, x * one, y * one, 0 * one, 0 * one, 0 * one, 0 * one, 0 * one)
 
 
-def test_master_steps_logs_and_closes(ramp_scenario: Scenario, tmp_path: Path) -> None:
-    stand_in = PdStandIn()
+def test_master_steps_logs_and_closes(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    stand_in = PdStandIn(fmu_contract)
     config = CoSimConfig(comm_step=0.004, stand_time=0.2, settle_time=0.3)
     with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=stand_in) as sim:
         assert sim.duration() == pytest.approx(1.5)
@@ -93,8 +94,10 @@ def test_master_steps_logs_and_closes(ramp_scenario: Scenario, tmp_path: Path) -
     assert len(stand_in.steps) == 375
     assert stand_in.steps[1] == (pytest.approx(0.004), 0.004)
     # Mode: stand for 0.2 s, then locomotion.
-    assert stand_in.modes[0] == fr.MODE_STAND and stand_in.modes[-1] == fr.MODE_LOCOMOTION
-    assert stand_in.modes.count(fr.MODE_STAND) == 50
+    modes = fmu_contract.mode
+    assert stand_in.modes[0] == modes.Stand and stand_in.modes[-1] == modes.Locomotion
+    assert stand_in.modes.count(modes.Stand) == 50
+    assert np.all(log["fsm"] == fmu_contract.fsm.Stand) and log["fsm_damping"] == fmu_contract.fsm.Damping
     # Torques are held between communication points (zero-order hold).
     np.testing.assert_array_equal(log["tau"][4], log["tau"][7])
     assert result.stop_reason == "completed"
@@ -130,8 +133,8 @@ def test_master_steps_logs_and_closes(ramp_scenario: Scenario, tmp_path: Path) -
         assert f"({png})" in text
 
 
-def test_a_collapsing_robot_is_stopped_early_as_a_fall(ramp_scenario: Scenario, tmp_path: Path) -> None:
-    limp = PdStandIn(kp=0.0, kd=0.0)
+def test_a_collapsing_robot_is_stopped_early_as_a_fall(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    limp = PdStandIn(fmu_contract, kp=0.0, kd=0.0)
     config = CoSimConfig(stand_time=0.0, settle_time=5.0, after_fall=0.2)
     with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=limp) as sim:
         result = sim.run()

@@ -21,12 +21,33 @@ from . import fmu_runner as fr
 from .errors import SimulationError
 from .metrics import FallThresholds
 from .planner_client import Plan
-from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, ReferenceTrajectory
+from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, ReferenceTrajectory, X, Y
 from .scenario import Scenario
 from .world import NUM_JOINTS, QuadrupedWorld, quaternion_to_rpy
 
 Progress = Callable[[float], None]
-FSM_DAMPING = 4
+# FMU reference input ← column of a reference row. ref.z is the height of the local terrain plane
+# whose slopes are terrain.dzdx/dzdy (the mesh under the plan, not the plan's own z).
+REFERENCE_COLUMNS = {
+    "ref.x": X,
+    "ref.y": Y,
+    "ref.z": T_HEIGHT,
+    "ref.yaw": YAW,
+    "ref.vx": VX,
+    "ref.vy": VY,
+    "ref.yawRate": YAW_RATE,
+    "terrain.dzdx": T_DZDX,
+    "terrain.dzdy": T_DZDY,
+}
+# Logged state blocks: log key ← FMU state inputs.
+STATE_LOG = {
+    "base_pos": fr.BASE_POS,
+    "base_quat": fr.BASE_QUAT,
+    "base_vel": fr.BASE_VEL,
+    "base_omega": fr.BASE_OMEGA,
+    "q": fr.JOINT_Q,
+    "dq": fr.JOINT_DQ,
+}
 
 
 @dataclass
@@ -46,7 +67,7 @@ class CoSimConfig:
     plane_radius: float = 0.3
     # Moving-average window (s) over the plan's heading and velocity feed-forward (positions untouched).
     heading_smoothing: float = 1.0
-    # Feed the controller the local elevation map (mesh vertices around the base) when its FMU has the inputs.
+    # Feed the controller the local elevation map (mesh vertices around the base).
     height_map: bool = True
     fall: FallThresholds = field(default_factory=FallThresholds)
     # Hard cap on simulated time (None: stand + plan + settle).
@@ -144,20 +165,26 @@ class CoSimulation:
 
         # One row per physics step; wide per-step vectors are copied with one assignment each.
         log_t = np.arange(n_steps) * dt
-        log_state = np.zeros((n_steps, fr.N_STATE))
-        log_outputs = np.zeros((n_steps, fr.N_REAL_OUTPUTS))
+        fmu = self.fmu
+        world = self.world
+        fsm, modes = fmu.contract.fsm, fmu.contract.mode
+        inputs, outputs = fmu.inputs, fmu.outputs
+        state_names = fr.NamedVector(fr.STATE_INPUTS)
+        log_state = np.zeros((n_steps, len(state_names.names)))
+        log_outputs = np.zeros((n_steps, len(outputs.names)))
         log_ref = np.zeros((n_steps, N_COLUMNS))
         # contacts scheduled (4), contacts actual (4), FSM state, mode request
         log_flags = np.zeros((n_steps, 10), dtype=np.int8)
-        fmu = self.fmu
-        world = self.world
-        inputs = fmu.real_inputs
-        state = inputs[0 : fr.N_STATE]
-        ref_in = inputs[fr.N_STATE : fr.N_STATE + fr.N_REF]
-        terrain_in = inputs[fr.N_STATE + fr.N_REF : fr.N_STATE + fr.N_REF + fr.N_TERRAIN]
-        map_in = inputs[fr.N_STATE + fr.N_REF + fr.N_TERRAIN :]
+        state = inputs.view(fr.STATE_INPUTS)
+        ref_in = inputs.indices(list(REFERENCE_COLUMNS))
+        ref_columns = np.array(list(REFERENCE_COLUMNS.values()), dtype=np.intp)
+        body_height_in = inputs.index("ref.bodyHeight")
+        map_origin = inputs.view(fr.HEIGHT_MAP_ORIGIN)
+        map_spacing = inputs.index(fr.HEIGHT_MAP_SPACING)
+        map_heights = inputs.view(fr.HEIGHT_MAP_HEIGHTS)
+        input_values = inputs.values
         terrain = self.scenario.terrain
-        use_map = c.height_map and getattr(fmu, "has_height_map", False)
+        use_map = c.height_map
         ref_row = np.zeros(N_COLUMNS)
         torques = np.zeros(NUM_JOINTS)
         timing = Timing()
@@ -180,22 +207,17 @@ class CoSimulation:
             walking = t >= walk_start
             self.reference.sample(t - walk_start if walking else 0.0, ref_row)
             if k % ratio == 0:
-                ref_in[0:7] = ref_row[0:7]
-                # The FMU's ref.z is the height of the local terrain plane it gets the slopes of.
-                ref_in[2] = ref_row[T_HEIGHT]
-                ref_in[7] = c.body_height
-                terrain_in[0] = ref_row[T_HEIGHT]
-                terrain_in[1] = ref_row[T_DZDX]
-                terrain_in[2] = ref_row[T_DZDY]
+                input_values[ref_in] = ref_row[ref_columns]
+                input_values[body_height_in] = c.body_height
                 # The elevation map a perception stack would give: the mesh vertices around the base.
                 grid = terrain.local_grid(float(state[0]), float(state[1]), fr.HEIGHT_MAP_SIZE) if use_map else None
                 if grid is None:
-                    map_in[2] = 0.0
+                    input_values[map_spacing] = 0.0
                 else:
-                    map_in[0], map_in[1] = grid[0], grid[1]
-                    map_in[2] = terrain.resolution
-                    map_in[3:] = grid[2].ravel()
-                mode = fr.MODE_LOCOMOTION if walking else fr.MODE_STAND
+                    map_origin[0], map_origin[1] = grid[0], grid[1]
+                    input_values[map_spacing] = terrain.resolution
+                    map_heights[:] = grid[2].ravel()
+                mode = modes.Locomotion if walking else modes.Stand
                 t0 = perf()
                 fmu.exchange_inputs(mode)
                 fmu.do_step(t, c.comm_step)
@@ -210,7 +232,7 @@ class CoSimulation:
             timing.physics += perf() - t0
 
             log_state[k] = state
-            log_outputs[k] = fmu.real_outputs
+            log_outputs[k] = outputs.values
             log_ref[k] = ref_row
             flags = log_flags[k]
             flags[0:4] = contacts_view
@@ -218,8 +240,8 @@ class CoSimulation:
             flags[8] = fmu.fsm_state
             flags[9] = mode
 
-            # The controller's damping state (code 4) is its own verdict that the robot is down.
-            if walking and fall_step is None and k % 10 == 0 and (flags[8] == FSM_DAMPING or self._fallen(state, min_height)):
+            # The controller's damping state is its own verdict that the robot is down.
+            if walking and fall_step is None and k % 10 == 0 and (flags[8] == fsm.Damping or self._fallen(state, min_height)):
                 fall_step = k
             if fall_step is not None and (k - fall_step) * dt >= c.after_fall:
                 stop_reason = f"fell at t={fall_step * dt:.2f} s"
@@ -238,19 +260,16 @@ class CoSimulation:
 
         log = {
             "t": log_t[:n],
-            "base_pos": log_state[:n, 0:3],
-            "base_quat": log_state[:n, 3:7],
-            "base_vel": log_state[:n, 7:10],
-            "base_omega": log_state[:n, 10:13],
-            "q": log_state[:n, 13:25],
-            "dq": log_state[:n, 25:37],
-            "tau": log_outputs[:n, 0:12],
+            **{key: log_state[:n, state_names.span(names)] for key, names in STATE_LOG.items()},
+            "tau": log_outputs[:n, outputs.span(fr.TORQUE_OUTPUTS)],
             "ref": log_ref[:n],
-            "forces": log_outputs[:n, 12:24],
+            "forces": log_outputs[:n, outputs.span(fr.FORCE_OUTPUTS)],
             "contact_scheduled": log_flags[:n, 0:4],
             "contact_actual": log_flags[:n, 4:8],
             "fsm": log_flags[:n, 8],
-            "mpc_solve_time": log_outputs[:n, 24],
+            # The FMU's code of its damping state, so the log's FSM codes can be read without it.
+            "fsm_damping": np.array(int(fsm.Damping)),
+            "mpc_solve_time": log_outputs[:n, outputs.index(fr.SOLVE_TIME_OUTPUT)],
             "mode": log_flags[:n, 9],
             "walk_start": np.array(walk_start),
             "comm_step": np.array(c.comm_step),

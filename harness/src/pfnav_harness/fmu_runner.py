@@ -1,17 +1,26 @@
 """The controller FMU through fmpy's FMU2Slave, with allocation-free per-step value exchange.
 
+The FMU variables the harness uses are declared once, in this module (`USED_VARIABLES` collects
+them with the causality each must have, `USED_ENUMERATIONS` the enumeration items). Value
+references, types and enumeration codes (FSM states, mode requests) are read from the FMU's
+modelDescription.xml at load time (`FmuContract`); a name the FMU lacks is an error then, never
+silently skipped.
+
 fmpy's `setReal`/`getReal` build fresh ctypes arrays on every call; at 1 kHz that overhead is
 comparable to the controller itself. Here the value-reference and value arrays are allocated once,
-the values are numpy views onto them, and the raw fmi2 functions are called directly (status
-checked here, exactly as fmpy would).
+the values are numpy views onto them (addressed by variable name through `NamedVector`), and the
+raw fmi2 functions are called directly (status checked here, exactly as fmpy would).
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
 import shutil
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import IntEnum
 from pathlib import Path
 from typing import Any
 
@@ -20,39 +29,154 @@ from numpy.typing import NDArray
 
 from .errors import SimulationError
 
-STATE_INPUTS = (
-    ["base.pos.x", "base.pos.y", "base.pos.z"]
-    + ["base.quat.w", "base.quat.x", "base.quat.y", "base.quat.z"]
-    + ["base.vel.x", "base.vel.y", "base.vel.z"]
-    + ["base.omega.x", "base.omega.y", "base.omega.z"]
-    + [f"joint.q[{i}]" for i in range(1, 13)]
-    + [f"joint.dq[{i}]" for i in range(1, 13)]
+# --- The FMU variables the harness uses (the one declaration) ---------------------------------
+
+BASE_POS = ("base.pos.x", "base.pos.y", "base.pos.z")
+BASE_QUAT = ("base.quat.w", "base.quat.x", "base.quat.y", "base.quat.z")
+BASE_VEL = ("base.vel.x", "base.vel.y", "base.vel.z")
+BASE_OMEGA = ("base.omega.x", "base.omega.y", "base.omega.z")
+JOINT_Q = tuple(f"joint.q[{i}]" for i in range(1, 13))
+JOINT_DQ = tuple(f"joint.dq[{i}]" for i in range(1, 13))
+# The order `QuadrupedWorld.state_vector` writes the measured state in.
+STATE_INPUTS = BASE_POS + BASE_QUAT + BASE_VEL + BASE_OMEGA + JOINT_Q + JOINT_DQ
+# Reference from the plan; ref.z is the height of the local terrain plane given by the slopes.
+REFERENCE_INPUTS = (
+    "ref.x",
+    "ref.y",
+    "ref.z",
+    "ref.yaw",
+    "ref.vx",
+    "ref.vy",
+    "ref.yawRate",
+    "ref.bodyHeight",
+    "terrain.dzdx",
+    "terrain.dzdy",
 )
-REFERENCE_INPUTS = ["ref.x", "ref.y", "ref.z", "ref.yaw", "ref.vx", "ref.vy", "ref.yawRate", "ref.bodyHeight"]
-TERRAIN_INPUTS = ["terrain.height", "terrain.dzdx", "terrain.dzdy"]
-# Local elevation map around the robot (HEIGHT_MAP_SIZE² mesh vertices); optional.
+# Local elevation map around the robot (HEIGHT_MAP_SIZE² mesh vertices); spacing ≤ 0: no map.
 HEIGHT_MAP_SIZE = 11
-HEIGHT_MAP_INPUTS = ["terrain.map.x0", "terrain.map.y0", "terrain.map.spacing"] + [
-    f"terrain.map.h[{i}]" for i in range(1, HEIGHT_MAP_SIZE * HEIGHT_MAP_SIZE + 1)
-]
+HEIGHT_MAP_ORIGIN = ("terrain.map.x0", "terrain.map.y0")
+HEIGHT_MAP_SPACING = "terrain.map.spacing"
+HEIGHT_MAP_HEIGHTS = tuple(f"terrain.map.h[{i}]" for i in range(1, HEIGHT_MAP_SIZE * HEIGHT_MAP_SIZE + 1))
+HEIGHT_MAP_INPUTS = (*HEIGHT_MAP_ORIGIN, HEIGHT_MAP_SPACING, *HEIGHT_MAP_HEIGHTS)
+REAL_INPUTS = STATE_INPUTS + REFERENCE_INPUTS + HEIGHT_MAP_INPUTS
 MODE_INPUT = "cmd.mode"
-TORQUE_OUTPUTS = [f"joint.tau[{i}]" for i in range(1, 13)]
-FORCE_OUTPUTS = [f"force[{k}].{c}" for k in range(1, 5) for c in "xyz"]
+
+TORQUE_OUTPUTS = tuple(f"joint.tau[{i}]" for i in range(1, 13))
+FORCE_OUTPUTS = tuple(f"force[{k}].{c}" for k in range(1, 5) for c in "xyz")
 SOLVE_TIME_OUTPUT = "mpc.solveTime"
-CONTACT_OUTPUTS = [f"contact[{k}]" for k in range(1, 5)]
+REAL_OUTPUTS = (*TORQUE_OUTPUTS, *FORCE_OUTPUTS, SOLVE_TIME_OUTPUT)
+CONTACT_OUTPUTS = tuple(f"contact[{k}]" for k in range(1, 5))
 FSM_OUTPUT = "fsm.state"
 
-MODE_PASSIVE = 0
-MODE_STAND = 1
-MODE_LOCOMOTION = 2
+# Enumeration types (modelDescription <TypeDefinitions>) and the items the harness refers to.
+FSM_TYPE = "FsmState"
+MODE_TYPE = "ModeRequest"
+USED_ENUMERATIONS: dict[str, tuple[str, ...]] = {
+    FSM_TYPE: ("Passive", "Stand", "Locomotion", "Damping"),
+    MODE_TYPE: ("Passive", "Stand", "Locomotion"),
+}
+# Variables whose values are items of an enumeration type.
+ENUMERATION_VARIABLES = {MODE_INPUT: MODE_TYPE, FSM_OUTPUT: FSM_TYPE}
 
-# Index ranges inside the real-input vector.
-N_STATE = len(STATE_INPUTS)
-N_REF = len(REFERENCE_INPUTS)
-N_TERRAIN = len(TERRAIN_INPUTS)
-N_MAP = len(HEIGHT_MAP_INPUTS)
-N_REAL_INPUTS = N_STATE + N_REF + N_TERRAIN + N_MAP
-N_REAL_OUTPUTS = len(TORQUE_OUTPUTS) + len(FORCE_OUTPUTS) + 1
+# Every FMU variable the harness reads or writes, with the causality it must have.
+USED_VARIABLES: dict[str, str] = (
+    {name: "input" for name in (*REAL_INPUTS, MODE_INPUT)}
+    | {name: "output" for name in (*REAL_OUTPUTS, *CONTACT_OUTPUTS, FSM_OUTPUT)}
+)
+
+
+class NamedVector:
+    """A float vector whose entries are FMU variables, addressed by name (views, no copies)."""
+
+    def __init__(self, names: Sequence[str], values: NDArray[np.float64] | None = None) -> None:
+        self.names = tuple(names)
+        self.values = np.zeros(len(self.names)) if values is None else values
+        if self.values.shape != (len(self.names),):
+            raise ValueError(f"{len(self.names)} names for a vector of shape {self.values.shape}")
+        self._index = {name: i for i, name in enumerate(self.names)}
+
+    def index(self, name: str) -> int:
+        try:
+            return self._index[name]
+        except KeyError:
+            raise KeyError(f"{name} is not one of this vector's FMU variables") from None
+
+    def indices(self, names: Sequence[str]) -> NDArray[np.intp]:
+        return np.array([self.index(n) for n in names], dtype=np.intp)
+
+    def span(self, names: Sequence[str]) -> slice:
+        """The slice holding `names`, which must be consecutive in this vector."""
+        first = self.index(names[0])
+        if self.names[first : first + len(names)] != tuple(names):
+            raise KeyError(f"{names[0]}…{names[-1]} are not consecutive in this vector")
+        return slice(first, first + len(names))
+
+    def view(self, names: Sequence[str]) -> NDArray[np.float64]:
+        """A live view of the entries `names` (consecutive)."""
+        return self.values[self.span(names)]
+
+
+def enumeration(md: Any, type_name: str) -> type[IntEnum]:
+    """The enumeration type `type_name` of fmpy's model description `md` as an IntEnum (item name → code)."""
+    types = {t.name: t for t in md.typeDefinitions if t.type == "Enumeration"}
+    if type_name not in types:
+        raise SimulationError(f"the FMU has no enumeration type {type_name}")
+    items = {str(item.name): int(item.value) for item in types[type_name].items}
+    return IntEnum(type_name, items)  # type: ignore[return-value]
+
+
+class FmuContract:
+    """What the harness relies on in one FMU's modelDescription, checked when it is read."""
+
+    def __init__(self, md: Any, source: str) -> None:
+        variables = {v.name: v for v in md.modelVariables}
+        types = {t.name: t for t in md.typeDefinitions}
+        problems = []
+        for name, causality in USED_VARIABLES.items():
+            v = variables.get(name)
+            if v is None:
+                problems.append(f"no variable {name}")
+            elif v.causality != causality:
+                problems.append(f"{name} is {v.causality}, not {causality}")
+        for type_name, items in USED_ENUMERATIONS.items():
+            t = types.get(type_name)
+            if t is None or t.type != "Enumeration":
+                problems.append(f"no enumeration type {type_name}")
+                continue
+            missing = sorted(set(items) - {item.name for item in t.items})
+            if missing:
+                problems.append(f"enumeration {type_name} has no item {', '.join(missing)}")
+        for name, type_name in ENUMERATION_VARIABLES.items():
+            v = variables.get(name)
+            declared = getattr(getattr(v, "declaredType", None), "name", None)
+            if v is not None and declared != type_name:
+                problems.append(f"{name} is not of type {type_name}")
+        if problems:
+            raise SimulationError(f"{source} lacks what the harness needs: {'; '.join(problems)}")
+        self.value_references = {name: int(variables[name].valueReference) for name in USED_VARIABLES}
+        self.parameters = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
+        self.fsm = enumeration(md, FSM_TYPE)
+        self.mode = enumeration(md, MODE_TYPE)
+
+    def vrs(self, names: Sequence[str]) -> list[int]:
+        return [self.value_references[n] for n in names]
+
+
+def _read_model_description(fmu_path: Path) -> Any:
+    try:
+        from fmpy import read_model_description
+    except ImportError as err:
+        raise SimulationError("fmpy is not installed: run scripts/setup.sh") from err
+    try:
+        return read_model_description(str(fmu_path))
+    except Exception as err:  # fmpy raises several exception types for a broken archive
+        raise SimulationError(f"cannot read the model description of {fmu_path}: {err}") from err
+
+
+@functools.cache
+def read_contract(fmu_path: Path) -> FmuContract:
+    """The contract of the FMU at `fmu_path` (read once per path)."""
+    return FmuContract(_read_model_description(fmu_path), str(fmu_path))
 
 
 @dataclass
@@ -72,67 +196,41 @@ class ControllerFmu:
 
     def __init__(self, fmu_path: Path, instance_name: str = "controller") -> None:
         try:
-            from fmpy import extract, read_model_description
+            from fmpy import extract
             from fmpy.fmi2 import FMU2Slave
         except ImportError as err:
             raise SimulationError("fmpy is not installed: run scripts/setup.sh") from err
-        self._unzipdir = Path(tempfile.mkdtemp(prefix="pfnav_fmu_"))
-        try:
-            md = read_model_description(str(fmu_path))
-        except Exception as err:  # fmpy raises several exception types for a broken archive
-            raise SimulationError(f"cannot read the model description of {fmu_path}: {err}") from err
+        md = _read_model_description(fmu_path)
         if md.coSimulation is None:
             raise SimulationError(f"{fmu_path} is not a co-simulation FMU")
-        variables = {v.name: v for v in md.modelVariables}
-        missing = [n for n in STATE_INPUTS + REFERENCE_INPUTS + [MODE_INPUT] + TORQUE_OUTPUTS if n not in variables]
-        if missing:
-            raise SimulationError(f"{fmu_path} lacks variables the harness needs: {', '.join(missing[:8])}")
+        self.contract = FmuContract(md, str(fmu_path))
         self.info = FmuInfo(
             model_name=md.modelName,
             model_identifier=md.coSimulation.modelIdentifier,
             guid=md.guid,
-            parameters={v.name: str(v.start) for v in md.modelVariables if v.causality == "parameter"},
+            parameters={name: str(v.start) for name, v in self.contract.parameters.items()},
         )
-
-        def vr(name: str) -> int | None:
-            v = variables.get(name)
-            return None if v is None else int(v.valueReference)
-
-        real_in_names = STATE_INPUTS + REFERENCE_INPUTS + TERRAIN_INPUTS + HEIGHT_MAP_INPUTS
-        # Terrain inputs and a few outputs are optional: an FMU without them still runs.
-        self._real_in_mask = np.array([vr(n) is not None for n in real_in_names])
-        in_vrs = [vr(n) for n in real_in_names if vr(n) is not None]
-        self.missing_optional = [n for n in real_in_names if vr(n) is None]
-        self.has_height_map = all(vr(n) is not None for n in HEIGHT_MAP_INPUTS)
-        out_names = TORQUE_OUTPUTS + FORCE_OUTPUTS + [SOLVE_TIME_OUTPUT]
-        self._real_out_mask = np.array([vr(n) is not None for n in out_names])
-        out_vrs = [vr(n) for n in out_names if vr(n) is not None]
-        self.missing_optional += [n for n in out_names if vr(n) is None]
-
-        self._in_vr = (ctypes.c_uint * len(in_vrs))(*in_vrs)
-        self._in_val = (ctypes.c_double * len(in_vrs))()
-        self._in_np = np.ctypeslib.as_array(self._in_val)
-        self._out_vr = (ctypes.c_uint * len(out_vrs))(*out_vrs)
-        self._out_val = (ctypes.c_double * len(out_vrs))()
-        self._out_np = np.ctypeslib.as_array(self._out_val)
-        self._mode_vr = (ctypes.c_uint * 1)(vr(MODE_INPUT) or 0)
-        self._mode_val = (ctypes.c_int * 1)(MODE_PASSIVE)
-        contact_vrs = [vr(n) for n in CONTACT_OUTPUTS]
-        self._has_contacts = all(v is not None for v in contact_vrs)
-        self._contact_vr = (ctypes.c_uint * 4)(*(v or 0 for v in contact_vrs))
-        self._contact_val = (ctypes.c_int * 4)()
+        vrs = self.contract.vrs
+        self._in_vr = (ctypes.c_uint * len(REAL_INPUTS))(*vrs(REAL_INPUTS))
+        self._in_val = (ctypes.c_double * len(REAL_INPUTS))()
+        # `inputs.values` *is* the ctypes buffer fmi2SetReal reads: no per-step copy. Likewise
+        # for the outputs.
+        self.inputs = NamedVector(REAL_INPUTS, np.ctypeslib.as_array(self._in_val))
+        self._out_vr = (ctypes.c_uint * len(REAL_OUTPUTS))(*vrs(REAL_OUTPUTS))
+        self._out_val = (ctypes.c_double * len(REAL_OUTPUTS))()
+        self.outputs = NamedVector(REAL_OUTPUTS, np.ctypeslib.as_array(self._out_val))
+        self._mode_vr = (ctypes.c_uint * 1)(*vrs([MODE_INPUT]))
+        self._mode_val = (ctypes.c_int * 1)(self.contract.mode.Passive)
+        self._contact_vr = (ctypes.c_uint * len(CONTACT_OUTPUTS))(*vrs(CONTACT_OUTPUTS))
+        self._contact_val = (ctypes.c_int * len(CONTACT_OUTPUTS))()
         self._contact_np = np.ctypeslib.as_array(self._contact_val)
-        fsm_vr = vr(FSM_OUTPUT)
-        self._has_fsm = fsm_vr is not None
-        self._fsm_vr = (ctypes.c_uint * 1)(fsm_vr or 0)
-        self._fsm_val = (ctypes.c_int * 1)()
-        # With every input present (our FMU), `real_inputs` *is* the ctypes buffer fmi2SetReal
-        # reads: no per-step copy. Likewise for the outputs.
-        self._inputs_complete = bool(self._real_in_mask.all())
-        self.real_inputs = self._in_np if self._inputs_complete else np.zeros(N_REAL_INPUTS)
-        self._outputs_complete = bool(self._real_out_mask.all())
-        self.real_outputs = self._out_np if self._outputs_complete else np.zeros(N_REAL_OUTPUTS)
+        self._fsm_vr = (ctypes.c_uint * 1)(*vrs([FSM_OUTPUT]))
+        self._fsm_val = (ctypes.c_int * 1)(self.contract.fsm.Passive)
+        self._torques = self.outputs.span(TORQUE_OUTPUTS)
+        self._forces = self.outputs.span(FORCE_OUTPUTS)
+        self._solve_time = self.outputs.index(SOLVE_TIME_OUTPUT)
 
+        self._unzipdir = Path(tempfile.mkdtemp(prefix="pfnav_fmu_"))
         try:
             extract(str(fmu_path), unzipdir=str(self._unzipdir))
             self._fmu: Any = FMU2Slave(
@@ -161,20 +259,16 @@ class ControllerFmu:
             raise SimulationError(f"FMU call {what} failed with status {status}")
 
     def set_parameters(self, values: dict[str, float]) -> None:
-        """Sets real parameters by name before initialisation (e.g. gait period)."""
+        """Sets parameters by name before initialisation (e.g. gait period)."""
         if self._initialized:
             raise SimulationError("FMU parameters must be set before initialisation")
-        from fmpy import read_model_description
-
-        md = read_model_description(str(self._unzipdir))
-        variables = {v.name: v for v in md.modelVariables}
         for name, value in values.items():
-            v = variables.get(name)
-            if v is None or v.causality != "parameter":
+            v = self.contract.parameters.get(name)
+            if v is None:
                 raise SimulationError(f"the FMU has no parameter '{name}'")
             if v.type == "Real":
                 self._fmu.setReal([v.valueReference], [float(value)])
-            elif v.type == "Integer":
+            elif v.type in ("Integer", "Enumeration"):
                 self._fmu.setInteger([v.valueReference], [int(value)])
             else:
                 raise SimulationError(f"parameter '{name}' has unsupported type {v.type}")
@@ -182,7 +276,7 @@ class ControllerFmu:
     def initialize(self, start_time: float = 0.0) -> None:
         try:
             self._fmu.setupExperiment(startTime=start_time)
-            self.exchange_inputs(MODE_PASSIVE)
+            self.exchange_inputs(self.contract.mode.Passive)
             self._fmu.enterInitializationMode()
             self._fmu.exitInitializationMode()
         except Exception as err:
@@ -190,10 +284,8 @@ class ControllerFmu:
         self._initialized = True
 
     def exchange_inputs(self, mode: int) -> None:
-        """Writes `real_inputs` (state, reference, terrain) and the mode request into the FMU."""
-        if not self._inputs_complete:
-            self._in_np[:] = self.real_inputs[self._real_in_mask]
-        self._check(self._set_real(self._component, self._in_vr, len(self._in_np), self._in_val), "fmi2SetReal")
+        """Writes `inputs` (state, reference, terrain) and the mode request into the FMU."""
+        self._check(self._set_real(self._component, self._in_vr, len(self._in_vr), self._in_val), "fmi2SetReal")
         self._mode_val[0] = mode
         self._check(self._set_integer(self._component, self._mode_vr, 1, self._mode_val), "fmi2SetInteger")
 
@@ -201,26 +293,23 @@ class ControllerFmu:
         self._check(self._do_step(self._component, time, step, 1), f"fmi2DoStep(t={time:.4f}, h={step})")
 
     def read_outputs(self) -> None:
-        """Fills `real_outputs` (tau[12], force[12], solve time), `contacts` and `fsm_state`."""
-        self._check(self._get_real(self._component, self._out_vr, len(self._out_np), self._out_val), "fmi2GetReal")
-        if not self._outputs_complete:
-            self.real_outputs[self._real_out_mask] = self._out_np
-        if self._has_contacts:
-            self._check(self._get_boolean(self._component, self._contact_vr, 4, self._contact_val), "fmi2GetBoolean")
-        if self._has_fsm:
-            self._check(self._get_integer(self._component, self._fsm_vr, 1, self._fsm_val), "fmi2GetInteger")
+        """Fills `outputs` (torques, forces, solve time), `contacts` and `fsm_state`."""
+        self._check(self._get_real(self._component, self._out_vr, len(self._out_vr), self._out_val), "fmi2GetReal")
+        n_contacts = len(self._contact_vr)
+        self._check(self._get_boolean(self._component, self._contact_vr, n_contacts, self._contact_val), "fmi2GetBoolean")
+        self._check(self._get_integer(self._component, self._fsm_vr, 1, self._fsm_val), "fmi2GetInteger")
 
     @property
     def torques(self) -> NDArray[np.float64]:
-        return self.real_outputs[0:12]
+        return self.outputs.values[self._torques]
 
     @property
     def forces(self) -> NDArray[np.float64]:
-        return self.real_outputs[12:24]
+        return self.outputs.values[self._forces]
 
     @property
     def solve_time(self) -> float:
-        return float(self.real_outputs[24])
+        return float(self.outputs.values[self._solve_time])
 
     @property
     def contacts(self) -> list[int]:
@@ -233,7 +322,7 @@ class ControllerFmu:
 
     @property
     def fsm_state(self) -> int:
-        return int(self._fsm_val[0]) if self._has_fsm else -1
+        return int(self._fsm_val[0])
 
     def close(self) -> None:
         if not self._terminated:

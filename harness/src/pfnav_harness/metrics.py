@@ -21,7 +21,6 @@ from numpy.typing import NDArray
 from .scenario import GoalRegion, Terrain
 
 FloatArray = NDArray[np.float64]
-FSM_DAMPING = 4
 
 
 @dataclass(frozen=True)
@@ -238,8 +237,9 @@ def compute_metrics(
     # body anywhere near the thresholds.
     too_rolled = np.abs(roll) > thresholds.max_roll
     too_pitched = np.abs(pitch) > thresholds.max_pitch
-    # The controller's damping state (FSM code 4) is its own verdict that the robot is down.
-    damping = (log["fsm"] == FSM_DAMPING) if "fsm" in log else np.zeros_like(too_low)
+    # The controller's damping state is its own verdict that the robot is down (the log carries
+    # the FMU's code of that state, read from its modelDescription).
+    damping = (log["fsm"] == log["fsm_damping"]) if "fsm" in log else np.zeros_like(too_low)
     # Before the controller has stood up the base is legitimately low: only judge after walk start.
     fallen = (too_low | too_rolled | too_pitched | damping) & walking
     fell = bool(np.any(fallen))

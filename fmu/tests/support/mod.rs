@@ -1,13 +1,71 @@
 //! Shared helpers of the FMU integration tests: bundling the FMU from the cdylib cargo built for
-//! this test run, and a standing state for the robot.
+//! this test run, capturing the error messages the FMU logs, value references by name, and a
+//! standing state for the robot.
 
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use quad_controller::{Controller, ControllerConfig, Reference, RobotModel, RobotState};
 use quad_controller_fmu::bundle::{repo_root, shared_library_next_to, write_fmu, BundleInputs};
+use quad_controller_fmu::variables::by_name;
+
+/// Error messages the FMU sent to the importer's logger (the `fmi` crate forwards them to `log`),
+/// as `instance: message`.
+static LOGGED: Mutex<Vec<String>> = Mutex::new(Vec::new());
+
+struct CaptureLogger;
+
+impl log::Log for CaptureLogger {
+    fn enabled(&self, _: &log::Metadata) -> bool {
+        true
+    }
+    fn log(&self, record: &log::Record) {
+        // Errors only: the informational messages depend on loggingOn.
+        if record.module_path() == Some("logger") && record.level() == log::Level::Error {
+            LOGGED
+                .lock()
+                .unwrap()
+                .push(format!("{}: {}", record.target(), record.args()));
+        }
+    }
+    fn flush(&self) {}
+}
+
+/// Starts capturing (idempotent).
+pub fn install_logger() {
+    static LOGGER: CaptureLogger = CaptureLogger;
+    let _ = log::set_logger(&LOGGER);
+    log::set_max_level(log::LevelFilter::Trace);
+}
+
+/// The number of messages captured so far.
+pub fn log_mark() -> usize {
+    LOGGED.lock().unwrap().len()
+}
+
+/// The error messages of `instance` captured since `mark` (see [`log_mark`]).
+pub fn logged_since(mark: usize, instance: &str) -> Vec<String> {
+    let prefix = format!("{instance}: ");
+    LOGGED.lock().unwrap()[mark..]
+        .iter()
+        .filter(|m| m.starts_with(&prefix))
+        .cloned()
+        .collect()
+}
+
+/// Every error message of `instance` captured.
+pub fn errors_of(instance: &str) -> Vec<String> {
+    logged_since(0, instance)
+}
+
+/// The value reference of the FMU variable `name` (panics when there is none).
+pub fn vr(name: &str) -> u32 {
+    by_name(name)
+        .unwrap_or_else(|| panic!("variable {name}"))
+        .value_reference
+}
 
 /// The cdylib of this build (target/<profile>/deps/libquad_controller_fmu.so).
 pub fn shared_library() -> PathBuf {
