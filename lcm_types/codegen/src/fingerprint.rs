@@ -8,7 +8,10 @@
 //! already on the path counting 0) and rotate left by one bit.
 
 use crate::parse::{QualifiedName, StructDef, TypeRef};
-use crate::schema::Schema;
+
+/// Finds the definition of a struct type by name (the schema's table; kept abstract so that
+/// hashing does not depend on how types are stored).
+pub type Lookup<'a> = dyn Fn(&QualifiedName) -> Option<&'a StructDef> + 'a;
 
 fn hash_update(v: i64, c: u8) -> i64 {
     // `c as i8` reproduces the signed `char` of lcmgen.c.
@@ -46,25 +49,25 @@ pub fn base_hash(def: &StructDef) -> u64 {
 /// The fingerprint sent on the wire in front of an encoded `name` message.
 ///
 /// Returns None if `name` (or a type it contains) is not in the schema.
-pub fn fingerprint(schema: &Schema, name: &QualifiedName) -> Option<u64> {
+pub fn fingerprint(lookup: &Lookup<'_>, name: &QualifiedName) -> Option<u64> {
     let mut parents = Vec::new();
-    recursive_hash(schema, name, &mut parents)
+    recursive_hash(lookup, name, &mut parents)
 }
 
 fn recursive_hash(
-    schema: &Schema,
+    lookup: &Lookup<'_>,
     name: &QualifiedName,
     parents: &mut Vec<QualifiedName>,
 ) -> Option<u64> {
     if parents.contains(name) {
         return Some(0);
     }
-    let def = schema.get(name)?;
+    let def = lookup(name)?;
     parents.push(name.clone());
     let mut hash = base_hash(def);
     for member in &def.members {
         if let TypeRef::Struct(child) = &member.ty {
-            hash = hash.wrapping_add(recursive_hash(schema, child, parents)?);
+            hash = hash.wrapping_add(recursive_hash(lookup, child, parents)?);
         }
     }
     parents.pop();
@@ -74,10 +77,14 @@ fn recursive_hash(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::parse::parse_str;
+    use crate::parse::{parse_str, ParsedFile};
 
-    fn schema(src: &str) -> Schema {
-        Schema::new(vec![parse_str(src, "t.lcm").unwrap()]).unwrap()
+    fn parse(src: &str) -> ParsedFile {
+        parse_str(src, "t.lcm").unwrap()
+    }
+
+    fn find<'a>(file: &'a ParsedFile, name: &QualifiedName) -> Option<&'a StructDef> {
+        file.structs.iter().find(|s| &s.name == name)
     }
 
     fn qn(package: &str, name: &str) -> QualifiedName {
@@ -91,10 +98,13 @@ mod tests {
     // and `_packed_fingerprint` of the generated modules.
     #[test]
     fn empty_struct_hash_is_the_seed_rotated() {
-        let s = schema("struct e_t { }");
-        let def = s.get(&qn("", "e_t")).unwrap();
+        let f = parse("struct e_t { }");
+        let def = find(&f, &qn("", "e_t")).unwrap();
         assert_eq!(base_hash(def), 0x1234_5678);
-        assert_eq!(fingerprint(&s, &qn("", "e_t")), Some(0x2468_acf0));
+        assert_eq!(
+            fingerprint(&|n| find(&f, n), &qn("", "e_t")),
+            Some(0x2468_acf0)
+        );
     }
 
     #[test]
@@ -107,11 +117,11 @@ mod tests {
 
     #[test]
     fn recursive_type_counts_itself_as_zero() {
-        let s = schema("package p; struct node_t { int32_t n; node_t kids[n]; }");
-        let def = s.get(&qn("p", "node_t")).unwrap();
+        let f = parse("package p; struct node_t { int32_t n; node_t kids[n]; }");
+        let def = find(&f, &qn("p", "node_t")).unwrap();
         assert_eq!(base_hash(def), 0x90af_a2d1_3a5e_e21c);
         assert_eq!(
-            fingerprint(&s, &qn("p", "node_t")),
+            fingerprint(&|n| find(&f, n), &qn("p", "node_t")),
             Some(0x215f_45a2_74bd_c439)
         );
     }

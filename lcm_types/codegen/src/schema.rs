@@ -117,7 +117,7 @@ impl Schema {
 
     /// The wire fingerprint of `name` (see [`fingerprint::fingerprint`]).
     pub fn fingerprint(&self, name: &QualifiedName) -> Option<u64> {
-        fingerprint::fingerprint(self, name)
+        fingerprint::fingerprint(&|n| self.get(n), name)
     }
 
     /// The fewest bytes an encoding of `name` (without fingerprint) can take; variable-length
