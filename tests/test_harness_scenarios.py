@@ -2,13 +2,52 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from pfnav_harness import cli
 from pfnav_harness.pipeline import PAPER_SCENARIOS
-from pfnav_harness.scenario import Scenario
+from pfnav_harness.scenario import Scenario, planner_scenario_names
 from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld
+
+
+def test_the_paper_scenarios_are_the_planners(
+    pf_plan_bin: Path, paper_scenarios: dict[str, Scenario]
+) -> None:
+    # The scenarios are defined once, in the planner: the harness's names are its list, and what
+    # the harness loads is the planner's export (seed, start, goal, map size), field for field.
+    names = planner_scenario_names(pf_plan_bin)
+    assert PAPER_SCENARIOS == names
+    assert cli.PAPER_SCENARIOS == names
+    listed = json.loads(
+        subprocess.run(
+            [str(pf_plan_bin), "scenario", "list", "--json"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=120,
+        ).stdout
+    )
+    for entry in listed:
+        scenario = paper_scenarios[entry["name"]]
+        assert scenario.seed == entry["seed"]
+        assert (
+            scenario.start == tuple(entry["start"])
+            and scenario.start_yaw == entry["start_yaw"]
+        )
+        assert (
+            scenario.goal.center == tuple(entry["goal"]["center"])
+            and scenario.goal.radius == entry["goal"]["radius"]
+        )
+        assert scenario.terrain.shape == (entry["height"], entry["width"])
+        assert (
+            scenario.terrain.origin == tuple(entry["origin"])
+            and scenario.resolution == entry["resolution"]
+        )
+        assert scenario.traversability == entry["traversability"]
 
 
 @pytest.mark.parametrize("name", PAPER_SCENARIOS)

@@ -1,12 +1,14 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from pfnav_harness.fmu_runner import FmuContract
+from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.metrics import (
+    CostModelError,
     FallThresholds,
     TraversabilityField,
     compute_metrics,
@@ -82,7 +84,7 @@ def test_goal_time_and_heading_error(ramp_scenario: Scenario) -> None:
     assert m.rms_heading_error_deg == pytest.approx(10.0, abs=1e-9)
 
 
-def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario, fmu_contract: FmuContract) -> None:
+def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario) -> None:
     field = TraversabilityField(ramp_scenario.terrain, ramp_scenario.traversability)
     low = straight_log(ramp_scenario, 0.0, height=0.05)
     m = compute_metrics(low, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf", FallThresholds(min_base_height=0.12))
@@ -102,10 +104,8 @@ def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario, fmu_cont
 
     # The controller's damping state counts as a fall.
     damped = straight_log(ramp_scenario, 0.0)
-    fsm = fmu_contract.fsm
-    damped["fsm"] = np.full(len(damped["t"]), fsm.Locomotion)
-    damped["fsm"][1500:] = fsm.Damping
-    damped["fsm_damping"] = np.array(int(fsm.Damping))
+    damped["fsm"] = np.full(len(damped["t"]), 3)
+    damped["fsm"][1500:] = 4
     m = compute_metrics(damped, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf")
     assert m.fell and m.fall_time == pytest.approx(1.5) and "damping" in m.fall_reason
 
@@ -160,6 +160,41 @@ def test_angle_helpers() -> None:
     assert (r[0], p[0], y[0]) == pytest.approx((0.1, -0.2, 2.5))
 
 
-def test_goal_region_dataclass() -> None:
-    g = GoalRegion((1.0, 2.0), 0.5)
-    assert g.center == (1.0, 2.0) and g.radius == 0.5
+def test_the_goal_disc_includes_its_boundary(ramp_scenario: Scenario) -> None:
+    # The walk ends on y = 1 at x = 1.5; a goal of radius 0.4 centred 0.4 m ahead is reached
+    # exactly at the end, one 1e-9 m further it is not.
+    log = straight_log(ramp_scenario, 0.0)
+    field = TraversabilityField(ramp_scenario.terrain, ramp_scenario.traversability)
+    on_edge = compute_metrics(log, ramp_scenario.terrain, GoalRegion((1.9, 1.0), 0.4), field, "ramp", "pf")
+    assert on_edge.goal_reached and on_edge.time_to_goal == pytest.approx(2.0)
+    assert on_edge.final_distance_to_goal == pytest.approx(0.4, abs=1e-12)
+    beyond = compute_metrics(log, ramp_scenario.terrain, GoalRegion((1.9 + 1e-9, 1.0), 0.4), field, "ramp", "pf")
+    assert not beyond.goal_reached and beyond.time_to_goal is None
+
+
+def test_path_cost_is_the_planners_measurement(tmp_path: Path) -> None:
+    # A pit (obstacle) across the middle row: the planner reports the length inside it, the
+    # clearance and exactly the cost the documented model gives (p = 0.5 everywhere, h_max = 1).
+    pit = np.zeros((5, 8), dtype=bool)
+    pit[2, 3:5] = True
+    terrain = Terrain((0.0, 0.0), 1.0, np.full((5, 8), 0.5), pit)
+    field = TraversabilityField(terrain, {"h_max": 1.0})
+    through = field.measure(np.array([0.5, 7.5]), np.array([2.5, 2.5]))
+    assert through.length == pytest.approx(7.0) and through.cost_integral == pytest.approx(3.5)
+    assert through.length_in_obstacles == pytest.approx(2.0) and through.min_clearance == 0.0
+    beside = field.measure(np.array([0.5, 7.5]), np.array([0.5, 0.5]))
+    assert beside.length_in_obstacles == 0.0 and beside.min_clearance == pytest.approx(1.5)
+    # Points reach the planner bit for bit (a 1e-13 m step would vanish at fewer digits).
+    x = np.array([0.1, 0.1 + 1e-13, 6.3])
+    assert field.measure(x, np.full(3, 0.7)).length == (x[1] - x[0]) + (x[2] - x[1])
+    # Bad paths are refused with the planner's reason.
+    with pytest.raises(CostModelError, match="not finite"):
+        field.measure(np.array([0.5, np.nan]), np.array([0.5, 0.5]))
+    with pytest.raises(ValueError, match="differ in length"):
+        field.measure(np.array([0.5, 1.0]), np.array([0.5]))
+    assert path_cost(field, np.array([0.5]), np.array([0.5])) == (0.0, 0.0)
+    # A binary that cannot run is a missing artefact, not a crash.
+    missing = TraversabilityField.__new__(TraversabilityField)
+    missing.__dict__.update(field.__dict__, _pf_plan=tmp_path / "no-pf-plan")
+    with pytest.raises(MissingArtifactError):
+        missing.measure(np.array([0.5, 1.0]), np.array([0.5, 0.5]))

@@ -1,26 +1,33 @@
 """Tracking metrics of one co-simulation run, computed from its log.
 
-The traversability p is re-evaluated here from the scenario's own weights with the formula the
-planner documents (planner/core/src/traversability.rs): p = clamp((w_h·h/h_max + w_s·min(slope/
-slope_ref, 1) + w_r·min(rough/rough_ref, 1)) / (w_h + w_s + w_r), p_floor, 1) per cell centre,
-bilinear in between; with `footprint_radius_m` > 0 each cell takes the largest p within that
-radius first, obstacle cells counting as p = 1 (the robot footprint the planner service is started
-with). Planned and executed paths are integrated with the same field, so their
-∫p ds are comparable; a test checks it against the planner's own figure for the planned path.
+∫p ds comes from the planner itself: `TraversabilityField` writes the terrain and the scenario's
+traversability model (with the robot footprint the planner service is started with) as a map file
+and `path_cost` asks `pf-plan path-cost` to measure a polyline on it, with the very traversability
+field, footprint filter and quadrature (bilinear p, trapezoid rule, steps ≤ resolution/8) that the
+planner reports for its own plans (`planner/core/src/metrics.rs`). There is no second copy of the
+cost model here; a test checks that the harness's ∫p ds of a planned path equals the planner's.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import subprocess
+import tempfile
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .scenario import GoalRegion, Terrain
+from . import paths
+from .errors import MissingArtifactError, PlannerError
+from .scenario import GoalRegion, Terrain, write_map
 
 FloatArray = NDArray[np.float64]
+FSM_DAMPING = 4
 
 
 @dataclass(frozen=True)
@@ -32,106 +39,96 @@ class FallThresholds:
     max_pitch: float = 1.0
 
 
+class CostModelError(PlannerError, ValueError):
+    """`pf-plan` refused the terrain, the traversability parameters or a path (bad input)."""
+
+
+@dataclass(frozen=True)
+class PathCost:
+    """The planner's measurement of a polyline (`pf-plan path-cost`)."""
+
+    cost_integral: float
+    length: float
+    length_in_obstacles: float
+    min_clearance: float | None
+    max_slope_deg: float
+
+
 class TraversabilityField:
-    """p per cell centre of the map, bilinear in between, clamped at the map edge."""
+    """The planner's traversability model on one terrain; `pf-plan` evaluates it.
 
-    def __init__(self, terrain: Terrain, params: dict[str, Any] | None = None) -> None:
-        params = dict(params or {})
-        w_h = float(params.get("height_weight", 1.0))
-        w_s = float(params.get("slope_weight", 0.0))
-        w_r = float(params.get("roughness_weight", 0.0))
-        slope_ref = float(params.get("slope_ref_deg", 30.0))
-        rough_ref = float(params.get("roughness_ref_m", 0.1))
-        p_floor = float(params.get("p_floor", 0.05))
-        h_max_param = params.get("h_max")
-        if w_h < 0 or w_s < 0 or w_r < 0 or w_h + w_s + w_r <= 0:
-            raise ValueError(f"traversability weights must be >= 0 with a positive sum, got {w_h}, {w_s}, {w_r}")
-        h = terrain.heights
-        h_max = float(h_max_param) if h_max_param is not None else max(float(h.max()), 0.0)
-        height_term = np.minimum(h / h_max, 1.0) if h_max > 0 else np.zeros_like(h)
-        total = w_h * height_term
-        if w_s > 0:
-            total = total + w_s * np.minimum(self._slope_deg(h, terrain.resolution) / slope_ref, 1.0)
-        if w_r > 0:
-            total = total + w_r * np.minimum(self._roughness(h) / rough_ref, 1.0)
-        values = np.clip(total / (w_h + w_s + w_r), p_floor, 1.0)
-        footprint = float(params.get("footprint_radius_m", 0.0))
-        if not (math.isfinite(footprint) and footprint >= 0.0):
-            raise ValueError(f"footprint_radius_m must be finite and >= 0, got {footprint}")
-        if footprint > 0:
-            # As the planner: obstacle cells count as p = 1 within the footprint and keep their own p.
-            worst = values if terrain.obstacles is None else np.where(terrain.obstacles, 1.0, values)
-            dilated = self._disc_max(worst, footprint / terrain.resolution)
-            values = dilated if terrain.obstacles is None else np.where(terrain.obstacles, values, dilated)
-        self.values = values
-        self.origin = terrain.origin
-        self.resolution = terrain.resolution
+    The map file lives in a private temporary folder for the lifetime of this object. Invalid
+    parameters (negative footprint, zero weights, negative heights, ...) are refused by the planner
+    with its reason (`CostModelError`, a `ValueError`), when the field is made.
+    """
 
-    @staticmethod
-    def _disc_max(values: FloatArray, radius_cells: float) -> FloatArray:
-        """Largest value among the cells whose centres lie within `radius_cells` (the planner's filter)."""
-        r2 = radius_cells * radius_cells + 1e-9
-        reach = math.floor(math.sqrt(r2))
-        rows, cols = values.shape
-        padded = np.full((rows + 2 * reach, cols + 2 * reach), -np.inf)
-        padded[reach : reach + rows, reach : reach + cols] = values
-        out = values.copy()
-        for dy in range(-reach, reach + 1):
-            for dx in range(-reach, reach + 1):
-                if dx * dx + dy * dy <= r2:
-                    np.maximum(out, padded[reach + dy : reach + dy + rows, reach + dx : reach + dx + cols], out=out)
-        return out
+    def __init__(self, terrain: Terrain, params: dict[str, Any] | None = None, pf_plan: Path | None = None, timeout: float = 120.0) -> None:
+        self.terrain = terrain
+        self.params = dict(params or {})
+        self.timeout = timeout
+        self._pf_plan = pf_plan
+        self._folder = tempfile.TemporaryDirectory(prefix="pfnav-field-")
+        self.map_file = write_map(terrain, Path(self._folder.name), "field", self.params)
+        self._values: FloatArray | None = None
+        self.values  # noqa: B018 - evaluate once now: bad parameters fail here, not at the first path
 
-    @staticmethod
-    def _slope_deg(h: FloatArray, res: float) -> FloatArray:
-        ny, nx = h.shape
-        ix = np.arange(nx)
-        iy = np.arange(ny)
-        xl, xh = np.maximum(ix - 1, 0), np.minimum(ix + 1, nx - 1)
-        yl, yh = np.maximum(iy - 1, 0), np.minimum(iy + 1, ny - 1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            dx = (h[:, xh] - h[:, xl]) / ((xh - xl) * res)[None, :]
-            dy = (h[yh, :] - h[yl, :]) / ((yh - yl) * res)[:, None]
-        dx = np.where(np.isfinite(dx), dx, 0.0)
-        dy = np.where(np.isfinite(dy), dy, 0.0)
-        return np.degrees(np.arctan(np.hypot(dx, dy)))
+    def _run(self, command: str, args: list[str], stdin: str | None = None) -> str:
+        binary = self._pf_plan or paths.pf_plan_path()
+        try:
+            proc = subprocess.run(
+                [str(binary), command, "--map", str(self.map_file), *args],
+                input=stdin,
+                capture_output=True,
+                text=True,
+                timeout=self.timeout,
+                check=False,
+                env={**os.environ, "RUST_BACKTRACE": "0", "RUST_LIB_BACKTRACE": "0"},
+            )
+        except OSError as err:
+            raise MissingArtifactError(f"cannot run {binary}: {err}") from err
+        except subprocess.TimeoutExpired as err:
+            raise PlannerError(f"`pf-plan {command}` did not finish within {self.timeout:.0f} s") from err
+        if proc.returncode != 0:
+            # anyhow's report: "Error: context", then "Caused by:" and the causes; one line here.
+            lines = [line.strip() for line in proc.stderr.splitlines() if line.strip() and line.strip() != "Caused by:"]
+            detail = "; ".join(line.removeprefix("Error: ") for line in lines) or f"exit code {proc.returncode}"
+            raise CostModelError(f"pf-plan {command} refused the map, the traversability parameters or the path: {detail}")
+        return proc.stdout
 
-    @staticmethod
-    def _roughness(h: FloatArray) -> FloatArray:
-        ny, nx = h.shape
-        out = np.empty_like(h)
-        for iy in range(ny):
-            y0, y1 = max(iy - 1, 0), min(iy + 1, ny - 1) + 1
-            for ix in range(nx):
-                x0, x1 = max(ix - 1, 0), min(ix + 1, nx - 1) + 1
-                out[iy, ix] = np.std(h[y0:y1, x0:x1])
-        return out
+    @property
+    def values(self) -> FloatArray:
+        """p per map cell, shape (rows along y, columns along x), as the planner evaluates it."""
+        if self._values is None:
+            out = Path(self._folder.name) / "p.npy"
+            self._run("traversability", ["--out", str(out)])
+            self._values = np.load(out, allow_pickle=False)
+        return self._values
 
-    def at(self, x: FloatArray, y: FloatArray) -> FloatArray:
-        ny, nx = self.values.shape
-        fx = np.clip((np.asarray(x) - self.origin[0]) / self.resolution - 0.5, 0.0, nx - 1.0)
-        fy = np.clip((np.asarray(y) - self.origin[1]) / self.resolution - 0.5, 0.0, ny - 1.0)
-        x0 = np.floor(fx).astype(np.int64)
-        y0 = np.floor(fy).astype(np.int64)
-        x1 = np.minimum(x0 + 1, nx - 1)
-        y1 = np.minimum(y0 + 1, ny - 1)
-        tx = fx - x0
-        ty = fy - y0
-        v = self.values
-        bottom = v[y0, x0] * (1 - tx) + v[y0, x1] * tx
-        top = v[y1, x0] * (1 - tx) + v[y1, x1] * tx
-        return bottom * (1 - ty) + top * ty
+    def measure(self, x: FloatArray, y: FloatArray) -> PathCost:
+        """The planner's ∫p ds, length, obstacle length, clearance and steepest slope of a polyline."""
+        x = np.asarray(x, dtype=np.float64).ravel()
+        y = np.asarray(y, dtype=np.float64).ravel()
+        if len(x) != len(y):
+            raise ValueError(f"path x and y differ in length ({len(x)} vs {len(y)})")
+        # %.17g reads back to the same double: the planner measures exactly these points.
+        rows = "\n".join(f"{a:.17g},{b:.17g}" for a, b in zip(x.tolist(), y.tolist(), strict=True))
+        reply = json.loads(self._run("path-cost", ["--path", "-"], stdin=f"x,y\n{rows}\n"))
+        clearance = reply.get("min_clearance")
+        return PathCost(
+            cost_integral=float(reply["cost_integral"]),
+            length=float(reply["length"]),
+            length_in_obstacles=float(reply["length_in_obstacles"]),
+            min_clearance=None if clearance is None else float(clearance),
+            max_slope_deg=float(reply["max_slope_deg"]),
+        )
 
 
 def path_cost(field: TraversabilityField, x: FloatArray, y: FloatArray) -> tuple[float, float]:
-    """(∫p ds, length) of a polyline, p at segment midpoints (midpoint rule)."""
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
+    """(∫p ds, length) of a polyline as the planner measures it; (0, 0) without a segment."""
     if len(x) < 2:
         return 0.0, 0.0
-    ds = np.hypot(np.diff(x), np.diff(y))
-    p = field.at(0.5 * (x[1:] + x[:-1]), 0.5 * (y[1:] + y[:-1]))
-    return float(np.sum(p * ds)), float(np.sum(ds))
+    cost = field.measure(x, y)
+    return cost.cost_integral, cost.length
 
 
 def wrap_angle(a: FloatArray) -> FloatArray:
@@ -237,9 +234,8 @@ def compute_metrics(
     # body anywhere near the thresholds.
     too_rolled = np.abs(roll) > thresholds.max_roll
     too_pitched = np.abs(pitch) > thresholds.max_pitch
-    # The controller's damping state is its own verdict that the robot is down (the log carries
-    # the FMU's code of that state, read from its modelDescription).
-    damping = (log["fsm"] == log["fsm_damping"]) if "fsm" in log else np.zeros_like(too_low)
+    # The controller's damping state (FSM code 4) is its own verdict that the robot is down.
+    damping = (log["fsm"] == FSM_DAMPING) if "fsm" in log else np.zeros_like(too_low)
     # Before the controller has stood up the base is legitimately low: only judge after walk start.
     fallen = (too_low | too_rolled | too_pitched | damping) & walking
     fell = bool(np.any(fallen))

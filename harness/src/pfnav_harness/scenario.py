@@ -1,5 +1,8 @@
 """Scenario files (written by `pf-plan scenario export`) and the terrain surface they define.
 
+The paper's scenarios are defined once, in the planner (`planner/core/src/scenarios.rs`): the
+harness asks `pf-plan scenario list` for their names and `pf-plan scenario export` for their maps.
+
 The planner's map stores one height per cell centre. The physics terrain is the triangle mesh
 through those centres, each cell quad split along its (ix, iy)→(ix+1, iy+1) diagonal. `Terrain`
 evaluates exactly that piecewise-linear surface, so the heights the reference, the metrics and the
@@ -10,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ScenarioError
+from .errors import MissingArtifactError, ScenarioError
 
 FloatArray = NDArray[np.float64]
 
@@ -261,3 +265,51 @@ def load_scenario(json_path: Path) -> Scenario:
         traversability=dict(meta.get("traversability") or {}),
         source=json_path,
     )
+
+
+def write_map(terrain: Terrain, folder: Path, name: str, traversability: dict[str, Any] | None = None) -> Path:
+    """Writes `terrain` as FOLDER/NAME.json + .npy arrays in the `pf-plan scenario export` format.
+
+    For `pf-plan path-cost --map` / `pf-plan traversability --map`, which read only the map and the
+    traversability model: start and goal are set to the centre of cell (0, 0).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    ny, nx = terrain.shape
+    np.save(folder / f"{name}.heights.npy", np.ascontiguousarray(terrain.heights, dtype=np.float64))
+    obstacles = None
+    if terrain.obstacles is not None:
+        obstacles = f"{name}.obstacles.npy"
+        np.save(folder / obstacles, np.ascontiguousarray(terrain.obstacles, dtype=bool))
+    corner = [terrain.origin[0] + 0.5 * terrain.resolution, terrain.origin[1] + 0.5 * terrain.resolution]
+    meta = {
+        "name": name,
+        "origin": list(terrain.origin),
+        "resolution": terrain.resolution,
+        "width": nx,
+        "height": ny,
+        "heights": f"{name}.heights.npy",
+        "obstacles": obstacles,
+        "start": corner,
+        "start_yaw": 0.0,
+        "goal": {"center": corner, "radius": 0.0},
+        "traversability": dict(traversability or {}),
+    }
+    path = folder / f"{name}.json"
+    path.write_text(json.dumps(meta))
+    return path
+
+
+def planner_scenario_names(pf_plan: Path, timeout: float = 60.0) -> tuple[str, ...]:
+    """The planner's built-in (paper) scenarios, from `pf-plan scenario list`."""
+    try:
+        proc = subprocess.run([str(pf_plan), "scenario", "list"], capture_output=True, text=True, timeout=timeout, check=False)
+    except OSError as err:
+        raise MissingArtifactError(f"cannot run {pf_plan}: {err}") from err
+    except subprocess.TimeoutExpired as err:
+        raise ScenarioError(f"`pf-plan scenario list` did not finish within {timeout:.0f} s") from err
+    names = tuple(line.strip() for line in proc.stdout.splitlines() if line.strip())
+    if proc.returncode != 0 or not names:
+        detail = (proc.stderr or "").strip().splitlines()
+        raise ScenarioError(f"`pf-plan scenario list` failed: {detail[-1] if detail else f'exit code {proc.returncode}'}")
+    return names

@@ -128,7 +128,7 @@ pub fn load_scenario(json_path: &Path) -> Result<MapScenario, PlanError> {
 /// sidecar is data and must not be able to point the reader at other files.
 pub fn load_scenario_limited(json_path: &Path, max_cells: usize) -> Result<MapScenario, PlanError> {
     let max_cells = max_cells.min(MAX_MAP_CELLS);
-    let text = read_limited(json_path, MAX_SIDECAR_BYTES)?;
+    let text = read_limited(json_path, MAX_SIDECAR_BYTES, "a map sidecar")?;
     let sidecar: Sidecar = serde_json::from_str(&text).map_err(|e| format_error(json_path, e))?;
     let too_large = sidecar
         .width
@@ -202,6 +202,77 @@ pub fn load_scenario_limited(json_path: &Path, max_cells: usize) -> Result<MapSc
         goal: sidecar.goal,
         traversability: sidecar.traversability,
     })
+}
+
+/// Largest path CSV accepted, bytes (a 10-minute walk logged at 1 kHz is about 40 MB).
+pub const MAX_PATH_CSV_BYTES: u64 = 256 << 20;
+
+/// The polyline of a CSV file with a header line naming columns `x` and `y` (others, such as
+/// `pf-plan plan`'s `t,x,y,z,yaw,...`, are ignored). `source` names the file in errors. Every
+/// value must be a finite number and the path must have at least one point.
+pub fn parse_path_csv(text: &str, source: &str) -> Result<Vec<Point>, PlanError> {
+    let bad = |reason: String| PlanError::Format {
+        path: source.to_string(),
+        reason,
+    };
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines
+        .next()
+        .ok_or_else(|| bad("empty: expected a header line with columns x and y".into()))?;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let column = |name: &str| {
+        names.iter().position(|&n| n == name).ok_or_else(|| {
+            bad(format!(
+                "the header {header:?} has no column {name:?} (expected e.g. \"x,y\")"
+            ))
+        })
+    };
+    let (cx, cy) = (column("x")?, column("y")?);
+    let mut path = Vec::new();
+    for (index, line) in lines {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != names.len() {
+            return Err(bad(format!(
+                "line {}: {} fields, the header has {}",
+                index + 1,
+                fields.len(),
+                names.len()
+            )));
+        }
+        let value = |c: usize| {
+            let v: f64 = fields[c].parse().map_err(|_| {
+                bad(format!(
+                    "line {}: {} = {:?} is not a number",
+                    index + 1,
+                    names[c],
+                    fields[c]
+                ))
+            })?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(bad(format!(
+                    "line {}: {} = {v} is not finite",
+                    index + 1,
+                    names[c]
+                )))
+            }
+        };
+        path.push([value(cx)?, value(cy)?]);
+    }
+    if path.is_empty() {
+        return Err(bad("the path has no points".into()));
+    }
+    Ok(path)
+}
+
+/// [`parse_path_csv`] of a file (at most [`MAX_PATH_CSV_BYTES`]).
+pub fn read_path_csv(path: &Path) -> Result<Vec<Point>, PlanError> {
+    let text = read_limited(path, MAX_PATH_CSV_BYTES, "a path CSV")?;
+    parse_path_csv(&text, &path.display().to_string())
 }
 
 /// A 2-D array read from `.npy`, converted to f64, in C (row-major) order.
@@ -452,7 +523,7 @@ fn array_path(json_path: &Path, dir: &Path, file: &str) -> Result<PathBuf, PlanE
 }
 
 /// Reads a text file of at most `max_bytes`.
-fn read_limited(path: &Path, max_bytes: u64) -> Result<String, PlanError> {
+fn read_limited(path: &Path, max_bytes: u64, what: &str) -> Result<String, PlanError> {
     let file = fs::File::open(path).map_err(|e| io_error(path, e))?;
     let mut text = String::new();
     file.take(max_bytes + 1)
@@ -461,7 +532,7 @@ fn read_limited(path: &Path, max_bytes: u64) -> Result<String, PlanError> {
     if text.len() as u64 > max_bytes {
         return Err(format_error(
             path,
-            format!("larger than {max_bytes} bytes: not a map sidecar"),
+            format!("larger than {max_bytes} bytes: not {what}"),
         ));
     }
     Ok(text)

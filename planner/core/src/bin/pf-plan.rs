@@ -1,7 +1,9 @@
-//! `pf-plan`: plan on a built-in scenario or a map file with P-F, A* or Dijkstra; export scenarios;
-//! run the demo (all methods × all scenarios → report.md + PNGs).
+//! `pf-plan`: plan on a built-in scenario or a map file with P-F, A* or Dijkstra; list and export
+//! scenarios; measure a path (∫p ds) or write the traversability field with the planner's own cost
+//! model; run the demo (all methods × all scenarios → report.md + PNGs).
 
 use std::fs;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -11,13 +13,19 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
-use pf_planner::io::{load_scenario_limited, save_scenario, MapScenario};
+use pf_planner::io::{
+    load_scenario_limited, parse_path_csv, read_path_csv, save_scenario, write_npy_f64,
+    MapScenario, MAX_PATH_CSV_BYTES,
+};
 use pf_planner::lp::LpSolver;
+use pf_planner::map::Point;
+use pf_planner::metrics::evaluate_path;
 use pf_planner::pf::BasisKind;
 use pf_planner::plan::{Method, Plan, Planner, PlannerOptions};
 use pf_planner::plot::{plot_plans, PlotPath};
 use pf_planner::report::{markdown_table, ReportRow, RowData};
 use pf_planner::scenarios::{self, SCENARIO_NAMES};
+use pf_planner::traversability::TraversabilityField;
 
 #[derive(Parser)]
 #[command(
@@ -39,6 +47,12 @@ enum Command {
         #[command(subcommand)]
         command: ScenarioCommand,
     },
+    /// ∫p ds, length, length in obstacles, clearance and steepest slope of a path, measured with
+    /// the planner's own cost model (the metric of every plan); prints one JSON object.
+    PathCost(PathCostArgs),
+    /// The traversability p of every map cell (the field plans are measured on) as a float64
+    /// `.npy` of shape (height, width).
+    Traversability(TraversabilityArgs),
     /// All methods on all scenarios: DIR/report.md and one PNG per scenario.
     Demo {
         /// Output directory.
@@ -69,6 +83,73 @@ enum ScenarioCommand {
         #[arg(long)]
         seed: Option<u64>,
     },
+    /// The built-in scenarios, one name a line; with --json their start, goal, seed and map size.
+    List {
+        /// One JSON array of objects instead of names.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// The map (and its traversability model) a command works on.
+#[derive(clap::Args)]
+struct MapArgs {
+    /// Built-in scenario (mountain_pass, pits, c_shape).
+    #[arg(long, conflicts_with = "map", required_unless_present = "map")]
+    scenario: Option<String>,
+    /// Map sidecar JSON (see `pf-plan scenario export`).
+    #[arg(long)]
+    map: Option<PathBuf>,
+    /// Largest map accepted with --map, in cells (refused from the file headers, before the
+    /// arrays are read).
+    #[arg(long, default_value_t = 2048 * 2048)]
+    max_map_cells: usize,
+    /// Robot footprint radius, metres: each cell costs the largest p within it (overrides the
+    /// map's `traversability.footprint_radius_m`; 0 = the paper's point robot).
+    #[arg(long, allow_negative_numbers = true)]
+    footprint_radius: Option<f64>,
+}
+
+impl MapArgs {
+    fn load(&self) -> Result<MapScenario> {
+        let mut scenario = match (&self.scenario, &self.map) {
+            (Some(name), None) => scenarios::by_name(name)?,
+            (None, Some(path)) => load_scenario_limited(path, self.max_map_cells)
+                .with_context(|| format!("loading map {}", path.display()))?,
+            _ => bail!("give exactly one of --scenario or --map"),
+        };
+        if let Some(radius) = self.footprint_radius {
+            scenario.traversability.footprint_radius_m = radius;
+        }
+        Ok(scenario)
+    }
+
+    /// The scenario and the traversability field the planners plan and measure with.
+    fn field(&self) -> Result<(MapScenario, TraversabilityField)> {
+        let scenario = self.load()?;
+        let field = TraversabilityField::from_map(&scenario.map, &scenario.traversability)
+            .context("evaluating the traversability model")?;
+        Ok((scenario, field))
+    }
+}
+
+#[derive(clap::Args)]
+struct PathCostArgs {
+    #[command(flatten)]
+    map: MapArgs,
+    /// CSV with a header naming columns x and y (other columns are ignored, so `pf-plan plan`'s
+    /// trajectory CSV works as is); `-` reads standard input.
+    #[arg(long)]
+    path: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct TraversabilityArgs {
+    #[command(flatten)]
+    map: MapArgs,
+    /// Output `.npy` file.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -87,16 +168,9 @@ enum BasisArg {
 
 #[derive(clap::Args)]
 struct PlanArgs {
-    /// Built-in scenario (mountain_pass, pits, c_shape).
-    #[arg(long, conflicts_with = "map", required_unless_present = "map")]
-    scenario: Option<String>,
-    /// Map sidecar JSON (see `pf-plan scenario export`).
-    #[arg(long)]
-    map: Option<PathBuf>,
-    /// Largest map accepted with --map, in cells (refused from the file headers, before the
-    /// arrays are read). Maps are resampled to --grid cells for planning.
-    #[arg(long, default_value_t = 2048 * 2048)]
-    max_map_cells: usize,
+    /// The map; it is resampled to --grid cells for planning.
+    #[command(flatten)]
+    map: MapArgs,
     /// Planning method (all = P-F, A* and Dijkstra on the same grid).
     #[arg(long, value_enum, default_value = "all")]
     method: MethodArg,
@@ -155,6 +229,15 @@ fn main() -> Result<()> {
             println!("{}", json.display());
             Ok(())
         }
+        Command::Scenario {
+            command: ScenarioCommand::List { json },
+        } => list_scenarios(json),
+        Command::PathCost(args) => run_path_cost(&args),
+        Command::Traversability(args) => {
+            let (_, field) = args.map.field()?;
+            write_npy_f64(&args.out, (field.height, field.width), &field.values)?;
+            emit(&args.out.display().to_string())
+        }
         Command::Demo {
             out,
             grid,
@@ -164,13 +247,60 @@ fn main() -> Result<()> {
     }
 }
 
-fn load(args: &PlanArgs) -> Result<MapScenario> {
-    match (&args.scenario, &args.map) {
-        (Some(name), None) => Ok(scenarios::by_name(name)?),
-        (None, Some(path)) => load_scenario_limited(path, args.max_map_cells)
-            .with_context(|| format!("loading map {}", path.display())),
-        _ => bail!("give exactly one of --scenario or --map"),
+/// Writes one line to stdout; a closed pipe is an error, not a panic.
+fn emit(line: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}")
+        .and_then(|()| out.flush())
+        .context("writing to standard output")
+}
+
+fn list_scenarios(json: bool) -> Result<()> {
+    if !json {
+        return emit(&SCENARIO_NAMES.join("\n"));
     }
+    let mut list = Vec::new();
+    for name in SCENARIO_NAMES {
+        let s = scenarios::by_name(name)?;
+        list.push(json!({
+            "name": s.name, "seed": s.seed, "start": s.start, "start_yaw": s.start_yaw,
+            "goal": s.goal, "origin": s.map.origin, "resolution": s.map.resolution,
+            "width": s.map.width, "height": s.map.height, "traversability": s.traversability,
+        }));
+    }
+    emit(&serde_json::to_string_pretty(&list)?)
+}
+
+fn read_path(file: &Path) -> Result<Vec<Point>> {
+    if file != Path::new("-") {
+        return Ok(read_path_csv(file)?);
+    }
+    let mut text = String::new();
+    std::io::stdin()
+        .take(MAX_PATH_CSV_BYTES + 1)
+        .read_to_string(&mut text)
+        .context("reading the path CSV from standard input")?;
+    if text.len() as u64 > MAX_PATH_CSV_BYTES {
+        bail!("the path CSV on standard input is larger than {MAX_PATH_CSV_BYTES} bytes");
+    }
+    Ok(parse_path_csv(&text, "<stdin>")?)
+}
+
+fn run_path_cost(args: &PathCostArgs) -> Result<()> {
+    let (scenario, field) = args.map.field()?;
+    let path = read_path(&args.path)?;
+    let m = evaluate_path(&scenario.map, &field, &path);
+    let doc = json!({
+        "map": scenario.name,
+        "points": path.len(),
+        "footprint_radius_m": scenario.traversability.footprint_radius_m,
+        "cost_integral": m.cost_integral,
+        "length": m.length,
+        "length_in_obstacles": m.length_in_obstacles,
+        "min_clearance": m.min_clearance.is_finite().then_some(m.min_clearance),
+        "max_slope_deg": m.max_slope_deg,
+    });
+    emit(&serde_json::to_string(&doc)?)
 }
 
 fn spinner(message: String) -> ProgressBar {
@@ -185,7 +315,7 @@ fn spinner(message: String) -> ProgressBar {
 }
 
 fn run_plan(args: &PlanArgs) -> Result<()> {
-    let scenario = load(args)?;
+    let scenario = args.map.load()?;
     let basis = match args.basis {
         BasisArg::Indicator => BasisKind::Indicator,
         BasisArg::Rbf => BasisKind::Rbf {
@@ -312,7 +442,7 @@ fn write_plan(stem: &Path, scenario: &str, plan: &Plan) -> Result<()> {
     let m = &plan.metrics;
     let lp = plan.lp.as_ref().map(|lp| {
         json!({
-            "status": lp.status, "solver": lp.solver, "certificate": lp.certificate,
+            "status": lp.status.name(), "solver": lp.solver.name(), "certificate": lp.certificate,
             "certified": lp.certificate.holds(), "objective": lp.objective, "primal_residual": lp.primal_residual,
             "dual_residual": lp.dual_residual, "mass_balance_residual": lp.mass_balance_residual,
             "iterations": lp.iterations, "solve_time_s": lp.solve_time_s,
