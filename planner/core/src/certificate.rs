@@ -17,7 +17,7 @@
 use serde::Serialize;
 
 use crate::generators::SparseColumns;
-use crate::lp::LpProblem;
+use crate::lp_problem::LpProblem;
 
 /// Default bound of each relative residual and of the relative gap for a certified solution.
 pub const CERTIFICATE_TOLERANCE: f64 = 1e-6;

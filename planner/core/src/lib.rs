@@ -13,6 +13,7 @@ pub mod graph;
 pub mod grid;
 pub mod io;
 pub mod lp;
+pub mod lp_problem;
 pub mod map;
 pub mod metrics;
 pub mod pf;

@@ -41,7 +41,7 @@ use tracing::debug;
 use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::generators::SparseColumns;
-use crate::lp::LpProblem;
+use crate::lp_problem::LpProblem;
 use crate::solve_status::{LpStatus, SolverUsed};
 
 /// Transition mass below this (in absolute value) is treated as zero when reading Uₖ back from Lₖ.
