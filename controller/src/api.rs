@@ -98,10 +98,6 @@ impl GaitKind {
     }
 }
 
-/// Declared in [`crate::config`] (one declaration per field); re-exported here with the rest of
-/// the contract.
-pub use crate::config::ControllerConfig;
-
 /// Measured state of the robot.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RobotState {

@@ -25,9 +25,9 @@
 use nalgebra::Vector3;
 
 use crate::api::{
-    Command, ControllerConfig, ControllerError, FsmState, HeightMap, Leg, Reference, RobotState,
-    NUM_JOINTS, NUM_LEGS,
+    Command, ControllerError, FsmState, HeightMap, Leg, Reference, RobotState, NUM_JOINTS, NUM_LEGS,
 };
+use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::FootholdPlanner;
 pub use crate::footholds::FOOTHOLD_SEARCH_RADIUS;

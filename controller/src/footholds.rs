@@ -12,7 +12,8 @@
 
 use nalgebra::Vector3;
 
-use crate::api::{ControllerConfig, HeightMap, Leg, Reference, GRAVITY, NUM_LEGS};
+use crate::api::{HeightMap, Leg, Reference, GRAVITY, NUM_LEGS};
+use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::gait::{swing_blend, swing_bump_shape};
 use crate::math::rot_z;

@@ -8,7 +8,8 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::api::{ControllerConfig, Leg, RobotState, NUM_JOINTS, NUM_LEGS};
+use crate::api::{Leg, RobotState, NUM_JOINTS, NUM_LEGS};
+use crate::config::ControllerConfig;
 use crate::estimate::{leg_slice, Estimate};
 use crate::gait::SwingSample;
 use crate::model::RobotModel;

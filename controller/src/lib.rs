@@ -44,5 +44,6 @@ mod mpc_schedule;
 mod validation;
 
 pub use api::*;
+pub use config::ControllerConfig;
 pub use controller::Controller;
 pub use model::RobotModel;

@@ -5,10 +5,9 @@
 //! declares them as the parameters' `min`/`max` in `modelDescription.xml` and refuses values
 //! outside them.
 //!
-//! [`Controller::new`](crate::Controller::new) enforces the hard part of them (positivity where a
-//! zero would divide, finiteness, `MPC_HORIZON`, `f_min < f_max`, a reachable standing pose); the
-//! upper bounds beyond that keep the cost of a tick and the physics sensible (a tick of 1e-12 s,
-//! gains of 1e300) and are enforced by the importer-facing boundary (the FMU).
+//! [`Controller::new`](crate::Controller::new) enforces all of them (and `f_min < f_max`, a
+//! reachable standing pose): the upper bounds keep the cost of a tick and the physics sensible
+//! (a tick of 1e-12 s, gains of 1e300), whoever builds the controller.
 
 use std::f64::consts::PI;
 use std::ops::RangeInclusive;

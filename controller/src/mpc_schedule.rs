@@ -5,7 +5,8 @@
 
 use nalgebra::Vector3;
 
-use crate::api::{ControllerConfig, ControllerError, Leg, Reference, GRAVITY, NUM_LEGS};
+use crate::api::{ControllerError, Leg, Reference, GRAVITY, NUM_LEGS};
+use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::{FootholdPlanner, MotionTarget, StanceGround};
 use crate::math::{rot_z, wrap_angle};

@@ -1,7 +1,8 @@
 //! Input checks run before a tick touches any controller state: the configuration (once, in
 //! `Controller::new`), the measured state and the reference (every tick).
 
-use crate::api::{ControllerConfig, ControllerError, Reference, RobotState};
+use crate::api::{ControllerError, Reference, RobotState};
+use crate::config::ControllerConfig;
 
 /// Accepted norms of the state quaternion (it is normalised; a norm outside this range means a
 /// corrupted input, not rounding).
@@ -18,60 +19,17 @@ fn check_finite(values: &[f64], what: &str) -> Result<(), String> {
     }
 }
 
-/// Checks that every field of the configuration is usable.
+/// Checks the configuration against its declared operating envelope (every field's range in
+/// [`crate::config`]) and the one relation between fields that a range cannot state.
 pub fn validate_config(config: &ControllerConfig) -> Result<(), ControllerError> {
-    let err = |m: String| Err(ControllerError::Config(m));
-    let positive = [
-        ("control_dt", config.control_dt),
-        ("mpc_dt", config.mpc_dt),
-        ("gait_period", config.gait_period),
-        ("mu", config.mu),
-        ("f_max", config.f_max),
-        ("body_height", config.body_height),
-        ("mpc_r", config.mpc_r),
-        ("stand_up_duration", config.stand_up_duration),
-        ("max_tilt", config.max_tilt),
-    ];
-    for (name, value) in positive {
-        if !(value.is_finite() && value > 0.0) {
-            return err(format!("{name} = {value} must be finite and > 0"));
-        }
-    }
-    let non_negative = [
-        ("swing_height", config.swing_height),
-        ("f_min", config.f_min),
-        ("raibert_gain", config.raibert_gain),
-        ("joint_limit_margin", config.joint_limit_margin),
-        ("damping_kd", config.damping_kd),
-        ("max_terrain_pitch", config.max_terrain_pitch),
-    ];
-    for (name, value) in non_negative {
-        if !(value.is_finite() && value >= 0.0) {
-            return err(format!("{name} = {value} must be finite and ≥ 0"));
-        }
-    }
-    let gains = config
-        .mpc_q
-        .iter()
-        .chain(&config.kp_swing)
-        .chain(&config.kd_swing)
-        .chain(&config.kp_stand)
-        .chain(&config.kd_stand);
-    if gains.clone().any(|g| !(g.is_finite() && *g >= 0.0)) {
-        return err("weights and gains must be finite and ≥ 0".into());
-    }
-    if config.mpc_every_ticks == 0 {
-        return err("mpc_every_ticks must be ≥ 1".into());
-    }
-    if !crate::limits::MPC_HORIZON.contains(&config.mpc_horizon) {
-        return err(format!(
-            "mpc_horizon = {} outside {:?}",
-            config.mpc_horizon,
-            crate::limits::MPC_HORIZON
-        ));
-    }
+    config
+        .check_ranges()
+        .map_err(|e| ControllerError::Config(e.to_string()))?;
     if config.f_min >= config.f_max {
-        return err("f_min must be < f_max".into());
+        return Err(ControllerError::Config(format!(
+            "f_min must be < f_max (f_min = {}, f_max = {})",
+            config.f_min, config.f_max
+        )));
     }
     Ok(())
 }

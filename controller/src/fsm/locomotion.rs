@@ -5,7 +5,8 @@
 use nalgebra::Vector3;
 
 use super::{Actuation, Stages};
-use crate::api::{ControllerConfig, FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::{FootholdPlanner, MotionTarget};
 use crate::gait::{swing_trajectory, Gait, LegPhase};

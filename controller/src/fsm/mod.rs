@@ -10,7 +10,8 @@ mod passive;
 mod stand;
 mod stand_up;
 
-use crate::api::{ControllerConfig, FsmState, Leg, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::api::{FsmState, Leg, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::FootholdPlanner;
 use crate::gait::Gait;

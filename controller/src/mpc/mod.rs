@@ -77,7 +77,8 @@ use std::collections::HashMap;
 use clarabel::solver::{DefaultSettings, DefaultSolver};
 use nalgebra::{Matrix3, Vector3};
 
-use crate::api::{ControllerConfig, NUM_LEGS};
+use crate::api::NUM_LEGS;
+use crate::config::ControllerConfig;
 pub use model::terrain_tangents;
 use model::StageModel;
 
