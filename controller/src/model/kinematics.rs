@@ -1,0 +1,142 @@
+//! Forward kinematics, the foot Jacobian and inverse kinematics of one leg chain. Kept apart from
+//! the URDF parsing so the per-tick hot paths (IK is called every control tick) read on their own.
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
+use super::{to_array3, to_array33, LegFrames, RobotModel, Transform};
+use crate::api::{Leg, ModelError};
+use crate::math::wrap_angle;
+
+/// Why an IK target was not reached (turned into [`ModelError::Unreachable`] on demand).
+#[derive(Clone, Copy, Debug)]
+enum IkFailure {
+    NotFinite,
+    InsideOffset,
+    OutOfReach { reach: f64, min: f64, max: f64 },
+    NotConverged { residual: f64 },
+}
+
+fn axis_rotation(axis: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
+    *Rotation3::from_axis_angle(&nalgebra::Unit::new_unchecked(*axis), angle).matrix()
+}
+
+impl RobotModel {
+    pub(super) fn frames(&self, leg: Leg, q: [f64; 3]) -> LegFrames {
+        let chain = &self.legs[leg.index()];
+        let mut current = Transform::identity();
+        let mut joint_origin = [Vector3::zeros(); 3];
+        let mut joint_axis = [Vector3::zeros(); 3];
+        let mut link_rotation = [Matrix3::identity(); 3];
+        for (i, joint) in chain.joints.iter().enumerate() {
+            current = current.then(&joint.pre);
+            joint_origin[i] = current.translation;
+            joint_axis[i] = current.rotation * joint.axis;
+            current.rotation *= axis_rotation(&joint.axis, q[i]);
+            link_rotation[i] = current.rotation;
+        }
+        let foot = current.then(&chain.foot).translation;
+        LegFrames {
+            joint_origin,
+            joint_axis,
+            link_rotation,
+            foot,
+        }
+    }
+
+    /// Forward kinematics: foot (sphere centre) position in the base frame, m.
+    pub fn foot_position_body(&self, leg: Leg, q_leg: [f64; 3]) -> [f64; 3] {
+        to_array3(&self.frames(leg, q_leg).foot)
+    }
+
+    /// Foot Jacobian ∂p_foot/∂q in the base frame (row = Cartesian axis, column = joint).
+    pub fn foot_jacobian_body(&self, leg: Leg, q_leg: [f64; 3]) -> [[f64; 3]; 3] {
+        to_array33(&self.jacobian(leg, q_leg))
+    }
+
+    fn jacobian(&self, leg: Leg, q: [f64; 3]) -> Matrix3<f64> {
+        let frames = self.frames(leg, q);
+        let mut jac = Matrix3::zeros();
+        for i in 0..3 {
+            let column = frames.joint_axis[i].cross(&(frames.foot - frames.joint_origin[i]));
+            jac.set_column(i, &column);
+        }
+        jac
+    }
+
+    /// Inverse kinematics: joint angles placing the foot at `p_body` (base frame), knee-backward
+    /// branch (knee angle < 0), foot below the hip axis in the leg plane. Closed-form for the nominal layout, refined by Newton steps on
+    /// the full URDF kinematics. Joint limits are not enforced here (callers clamp).
+    pub fn inverse_kinematics(&self, leg: Leg, p_body: [f64; 3]) -> Result<[f64; 3], ModelError> {
+        self.solve_ik(leg, p_body)
+            .map_err(|failure| ModelError::Unreachable {
+                leg,
+                reason: match failure {
+                    IkFailure::NotFinite => "target is not finite".into(),
+                    IkFailure::InsideOffset => "target inside the abduction offset".into(),
+                    IkFailure::OutOfReach { reach, min, max } => {
+                        format!("distance {reach:.4} m outside [{min:.4}, {max:.4}] m")
+                    }
+                    IkFailure::NotConverged { residual } => {
+                        format!("IK did not converge (residual {residual:.2e} m)")
+                    }
+                },
+            })
+    }
+
+    /// [`RobotModel::inverse_kinematics`] without building an error message: for callers that
+    /// retry or fall back on failure every control tick (formatting the message's floats cost
+    /// more than the IK itself).
+    pub(crate) fn try_inverse_kinematics(&self, leg: Leg, p_body: [f64; 3]) -> Option<[f64; 3]> {
+        self.solve_ik(leg, p_body).ok()
+    }
+
+    fn solve_ik(&self, leg: Leg, p_body: [f64; 3]) -> Result<[f64; 3], IkFailure> {
+        if p_body.iter().any(|v| !v.is_finite()) {
+            return Err(IkFailure::NotFinite);
+        }
+        let g = &self.legs[leg.index()].geometry;
+        let rel = Vector3::new(p_body[0], p_body[1], p_body[2]) - g.abd_origin;
+        let d = g.lateral_offset;
+        let (l1, l2) = (g.thigh_length, g.calf_length);
+        let yz_sq = rel.y * rel.y + rel.z * rel.z;
+        if yz_sq < d * d + 1e-12 {
+            return Err(IkFailure::InsideOffset);
+        }
+        let z_plane = -(yz_sq - d * d).sqrt();
+        let q0 = rel.z.atan2(rel.y) - z_plane.atan2(d);
+        let x_plane = rel.x;
+        let reach_sq = x_plane * x_plane + z_plane * z_plane;
+        let reach = reach_sq.sqrt();
+        if reach > l1 + l2 - 1e-9 || reach < (l1 - l2).abs() + 1e-9 {
+            return Err(IkFailure::OutOfReach {
+                reach,
+                min: (l1 - l2).abs(),
+                max: l1 + l2,
+            });
+        }
+        let cos_knee = ((reach_sq - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)).clamp(-1.0, 1.0);
+        let q2 = -cos_knee.acos();
+        let direction = (-x_plane).atan2(-z_plane);
+        let q1 = direction - (l2 * q2.sin()).atan2(l1 + l2 * q2.cos());
+        let mut q = [wrap_angle(q0), wrap_angle(q1), q2];
+        let target = Vector3::new(p_body[0], p_body[1], p_body[2]);
+        for _ in 0..20 {
+            let error = target - self.frames(leg, q).foot;
+            if error.norm() < 1e-12 {
+                break;
+            }
+            let Some(inverse) = self.jacobian(leg, q).try_inverse() else {
+                break;
+            };
+            let dq = inverse * error;
+            for i in 0..3 {
+                q[i] += dq[i];
+            }
+        }
+        let residual = (target - self.frames(leg, q).foot).norm();
+        if residual > 1e-6 {
+            return Err(IkFailure::NotConverged { residual });
+        }
+        Ok(q)
+    }
+}
