@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from pfnav_harness.errors import MissingArtifactError
+from pfnav_harness.fmu_runner import FmuContract
 from pfnav_harness.metrics import (
     CostModelError,
     FallThresholds,
@@ -84,7 +85,7 @@ def test_goal_time_and_heading_error(ramp_scenario: Scenario) -> None:
     assert m.rms_heading_error_deg == pytest.approx(10.0, abs=1e-9)
 
 
-def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario) -> None:
+def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario, fmu_contract: FmuContract) -> None:
     field = TraversabilityField(ramp_scenario.terrain, ramp_scenario.traversability)
     low = straight_log(ramp_scenario, 0.0, height=0.05)
     m = compute_metrics(low, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf", FallThresholds(min_base_height=0.12))
@@ -104,8 +105,10 @@ def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario) -> None:
 
     # The controller's damping state counts as a fall.
     damped = straight_log(ramp_scenario, 0.0)
-    damped["fsm"] = np.full(len(damped["t"]), 3)
-    damped["fsm"][1500:] = 4
+    fsm = fmu_contract.fsm
+    damped["fsm"] = np.full(len(damped["t"]), fsm.Locomotion)
+    damped["fsm"][1500:] = fsm.Damping
+    damped["fsm_damping"] = np.array(int(fsm.Damping))
     m = compute_metrics(damped, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf")
     assert m.fell and m.fall_time == pytest.approx(1.5) and "damping" in m.fall_reason
 

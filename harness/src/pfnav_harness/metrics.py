@@ -27,7 +27,6 @@ from .errors import MissingArtifactError, PlannerError
 from .scenario import GoalRegion, Terrain, write_map
 
 FloatArray = NDArray[np.float64]
-FSM_DAMPING = 4
 
 
 @dataclass(frozen=True)
@@ -234,8 +233,9 @@ def compute_metrics(
     # body anywhere near the thresholds.
     too_rolled = np.abs(roll) > thresholds.max_roll
     too_pitched = np.abs(pitch) > thresholds.max_pitch
-    # The controller's damping state (FSM code 4) is its own verdict that the robot is down.
-    damping = (log["fsm"] == FSM_DAMPING) if "fsm" in log else np.zeros_like(too_low)
+    # The controller's damping state is its own verdict that the robot is down (the log carries
+    # the FMU's code of that state, read from its modelDescription).
+    damping = (log["fsm"] == log["fsm_damping"]) if "fsm" in log else np.zeros_like(too_low)
     # Before the controller has stood up the base is legitimately low: only judge after walk start.
     fallen = (too_low | too_rolled | too_pitched | damping) & walking
     fell = bool(np.any(fallen))
