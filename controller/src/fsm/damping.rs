@@ -1,10 +1,8 @@
 //! Damping: the safe state after a fault, joint damping only. Left only through an explicit
 //! request for passive (a fault is not cleared by asking to walk again).
 
-use super::{measured_feet, Actuation, Stages};
+use super::{measured_feet, Actuation, Stages, Tick};
 use crate::api::{FsmState, ModeRequest, NUM_LEGS};
-use crate::estimate::Estimate;
-use crate::model::RobotModel;
 
 pub struct Damping;
 
@@ -13,7 +11,10 @@ impl Damping {
         stages.mpc.clear_forces();
     }
 
-    pub fn run(&mut self, model: &RobotModel, stages: &Stages, estimate: &Estimate) -> Actuation {
+    pub fn run(&mut self, stages: &Stages, tick: &Tick) -> Actuation {
+        let Tick {
+            model, estimate, ..
+        } = *tick;
         Actuation {
             torques: stages.legs.damping_torques(model, estimate),
             contacts: [false; NUM_LEGS],

@@ -4,13 +4,12 @@
 
 use nalgebra::Vector3;
 
-use super::{Actuation, Stages};
+use super::{balancing_transition, Actuation, Stages, Tick};
 use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::{FootholdPlanner, MotionTarget};
 use crate::gait::{swing_trajectory, Gait, LegPhase};
-use crate::model::RobotModel;
 
 pub struct Locomotion {
     gait: Gait,
@@ -48,14 +47,14 @@ impl Locomotion {
         self.footholds = estimate.feet_world;
     }
 
-    pub fn run(
-        &mut self,
-        model: &RobotModel,
-        stages: &mut Stages,
-        estimate: &Estimate,
-        reference: &Reference,
-        dt: f64,
-    ) -> Actuation {
+    pub fn run(&mut self, stages: &mut Stages, tick: &Tick) -> Actuation {
+        let Tick {
+            model,
+            estimate,
+            reference,
+            dt,
+            ..
+        } = *tick;
         let t = self.gait_time;
         let contacts = self.gait.contacts(t);
         self.track_contact_edges(estimate, contacts);
@@ -133,15 +132,7 @@ impl Locomotion {
         fault: impl Fn() -> Option<String>,
         mode: ModeRequest,
     ) -> Option<FsmState> {
-        if let Some(reason) = fault() {
-            tracing::warn!(%reason, "fault during locomotion: damping");
-            return Some(FsmState::Damping);
-        }
-        match mode {
-            ModeRequest::Passive => Some(FsmState::Passive),
-            ModeRequest::Stand => Some(FsmState::Stand),
-            ModeRequest::Locomotion => None,
-        }
+        balancing_transition(fault, mode, FsmState::Locomotion)
     }
 
     /// Records where each swing starts (lift-off) and each stance is anchored (touchdown).

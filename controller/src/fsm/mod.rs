@@ -10,7 +10,7 @@ mod passive;
 mod stand;
 mod stand_up;
 
-use crate::api::{FsmState, Leg, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::FootholdPlanner;
@@ -45,6 +45,56 @@ pub struct Actuation {
     pub forces: [[f64; 3]; NUM_LEGS],
     /// Desired foot positions, world frame, m.
     pub feet: [[f64; 3]; NUM_LEGS],
+}
+
+impl Actuation {
+    /// Every foot in stance where it is, carrying `forces`.
+    fn all_stance(
+        torques: [f64; NUM_JOINTS],
+        forces: [[f64; 3]; NUM_LEGS],
+        estimate: &Estimate,
+    ) -> Self {
+        Actuation {
+            torques,
+            contacts: [true; NUM_LEGS],
+            forces,
+            feet: measured_feet(estimate),
+        }
+    }
+}
+
+/// What a state's run step reads this tick.
+#[derive(Clone, Copy)]
+pub struct Tick<'a> {
+    /// The robot.
+    pub model: &'a RobotModel,
+    /// State estimate of this tick.
+    pub estimate: &'a Estimate,
+    /// The master's reference.
+    pub reference: &'a Reference,
+    /// Tick length, s.
+    pub dt: f64,
+    /// Time since the current state was entered, s.
+    pub state_time: f64,
+}
+
+/// The exit of a balancing state: damping on a fault (logged with its reason), else the state
+/// the mode asks for when that is not `current`.
+fn balancing_transition(
+    fault: impl Fn() -> Option<String>,
+    mode: ModeRequest,
+    current: FsmState,
+) -> Option<FsmState> {
+    if let Some(reason) = fault() {
+        tracing::warn!(%reason, state = ?current, "fault: entering damping");
+        return Some(FsmState::Damping);
+    }
+    let requested = match mode {
+        ModeRequest::Passive => FsmState::Passive,
+        ModeRequest::Stand => FsmState::Stand,
+        ModeRequest::Locomotion => FsmState::Locomotion,
+    };
+    (requested != current).then_some(requested)
 }
 
 /// Tilt and joint-limit fault detection shared by the balancing states.
@@ -154,12 +204,19 @@ impl Fsm {
         reference: &Reference,
         dt: f64,
     ) -> Actuation {
+        let tick = Tick {
+            model,
+            estimate,
+            reference,
+            dt,
+            state_time: self.state_time,
+        };
         let actuation = match self.current {
             FsmState::Passive => self.passive.run(),
-            FsmState::StandUp => self.stand_up.run(model, stages, estimate, self.state_time),
-            FsmState::Stand => self.stand.run(model, stages, estimate, reference),
-            FsmState::Locomotion => self.locomotion.run(model, stages, estimate, reference, dt),
-            FsmState::Damping => self.damping.run(model, stages, estimate),
+            FsmState::StandUp => self.stand_up.run(stages, &tick),
+            FsmState::Stand => self.stand.run(stages, &tick),
+            FsmState::Locomotion => self.locomotion.run(stages, &tick),
+            FsmState::Damping => self.damping.run(stages, &tick),
         };
         self.state_time += dt;
         actuation

@@ -1,10 +1,9 @@
 //! Stand: four-leg balance with the MPC, holding the base where it was on entry.
 
-use super::{measured_feet, Actuation, Stages};
-use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
+use super::{balancing_transition, Actuation, Stages, Tick};
+use crate::api::{FsmState, Leg, ModeRequest, NUM_JOINTS, NUM_LEGS};
 use crate::estimate::Estimate;
 use crate::footholds::MotionTarget;
-use crate::model::RobotModel;
 
 pub struct Stand {
     /// Base pose held, taken on entry.
@@ -32,13 +31,13 @@ impl Stand {
         };
     }
 
-    pub fn run(
-        &mut self,
-        model: &RobotModel,
-        stages: &mut Stages,
-        estimate: &Estimate,
-        reference: &Reference,
-    ) -> Actuation {
+    pub fn run(&mut self, stages: &mut Stages, tick: &Tick) -> Actuation {
+        let Tick {
+            model,
+            estimate,
+            reference,
+            ..
+        } = *tick;
         let contacts = [true; NUM_LEGS];
         stages.mpc.set_schedule(|_| contacts);
         stages.mpc.update_forces(
@@ -56,12 +55,7 @@ impl Stand {
                 .legs
                 .stance_torques(model, estimate, leg, forces[leg.index()], &mut torques);
         }
-        Actuation {
-            torques,
-            contacts,
-            forces,
-            feet: measured_feet(estimate),
-        }
+        Actuation::all_stance(torques, forces, estimate)
     }
 
     pub fn check_transition(
@@ -69,14 +63,6 @@ impl Stand {
         fault: impl Fn() -> Option<String>,
         mode: ModeRequest,
     ) -> Option<FsmState> {
-        if let Some(reason) = fault() {
-            tracing::warn!(%reason, "fault while standing: damping");
-            return Some(FsmState::Damping);
-        }
-        match mode {
-            ModeRequest::Passive => Some(FsmState::Passive),
-            ModeRequest::Stand => None,
-            ModeRequest::Locomotion => Some(FsmState::Locomotion),
-        }
+        balancing_transition(fault, mode, FsmState::Stand)
     }
 }

@@ -1,10 +1,9 @@
 //! Stand-up: joint-space interpolation from the pose at entry to the standing pose over
 //! `stand_up_duration`, with a feed-forward of a growing share of the weight on each foot.
 
-use super::{measured_feet, Actuation, Stages};
+use super::{balancing_transition, Actuation, Stages, Tick};
 use crate::api::{FsmState, ModeRequest, GRAVITY, NUM_JOINTS, NUM_LEGS};
 use crate::estimate::Estimate;
-use crate::model::RobotModel;
 
 /// 3s² − 2s³ on s clamped to [0, 1]: starts and ends the interpolation at zero joint velocity.
 fn smoothstep(s: f64) -> f64 {
@@ -32,25 +31,20 @@ impl StandUp {
         }
     }
 
-    pub fn run(
-        &mut self,
-        model: &RobotModel,
-        stages: &Stages,
-        estimate: &Estimate,
-        state_time: f64,
-    ) -> Actuation {
+    pub fn run(&mut self, stages: &Stages, tick: &Tick) -> Actuation {
+        let Tick {
+            model,
+            estimate,
+            state_time,
+            ..
+        } = *tick;
         let s = smoothstep(state_time / self.duration);
         let weight_share = model.total_mass() * GRAVITY / NUM_LEGS as f64 * s;
         let (torques, forces) =
             stages
                 .legs
                 .stand_up_torques(model, estimate, &self.start, s, weight_share);
-        Actuation {
-            torques,
-            contacts: [true; NUM_LEGS],
-            forces,
-            feet: measured_feet(estimate),
-        }
+        Actuation::all_stance(torques, forces, estimate)
     }
 
     pub fn check_transition(
@@ -59,15 +53,11 @@ impl StandUp {
         mode: ModeRequest,
         state_time: f64,
     ) -> Option<FsmState> {
-        if let Some(reason) = fault() {
-            tracing::warn!(%reason, "fault during stand-up: damping");
-            Some(FsmState::Damping)
-        } else if mode == ModeRequest::Passive {
-            Some(FsmState::Passive)
-        } else if state_time >= self.duration {
-            Some(FsmState::Stand)
-        } else {
-            None
+        // Stand-up runs to its end whatever balancing mode is asked for; only passive or a
+        // fault cuts it short.
+        match balancing_transition(fault, mode, FsmState::StandUp) {
+            Some(next @ (FsmState::Damping | FsmState::Passive)) => Some(next),
+            _ => (state_time >= self.duration).then_some(FsmState::Stand),
         }
     }
 }
