@@ -24,10 +24,11 @@ if _generated.is_dir() and str(_generated) not in sys.path:
     sys.path.insert(0, str(_generated))
 
 from pfnav_harness import paths
+from pfnav_harness import scenario as harness_scenario
 from pfnav_harness.cli import in_private_network_namespace
 from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.fmu_runner import FmuContract, read_contract
-from pfnav_harness.pipeline import PAPER_SCENARIOS, export_scenario
+from pfnav_harness.pipeline import export_scenario
 from pfnav_harness.planner_client import Plan, PlannerClient
 from pfnav_harness.scenario import Scenario
 
@@ -105,7 +106,7 @@ def paper_scenarios(
     """The paper's three scenarios as exported by `pf-plan scenario export`."""
     folder = tmp_path_factory.mktemp("scenarios")
     return {
-        name: export_scenario(pf_plan_bin, name, folder) for name in PAPER_SCENARIOS
+        name: export_scenario(pf_plan_bin, name, folder) for name in harness_scenario.paper_scenario_names()
     }
 
 

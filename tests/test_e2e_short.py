@@ -15,15 +15,15 @@ import numpy as np
 import pytest
 from pfnav_harness.cosim import CoSimConfig
 from pfnav_harness.fmu_runner import read_contract
-from pfnav_harness.pipeline import PAPER_SCENARIOS, simulate
+from pfnav_harness.pipeline import simulate
 from pfnav_harness.planner_client import Plan
-from pfnav_harness.scenario import Scenario
+from pfnav_harness.scenario import Scenario, paper_scenario_names
 
 SHORT_SECONDS = 6.0
 STAND_SECONDS = 1.5
 
 
-@pytest.mark.parametrize(("name", "comm_step"), [*((n, 0.001) for n in PAPER_SCENARIOS), ("mountain_pass", 0.005)])
+@pytest.mark.parametrize(("name", "comm_step"), [*((n, 0.001) for n in paper_scenario_names()), ("mountain_pass", 0.005)])
 def test_short_pf_run(
     name: str,
     comm_step: float,

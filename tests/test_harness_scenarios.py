@@ -8,9 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pfnav_harness import cli
-from pfnav_harness.pipeline import PAPER_SCENARIOS
-from pfnav_harness.scenario import Scenario, planner_scenario_names
+from pfnav_harness.scenario import (
+    Scenario,
+    paper_scenario_names,
+    planner_scenario_names,
+)
 from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld
 
 
@@ -20,8 +22,7 @@ def test_the_paper_scenarios_are_the_planners(
     # The scenarios are defined once, in the planner: the harness's names are its list, and what
     # the harness loads is the planner's export (seed, start, goal, map size), field for field.
     names = planner_scenario_names(pf_plan_bin)
-    assert PAPER_SCENARIOS == names
-    assert cli.PAPER_SCENARIOS == names
+    assert paper_scenario_names() == names
     listed = json.loads(
         subprocess.run(
             [str(pf_plan_bin), "scenario", "list", "--json"],
@@ -50,7 +51,7 @@ def test_the_paper_scenarios_are_the_planners(
         assert scenario.traversability == entry["traversability"]
 
 
-@pytest.mark.parametrize("name", PAPER_SCENARIOS)
+@pytest.mark.parametrize("name", paper_scenario_names())
 def test_exported_scenario_is_a_standable_world(
     name: str, paper_scenarios: dict[str, Scenario], urdf_file: Path, tmp_path: Path
 ) -> None:

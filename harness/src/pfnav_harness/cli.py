@@ -15,15 +15,13 @@ from typing import TYPE_CHECKING
 from . import paths
 from .errors import HarnessError
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, Plan, PlannerClient
+from .scenario import paper_scenario_names
 
 if TYPE_CHECKING:
     from .cosim import CoSimConfig
     from .report import RunRecord
     from .scenario import Scenario
 
-# Kept in sync with pipeline.PAPER_SCENARIOS (not imported here: DART and matplotlib load slowly
-# and argument errors should answer at once).
-PAPER_SCENARIOS = ("mountain_pass", "pits", "c_shape")
 
 SHORT_DURATION = 8.0
 
@@ -81,11 +79,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="one scenario, one method")
-    run.add_argument("--scenario", required=True, help=f"scenario name ({', '.join(PAPER_SCENARIOS)})")
+    run.add_argument("--scenario", required=True, help="scenario name (`pf-plan scenario list` lists the paper's)")
     run.add_argument("--method", default="pf", choices=METHODS, help="planning method (default pf)")
     _add_common(run)
     demo = sub.add_parser("demo", help="all scenarios × {P-F, A*}; writes OUT/report.md with PNGs")
-    demo.add_argument("--scenario", action="append", default=None, help="only this scenario (repeatable; default: all three)")
+    demo.add_argument("--scenario", action="append", default=None, help="only this scenario (repeatable; default: every scenario of `pf-plan scenario list`)")
     demo.add_argument("--methods", default="pf,astar", help="comma-separated methods (default pf,astar)")
     _add_common(demo)
     return parser
@@ -148,11 +146,11 @@ def execute(args: argparse.Namespace) -> int:
         names = [args.scenario]
         methods = [args.method]
     else:
-        names = args.scenario or list(PAPER_SCENARIOS)
         methods = [m.strip() for m in args.methods.split(",") if m.strip()]
         unknown = [m for m in methods if m not in METHODS]
         if unknown or not methods:
             raise HarnessError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(METHODS)}")
+        names = args.scenario or list(paper_scenario_names())
     if args.duration is not None and not args.duration > 0:
         raise HarnessError(f"--duration must be positive, got {args.duration}")
     # Fail on missing build products before any planning work.

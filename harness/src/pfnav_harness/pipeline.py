@@ -17,8 +17,6 @@ from .report import RunRecord
 from .scenario import Scenario, load_scenario
 from .state_log import write_state_log
 
-PAPER_SCENARIOS = ("mountain_pass", "pits", "c_shape")
-
 
 def export_scenario(pf_plan: Path, name: str, out_dir: Path, timeout: float = 120.0, seed: int | None = None) -> Scenario:
     """Runs `pf-plan scenario export NAME --out DIR [--seed SEED]` and loads the result (seed None: the scenario's own)."""

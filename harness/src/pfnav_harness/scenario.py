@@ -11,6 +11,7 @@ FMU's terrain inputs use are the heights the robot's feet touch.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import subprocess
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from . import paths
 from .errors import MissingArtifactError, ScenarioError
 
 FloatArray = NDArray[np.float64]
@@ -313,3 +315,9 @@ def planner_scenario_names(pf_plan: Path, timeout: float = 60.0) -> tuple[str, .
         detail = (proc.stderr or "").strip().splitlines()
         raise ScenarioError(f"`pf-plan scenario list` failed: {detail[-1] if detail else f'exit code {proc.returncode}'}")
     return names
+
+
+@functools.cache
+def paper_scenario_names() -> tuple[str, ...]:
+    """The paper's scenarios: the planner's built-in list, declared once in the planner."""
+    return planner_scenario_names(paths.pf_plan_path())
