@@ -19,6 +19,7 @@ from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from pfnav_harness.fmu_runner import FSM_TYPE, enumeration
 
 REPO = Path(__file__).resolve().parents[1]
 DT = 0.001
@@ -74,7 +75,7 @@ def main() -> None:
         if (k + 1) % report_every == 0:
             print(f"{k + 1},{rss_kib()},{time.perf_counter() - start:.1f}", flush=True)
     (fsm,) = slave.getInteger([refs["fsm.state"]])
-    print(f"fsm.state at the end: {fsm} (2 = stand)")
+    print(f"fsm.state at the end: {enumeration(md, FSM_TYPE)(fsm).name}")
     after_steps = rss_kib()
     elapsed = time.perf_counter() - start
     slave.terminate()
