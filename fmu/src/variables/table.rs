@@ -1,0 +1,355 @@
+//! How the table is built: the declaration order here *is* the value-reference order, so
+//! appending keeps existing references stable while reordering changes the FMU's interface
+//! (and needs a new GUID).
+
+use quad_controller::config::FieldKind;
+use quad_controller::{
+    ControllerConfig, HeightMap, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
+};
+
+use super::{
+    enum_type, initial_command, initial_inputs, read_parameter, Binding, Causality, Unit, Value,
+    Variability, Variable, FSM_STATE_TYPE, GAIT_KIND_TYPE, MODE_REQUEST_TYPE,
+};
+
+struct TableBuilder {
+    rows: Vec<Variable>,
+}
+
+impl TableBuilder {
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &mut self,
+        name: String,
+        causality: Causality,
+        variability: Variability,
+        start: Value,
+        description: String,
+        unit: Option<Unit>,
+        range: (Option<f64>, Option<f64>),
+        binding: Binding,
+    ) {
+        let value_reference = u32::try_from(self.rows.len())
+            .expect("the variable table has far fewer than 2^32 rows");
+        self.rows.push(Variable {
+            name,
+            value_reference,
+            causality,
+            variability,
+            start,
+            description,
+            unit,
+            declared_type: None,
+            min: range.0,
+            max: range.1,
+            binding,
+        });
+    }
+
+    /// Gives the row pushed last the enumeration type `type_name`.
+    fn of_type(&mut self, type_name: &'static str) {
+        debug_assert!(enum_type(type_name).is_some(), "{type_name}");
+        if let Some(row) = self.rows.last_mut() {
+            row.declared_type = Some(type_name);
+        }
+    }
+
+    fn input(
+        &mut self,
+        name: String,
+        start: f64,
+        description: String,
+        unit: Option<Unit>,
+        binding: Binding,
+    ) {
+        self.push(
+            name,
+            Causality::Input,
+            Variability::Continuous,
+            Value::Real(start),
+            description,
+            unit,
+            (None, None),
+            binding,
+        );
+    }
+
+    fn output(
+        &mut self,
+        name: String,
+        start: Value,
+        description: String,
+        unit: Option<Unit>,
+        binding: Binding,
+    ) {
+        let variability = match start {
+            Value::Real(_) => Variability::Continuous,
+            _ => Variability::Discrete,
+        };
+        self.push(
+            name,
+            Causality::Output,
+            variability,
+            start,
+            description,
+            unit,
+            (None, None),
+            binding,
+        );
+    }
+
+    /// One parameter per element of every field of [`ControllerConfig::FIELDS`], in order.
+    fn parameters(&mut self) {
+        let config = ControllerConfig::default();
+        for (field, f) in ControllerConfig::FIELDS.iter().enumerate() {
+            let (min, max) = f.range();
+            let unit = f.unit.map(|name| {
+                Unit::ALL
+                    .into_iter()
+                    .find(|u| u.name() == name)
+                    .unwrap_or_else(|| panic!("unit {name} of {} is not declared", f.name))
+            });
+            for element in 0..f.len {
+                self.push(
+                    f.fmi_element_name(element),
+                    Causality::Parameter,
+                    Variability::Fixed,
+                    read_parameter(field, element, &config),
+                    f.element_description(element),
+                    unit,
+                    (Some(min), Some(max)),
+                    Binding::Parameter { field, element },
+                );
+                if f.kind == FieldKind::Gait {
+                    self.of_type(GAIT_KIND_TYPE);
+                }
+            }
+        }
+    }
+}
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+const QUATERNION: [&str; 4] = ["w", "x", "y", "z"];
+const LEG_NAMES: [&str; NUM_LEGS] = ["FR", "FL", "RR", "RL"];
+const JOINT_NAMES: [&str; 3] = ["hip abduction", "hip flexion", "knee"];
+
+fn joint_label(index: usize) -> String {
+    format!("{} {}", LEG_NAMES[index / 3], JOINT_NAMES[index % 3])
+}
+
+pub(super) fn build_table() -> Vec<Variable> {
+    use Unit::*;
+    let mut t = TableBuilder { rows: Vec::new() };
+    let (state, reference) = initial_inputs();
+    let command = initial_command();
+
+    // Inputs: measured state.
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("base.pos.{axis}"),
+            state.base_position[i],
+            format!("Base origin {axis}, world frame"),
+            Some(Metre),
+            Binding::BasePosition(i),
+        );
+    }
+    for (i, c) in QUATERNION.iter().enumerate() {
+        t.input(
+            format!("base.quat.{c}"),
+            state.base_orientation[i],
+            format!("Base orientation quaternion component {c} (rotates body to world; normalised by the controller)"),
+            None,
+            Binding::BaseOrientation(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("base.vel.{axis}"),
+            state.base_linear_velocity[i],
+            format!("Base linear velocity {axis}, world frame"),
+            Some(MetrePerSecond),
+            Binding::BaseLinearVelocity(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("base.omega.{axis}"),
+            state.base_angular_velocity[i],
+            format!("Base angular velocity {axis}, world frame"),
+            Some(RadianPerSecond),
+            Binding::BaseAngularVelocity(i),
+        );
+    }
+    for i in 0..NUM_JOINTS {
+        t.input(
+            format!("joint.q[{}]", i + 1),
+            state.joint_positions[i],
+            format!("Joint position, {}", joint_label(i)),
+            Some(Radian),
+            Binding::JointPosition(i),
+        );
+    }
+    for i in 0..NUM_JOINTS {
+        t.input(
+            format!("joint.dq[{}]", i + 1),
+            state.joint_velocities[i],
+            format!("Joint velocity, {}", joint_label(i)),
+            Some(RadianPerSecond),
+            Binding::JointVelocity(i),
+        );
+    }
+
+    // Inputs: reference from the planner.
+    let reference_inputs: [(&str, f64, &str, Option<Unit>, Binding); 10] = [
+        ("ref.x", reference.x, "Reference base x, world frame", Some(Metre), Binding::RefX),
+        ("ref.y", reference.y, "Reference base y, world frame", Some(Metre), Binding::RefY),
+        (
+            "ref.z",
+            reference.terrain.height,
+            "Terrain height at (ref.x, ref.y), world z: the plan sample's z and the height of the local terrain plane",
+            Some(Metre),
+            Binding::RefZ,
+        ),
+        ("ref.yaw", reference.yaw, "Reference yaw about +z, counter-clockwise from +x", Some(Radian), Binding::RefYaw),
+        ("ref.vx", reference.vx, "Reference velocity x, world frame", Some(MetrePerSecond), Binding::RefVx),
+        ("ref.vy", reference.vy, "Reference velocity y, world frame", Some(MetrePerSecond), Binding::RefVy),
+        ("ref.yawRate", reference.yaw_rate, "Reference yaw rate", Some(RadianPerSecond), Binding::RefYawRate),
+        (
+            "ref.bodyHeight",
+            reference.body_height,
+            "Desired base height above the terrain (<= 0 selects the parameter stand.bodyHeight)",
+            Some(Metre),
+            Binding::RefBodyHeight,
+        ),
+        (
+            "terrain.dzdx",
+            reference.terrain.slope_x,
+            "Terrain slope dz/dx of the local plane through (ref.x, ref.y, ref.z)",
+            None,
+            Binding::TerrainSlopeX,
+        ),
+        (
+            "terrain.dzdy",
+            reference.terrain.slope_y,
+            "Terrain slope dz/dy of the local plane through (ref.x, ref.y, ref.z)",
+            None,
+            Binding::TerrainSlopeY,
+        ),
+    ];
+    for (name, start, description, unit, binding) in reference_inputs {
+        t.input(
+            name.to_owned(),
+            start,
+            description.to_owned(),
+            unit,
+            binding,
+        );
+    }
+    // Inputs: local terrain height map (elevation map around the robot).
+    let map = HeightMap::default();
+    for (i, axis) in ["x0", "y0"].iter().enumerate() {
+        t.input(
+            format!("terrain.map.{axis}"),
+            map.origin[i],
+            format!("World {} of height-map sample (1, 1)", &axis[..1]),
+            Some(Metre),
+            Binding::HeightMapOrigin(i),
+        );
+    }
+    t.input(
+        "terrain.map.spacing".to_owned(),
+        map.spacing,
+        format!(
+            "Height-map sample spacing (<= 0: no map, the terrain plane is used alone); the map has {HEIGHT_MAP_SIZE}x{HEIGHT_MAP_SIZE} samples, triangulated like the terrain mesh"
+        ),
+        Some(Metre),
+        Binding::HeightMapSpacing,
+    );
+    for i in 0..HEIGHT_MAP_CELLS {
+        t.input(
+            format!("terrain.map.h[{}]", i + 1),
+            map.heights[i],
+            format!(
+                "Terrain height of height-map sample (ix={}, iy={}) at (x0 + ix*spacing, y0 + iy*spacing), row-major by iy",
+                i % HEIGHT_MAP_SIZE,
+                i / HEIGHT_MAP_SIZE
+            ),
+            Some(Metre),
+            Binding::HeightMapHeight(i),
+        );
+    }
+    let mode_range = enum_type(MODE_REQUEST_TYPE)
+        .map_or((None, None), |e| (Some(e.range().0), Some(e.range().1)));
+    t.push(
+        "cmd.mode".to_owned(),
+        Causality::Input,
+        Variability::Discrete,
+        Value::Integer(reference.mode.as_code()),
+        "Requested mode (the FSM stands up first and may enter damping on faults)".to_owned(),
+        None,
+        mode_range,
+        Binding::ModeRequest,
+    );
+    t.of_type(MODE_REQUEST_TYPE);
+
+    // Outputs.
+    for i in 0..NUM_JOINTS {
+        t.output(
+            format!("joint.tau[{}]", i + 1),
+            Value::Real(command.joint_torques[i]),
+            format!(
+                "Joint torque command, {} (clamped to the URDF effort limit)",
+                joint_label(i)
+            ),
+            Some(NewtonMetre),
+            Binding::JointTorque(i),
+        );
+    }
+    for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
+        t.output(
+            format!("contact[{}]", leg + 1),
+            Value::Boolean(command.contacts[leg]),
+            format!("Scheduled stance of leg {leg_name}"),
+            None,
+            Binding::Contact(leg),
+        );
+    }
+    t.output(
+        "fsm.state".to_owned(),
+        Value::Integer(command.fsm_state.as_code()),
+        "Controller state".to_owned(),
+        None,
+        Binding::FsmState,
+    );
+    t.of_type(FSM_STATE_TYPE);
+    for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
+        for (axis, axis_name) in AXES.iter().enumerate() {
+            t.output(
+                format!("force[{}].{axis_name}", leg + 1),
+                Value::Real(command.desired_forces[leg][axis]),
+                format!("Desired ground reaction force on the robot at foot {leg_name}, {axis_name}, world frame"),
+                Some(Newton),
+                Binding::DesiredForce(leg, axis),
+            );
+        }
+    }
+    t.output(
+        "mpc.solveTime".to_owned(),
+        Value::Real(command.mpc_solve_time_s),
+        "Wall time of the last MPC solve (diagnostic; not deterministic)".to_owned(),
+        Some(Second),
+        Binding::MpcSolveTime,
+    );
+    t.output(
+        "mpc.solved".to_owned(),
+        Value::Boolean(command.mpc_solved),
+        "Whether the last MPC solve succeeded".to_owned(),
+        None,
+        Binding::MpcSolved,
+    );
+
+    // Parameters are all fixed: `Controller` is built from them in fmi2ExitInitializationMode
+    // (MPC matrices, standing pose, gait) and offers no way to change them afterwards.
+    t.parameters();
+    t.rows
+}

@@ -1,0 +1,232 @@
+use super::*;
+use quad_controller::config::ConfigField;
+use quad_controller::{ControllerConfig, HeightMap, HEIGHT_MAP_CELLS};
+use std::collections::HashSet;
+
+#[test]
+fn names_and_references_are_unique_and_dense() {
+    let rows = table();
+    let names: HashSet<&str> = rows.iter().map(|v| v.name.as_str()).collect();
+    assert_eq!(names.len(), rows.len());
+    for (i, v) in rows.iter().enumerate() {
+        assert_eq!(v.value_reference as usize, i);
+    }
+}
+
+#[test]
+fn table_has_the_documented_signals() {
+    let count = |c: Causality| table().iter().filter(|v| v.causality == c).count();
+    // 3 pos + 4 quat + 3 vel + 3 omega + 12 q + 12 dq + 10 reference/terrain + cmd.mode
+    // + height map (x0, y0, spacing, 121 heights)
+    assert_eq!(count(Causality::Input), 48 + 3 + HEIGHT_MAP_CELLS);
+    // 12 tau + 4 contact + fsm + 12 force + solve time + solved
+    assert_eq!(count(Causality::Output), 31);
+    for name in [
+        "base.quat.w",
+        "joint.q[12]",
+        "joint.dq[1]",
+        "ref.yawRate",
+        "cmd.mode",
+        "joint.tau[12]",
+        "contact[4]",
+        "force[4].z",
+        "mpc.solved",
+        "gait.period",
+        "mpc.q[13]",
+        "swing.kd[3]",
+    ] {
+        assert!(by_name(name).is_some(), "{name}");
+    }
+    assert_eq!(
+        by_name("cmd.mode").unwrap().scalar_type(),
+        ScalarType::Integer
+    );
+    assert_eq!(
+        by_name("contact[1]").unwrap().scalar_type(),
+        ScalarType::Boolean
+    );
+}
+
+#[test]
+fn every_binding_round_trips_through_its_storage() {
+    let (mut state, mut reference) = initial_inputs();
+    let mut map = HeightMap::default();
+    let mut config = ControllerConfig::default();
+    for (k, v) in table().iter().enumerate() {
+        let probe = match v.start {
+            Value::Real(_) => Value::Real(0.5 + k as f64),
+            Value::Integer(_) => Value::Integer(1),
+            Value::Boolean(b) => Value::Boolean(!b),
+        };
+        match v.binding {
+            Binding::Parameter { field, element } => {
+                assert_eq!(
+                    read_parameter(field, element, &config),
+                    v.start,
+                    "{}",
+                    v.name
+                );
+                write_parameter(field, element, &mut config, probe);
+                assert_eq!(read_parameter(field, element, &config), probe, "{}", v.name);
+            }
+            b if v.causality == Causality::Input => {
+                assert_eq!(
+                    read_input(b, &state, &reference, &map),
+                    Some(v.start),
+                    "{}",
+                    v.name
+                );
+                write_input(b, probe, &mut state, &mut reference, &mut map);
+                assert_eq!(
+                    read_input(b, &state, &reference, &map),
+                    Some(probe),
+                    "{}",
+                    v.name
+                );
+            }
+            b => assert_eq!(
+                read_output(b, &initial_command()),
+                Some(v.start),
+                "{}",
+                v.name
+            ),
+        }
+    }
+}
+
+fn next_up(x: f64) -> f64 {
+    if x == 0.0 {
+        f64::from_bits(1)
+    } else if x > 0.0 {
+        f64::from_bits(x.to_bits() + 1)
+    } else {
+        f64::from_bits(x.to_bits() - 1)
+    }
+}
+
+fn next_down(x: f64) -> f64 {
+    -next_up(-x)
+}
+
+/// Every parameter with its config field and element.
+fn parameters() -> impl Iterator<Item = (&'static Variable, &'static ConfigField, usize)> {
+    table().iter().filter_map(|v| match v.binding {
+        Binding::Parameter { field, element } => {
+            Some((v, &ControllerConfig::FIELDS[field], element))
+        }
+        _ => None,
+    })
+}
+
+#[test]
+fn every_parameter_has_a_range_holding_its_start_value() {
+    assert_eq!(parameters().count(), 43);
+    for (v, field, _) in parameters() {
+        let (min, max) = field.range();
+        assert_eq!((v.min, v.max), (Some(min), Some(max)), "{}", v.name);
+        assert!(
+            min.is_finite() && max.is_finite() && min < max,
+            "{}",
+            v.name
+        );
+        check_value(v, v.start).unwrap_or_else(|e| panic!("{e}"));
+    }
+    check_parameters(&ControllerConfig::default()).unwrap();
+}
+
+#[test]
+fn values_just_outside_a_range_and_non_finite_values_are_refused() {
+    for (v, field, _) in parameters() {
+        let (min, max) = field.range();
+        let (below, above) = match v.start {
+            Value::Real(_) => (Value::Real(next_down(min)), Value::Real(next_up(max))),
+            _ => (
+                Value::Integer(min as i32 - 1),
+                Value::Integer(max as i32 + 1),
+            ),
+        };
+        for bad in [below, above] {
+            let err = check_value(v, bad).unwrap_err().to_string();
+            assert!(
+                err.starts_with(&format!("invalid value for {}", v.name)),
+                "{err}"
+            );
+        }
+        if let Value::Real(_) = v.start {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
+                assert!(
+                    check_value(v, Value::Real(bad)).is_err(),
+                    "{} {bad}",
+                    v.name
+                );
+            }
+        }
+        for good in [min, max] {
+            let value = match v.start {
+                Value::Real(_) => Value::Real(good),
+                _ => Value::Integer(good as i32),
+            };
+            check_value(v, value).unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+}
+
+/// The ranges are the controller's operating envelope: every end point, with the other
+/// parameters at their defaults, builds a controller, except where a parameter is also
+/// checked against another one in fmi2ExitInitializationMode (`f_min < f_max`, a standing
+/// height the legs reach); those work with a matching partner.
+#[test]
+fn every_range_end_point_builds_a_controller() {
+    use quad_controller::{Controller, RobotModel};
+    let model = RobotModel::from_urdf_file(
+        &crate::bundle::repo_root()
+            .join("robot")
+            .join("quadruped.urdf"),
+    )
+    .unwrap();
+    for (v, field, element) in parameters() {
+        let (min, max) = field.range();
+        let index = ControllerConfig::FIELDS
+            .iter()
+            .position(|f| f.name == field.name)
+            .unwrap();
+        for end in [min, max] {
+            let mut config = ControllerConfig::default();
+            let value = match v.start {
+                Value::Real(_) => Value::Real(end),
+                _ => Value::Integer(end as i32),
+            };
+            write_parameter(index, element, &mut config, value);
+            assert_eq!(read_parameter(index, element, &config), value);
+            config.check_ranges().unwrap();
+            match (field.name, end == max) {
+                ("f_min", true) => config.f_max = end + 1.0,
+                ("f_max", false) => config.f_min = 0.0,
+                _ => {}
+            }
+            let result = Controller::new(model.clone(), config.clone());
+            if field.name == "body_height" && end == max {
+                assert!(result.is_err(), "legs of 0.4 m cannot stand 0.5 m high");
+            } else {
+                result.unwrap_or_else(|e| panic!("{} = {end}: {e}", v.name));
+            }
+        }
+    }
+}
+
+#[test]
+fn values_are_checked() {
+    let x = by_name("base.pos.x").unwrap();
+    assert!(check_value(x, Value::Real(f64::NAN))
+        .unwrap_err()
+        .to_string()
+        .contains("base.pos.x"));
+    assert!(check_value(x, Value::Real(f64::INFINITY)).is_err());
+    assert!(check_value(x, Value::Real(-3.0)).is_ok());
+    let mode = by_name("cmd.mode").unwrap();
+    assert!(check_value(mode, Value::Integer(3)).is_err());
+    assert!(check_value(mode, Value::Integer(-1)).is_err());
+    assert!(check_value(mode, Value::Integer(2)).is_ok());
+    let dt = by_name("control.dt").unwrap();
+    assert!(check_value(dt, Value::Real(0.0)).is_err());
+}
