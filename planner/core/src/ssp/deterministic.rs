@@ -1,14 +1,12 @@
 //! Deterministic moves (Ulam's one-cell shifts): V* by Dijkstra, the flux by one pass over the
 //! shortest-path tree.
 
-use std::collections::BinaryHeap;
-
 use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::lp_problem::LpProblem;
 use crate::solve_status::SolverUsed;
 
-use super::dijkstra::HeapEntry;
+use super::dijkstra::dijkstra;
 use super::*;
 
 /// States settled by Dijkstra between two deadline checks (about 0.1 ms of work).
@@ -84,35 +82,24 @@ pub(super) fn solve_deterministic(
         }
     }
     let step_cost: Vec<f64> = gens.directions.iter().map(|d| c * d.step).collect();
-    let mut value = vec![f64::INFINITY; n];
-    let mut policy = vec![u8::MAX; n];
-    let mut order = Vec::with_capacity(n);
-    let mut heap = BinaryHeap::new();
-    for (j, _) in problem.target.iter().enumerate().filter(|(_, &t)| t) {
-        value[j] = 0.0;
-        heap.push(HeapEntry { key: 0.0, state: j });
-    }
-    while let Some(HeapEntry { key, state: j }) = heap.pop() {
-        if key > value[j] {
-            continue;
-        }
-        if order.len() % STATES_PER_DEADLINE_CHECK == 0 {
-            deadline.check("the LP solve (Dijkstra)")?;
-        }
-        order.push(j);
-        for &(i, k) in &from[ptr[j] as usize..ptr[j + 1] as usize] {
-            let i = i as usize;
-            let candidate = key + problem.cost[i] * step_cost[k as usize];
-            if candidate < value[i] {
-                value[i] = candidate;
-                policy[i] = k;
-                heap.push(HeapEntry {
-                    key: candidate,
-                    state: i,
-                });
+    let (value, policy, order) = dijkstra(
+        problem.target,
+        u8::MAX,
+        |settled| {
+            if settled % STATES_PER_DEADLINE_CHECK == 0 {
+                deadline.check("the LP solve (Dijkstra)")?;
             }
-        }
-    }
+            Ok(())
+        },
+        |j| {
+            from[ptr[j] as usize..ptr[j + 1] as usize]
+                .iter()
+                .map(|&(i, k)| {
+                    let i = i as usize;
+                    (i, problem.cost[i] * step_cost[k as usize], k)
+                })
+        },
+    )?;
     check_reachable(problem, &value)?;
     let mut q = problem.start.to_vec();
     let mut flux = vec![vec![0.0; n]; k_count];

@@ -7,9 +7,9 @@ use std::collections::BinaryHeap;
 use super::*;
 
 #[derive(Copy, Clone, PartialEq)]
-pub(super) struct HeapEntry {
-    pub(super) key: f64,
-    pub(super) state: usize,
+struct HeapEntry {
+    key: f64,
+    state: usize,
 }
 
 impl Eq for HeapEntry {}
@@ -30,16 +30,26 @@ impl PartialOrd for HeapEntry {
     }
 }
 
-/// Dijkstra from the targets over reversed moves: (values, chosen action, pop order).
-pub(super) fn dijkstra(
-    model: &Model,
+/// Values, the minimising action of each state and the settling order (increasing value).
+pub(super) type ShortestPaths<A> = (Vec<f64>, Vec<A>, Vec<usize>);
+
+/// Dijkstra on the value function from the target states: `into(j)` lists the moves
+/// `(source i, cost, action)` that end in state j; targets are never relaxed. `before_settling`
+/// runs with the number of states settled so far (the deadline check). Returns the values, the
+/// minimising action of each state (`no_action` where none) and the settling order.
+pub(super) fn dijkstra<A, I>(
     target: &[bool],
-    reversed: &(Vec<usize>, Vec<(usize, usize)>),
-) -> (Vec<f64>, Vec<usize>, Vec<usize>) {
+    no_action: A,
+    mut before_settling: impl FnMut(usize) -> Result<(), PlanError>,
+    into: impl Fn(usize) -> I,
+) -> Result<ShortestPaths<A>, PlanError>
+where
+    A: Copy,
+    I: Iterator<Item = (usize, f64, A)>,
+{
     let n = target.len();
-    let (ptr, entries) = reversed;
     let mut value = vec![f64::INFINITY; n];
-    let mut policy = vec![usize::MAX; n];
+    let mut policy = vec![no_action; n];
     let mut order = Vec::with_capacity(n);
     let mut heap = BinaryHeap::new();
     for (j, _) in target.iter().enumerate().filter(|(_, &t)| t) {
@@ -50,15 +60,16 @@ pub(super) fn dijkstra(
         if key > value[j] {
             continue;
         }
+        before_settling(order.len())?;
         order.push(j);
-        for &(i, a) in &entries[ptr[j]..ptr[j + 1]] {
+        for (i, cost, action) in into(j) {
             if target[i] {
                 continue;
             }
-            let candidate = key + model.action_cost[a];
+            let candidate = key + cost;
             if candidate < value[i] {
                 value[i] = candidate;
-                policy[i] = a;
+                policy[i] = action;
                 heap.push(HeapEntry {
                     key: candidate,
                     state: i,
@@ -66,5 +77,5 @@ pub(super) fn dijkstra(
             }
         }
     }
-    (value, policy, order)
+    Ok((value, policy, order))
 }

@@ -54,33 +54,14 @@ impl Model {
                         if j == i {
                             stay += step * value;
                         } else {
-                            let prob = step * value;
-                            if prob < -TRANSITION_EPS {
-                                model.mark_general(format!(
-                                    "direction {k}, function {i}: transition mass {prob:.3e} to {j} is negative"
-                                ));
-                            }
-                            if prob > TRANSITION_EPS {
-                                model.trans_to.push(j);
-                                model.trans_prob.push(prob);
-                                sum += prob;
-                            }
+                            sum += model.add_transition(k, i, j, step * value);
                         }
                     }
                     if !any {
                         // A wall: the flux moves nothing and only costs, so it is no action.
                         continue;
                     }
-                    if stay < -TRANSITION_EPS {
-                        model.mark_general(format!(
-                            "direction {k}, function {i}: negative probability {stay:.3e} of staying"
-                        ));
-                    }
-                    if stay > TRANSITION_EPS {
-                        model.trans_to.push(i);
-                        model.trans_prob.push(stay);
-                        sum += stay;
-                    }
+                    sum += model.add_transition(k, i, i, stay);
                     if (sum - 1.0).abs() > ROW_SUM_TOLERANCE {
                         model.mark_general(format!(
                             "direction {k}, function {i}: transition mass sums to {sum:.12}"
@@ -107,6 +88,24 @@ impl Model {
             model.action_ptr.push(model.action_dir.len());
         }
         model
+    }
+
+    /// Records the transition mass `prob` of (direction `k`, function `i`) to `j` (`j == i`:
+    /// staying) and returns what it adds to the row sum: negative mass makes the generators
+    /// general (not Markov); mass within the threshold of zero is no transition.
+    pub(super) fn add_transition(&mut self, k: usize, i: usize, j: usize, prob: f64) -> f64 {
+        if prob < -TRANSITION_EPS {
+            self.mark_general(format!(
+                "direction {k}, function {i}: negative transition mass {prob:.3e} to {j}"
+            ));
+        }
+        if prob > TRANSITION_EPS {
+            self.trans_to.push(j);
+            self.trans_prob.push(prob);
+            prob
+        } else {
+            0.0
+        }
     }
 
     pub(super) fn mark_general(&mut self, reason: String) {

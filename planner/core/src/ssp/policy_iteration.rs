@@ -56,7 +56,17 @@ pub(super) fn policy_iteration(
     }
     let reachable: Vec<bool> = layer.iter().map(|&l| l != usize::MAX).collect();
     // Warm start: greedy for the Dijkstra values of the most-likely-move graph.
-    let (guess, _, _) = dijkstra(model, target, &model.reversed(n, true));
+    let (ptr, entries) = model.reversed(n, true);
+    let (guess, _, _) = dijkstra(
+        target,
+        usize::MAX,
+        |_| Ok(()),
+        |j| {
+            entries[ptr[j]..ptr[j + 1]]
+                .iter()
+                .map(|&(i, a)| (i, model.action_cost[a], a))
+        },
+    )?;
     let mut policy = vec![usize::MAX; n];
     for i in (0..n).filter(|&i| reachable[i] && !target[i]) {
         let mut best = (f64::INFINITY, usize::MAX);
