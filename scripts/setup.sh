@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs everything the demo and the tests need on a fresh Debian machine (run as root):
 # Debian packages, the Python venv with pinned versions, generated LCM Python types,
-# release builds of the workspace and the bundled FMU. Safe to run again: it skips what is done.
+# release builds of the workspace and the bundled FMU (its binary portable to glibc >= 2.17).
+# Safe to run again: it skips what is done.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -83,7 +84,8 @@ log "cargo build --release --workspace"
 cargo build --release --workspace --quiet
 
 if [[ -f fmu/Cargo.toml ]] && grep -q 'name = "bundle-fmu"' fmu/Cargo.toml; then
-    log "bundling the FMU"
-    cargo run --release --quiet -p quad-controller-fmu --bin bundle-fmu
+    # The shipped binary: linked by zig against glibc 2.17, stripped (a few minutes the first time).
+    log "bundling the FMU from its portable build (scripts/build_fmu_portable.sh)"
+    bash scripts/build_fmu_portable.sh
 fi
 log "done"
