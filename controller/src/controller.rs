@@ -31,7 +31,7 @@ use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::FootholdPlanner;
 pub use crate::footholds::FOOTHOLD_SEARCH_RADIUS;
-use crate::fsm::{Fsm, Stages};
+use crate::fsm::{Fsm, FsmTransition, Stages};
 use crate::leg_control::LegControl;
 use crate::model::RobotModel;
 use crate::mpc_schedule::MpcScheduler;
@@ -45,6 +45,7 @@ pub struct Controller {
     com_offset_body: Vector3<f64>,
     fsm: Fsm,
     stages: Stages,
+    last_transition: Option<FsmTransition>,
 }
 
 impl Controller {
@@ -73,6 +74,7 @@ impl Controller {
         };
         Ok(Controller {
             fsm: Fsm::new(&config),
+            last_transition: None,
             stages,
             com_offset_body,
             model,
@@ -97,6 +99,12 @@ impl Controller {
     /// Current FSM state.
     pub fn fsm_state(&self) -> FsmState {
         self.fsm.state()
+    }
+
+    /// The last state change (made by the latest `step` when its `from` is not the state before
+    /// that step), with the reason when a fault caused it.
+    pub fn last_transition(&self) -> Option<&FsmTransition> {
+        self.last_transition.as_ref()
     }
 
     /// Declares that each state given to [`Controller::step`] stays in force for `seconds` (a
@@ -167,11 +175,12 @@ impl Controller {
         validate_reference(reference, self.config.mpc_dt)?;
 
         let estimate = Estimate::from_measurement(&self.model, state);
-        if let Some(next) = self
+        if let Some(transition) = self
             .fsm
             .check_transition(&self.stages, &estimate, reference)
         {
-            self.fsm.enter(next, &mut self.stages, &estimate);
+            self.fsm.enter(transition.to, &mut self.stages, &estimate);
+            self.last_transition = Some(transition);
         }
         // The state runs the gait, footholds, MPC scheduling and leg laws it needs.
         let actuation = self

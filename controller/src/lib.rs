@@ -46,4 +46,5 @@ mod validation;
 pub use api::*;
 pub use config::ControllerConfig;
 pub use controller::Controller;
+pub use fsm::FsmTransition;
 pub use model::RobotModel;

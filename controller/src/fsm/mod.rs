@@ -97,6 +97,20 @@ fn balancing_transition(
     (requested != current).then_some(requested)
 }
 
+/// Joint names within a leg, index j of `3·leg + j` (for the fault reasons).
+const JOINT_NAMES: [&str; 3] = ["hip abduction", "hip flexion", "knee"];
+
+/// A change of state, with the fault that caused it when it is a drop to damping.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FsmTransition {
+    /// State left.
+    pub from: FsmState,
+    /// State entered.
+    pub to: FsmState,
+    /// Which check failed with which value, for a transition caused by a fault.
+    pub reason: Option<String>,
+}
+
 /// Tilt and joint-limit fault detection shared by the balancing states.
 struct FaultMonitor {
     max_tilt: f64,
@@ -108,16 +122,22 @@ impl FaultMonitor {
     fn check(&self, estimate: &Estimate, legs: &LegControl) -> Option<String> {
         let tilt = estimate.rotation[(2, 2)].clamp(-1.0, 1.0).acos();
         if tilt > self.max_tilt {
-            return Some(format!("tilt {tilt:.3} rad"));
+            return Some(format!(
+                "tilt check: base tilted {tilt:.3} rad, more than max.tilt {:.3} rad",
+                self.max_tilt
+            ));
         }
         let margin = self.joint_limit_margin;
         let (lower, upper) = legs.joint_limits();
         for leg in Leg::ALL {
-            for j in 0..3 {
+            for (j, joint) in JOINT_NAMES.iter().enumerate() {
                 let i = 3 * leg.index() + j;
                 let q = estimate.q[leg.index()][j];
                 if q < lower[i] - margin || q > upper[i] + margin {
-                    return Some(format!("joint {i} at {q:.3} rad beyond its limits"));
+                    return Some(format!(
+                        "joint-limit check: joint {i} ({leg:?} {joint}) at {q:.3} rad beyond its limits [{:.3}, {:.3}] rad by more than the margin {margin:.3} rad",
+                        lower[i], upper[i]
+                    ));
                 }
             }
         }
@@ -161,22 +181,34 @@ impl Fsm {
         self.current
     }
 
-    /// The state the current one hands over to this tick, if any.
+    /// The state the current one hands over to this tick, if any, with the fault that caused
+    /// it (a drop to damping).
     pub fn check_transition(
         &self,
         stages: &Stages,
         estimate: &Estimate,
         reference: &Reference,
-    ) -> Option<FsmState> {
-        let fault = || self.faults.check(estimate, &stages.legs);
+    ) -> Option<FsmTransition> {
+        let reason = std::cell::RefCell::new(None);
+        let fault = || {
+            let found = self.faults.check(estimate, &stages.legs);
+            reason.borrow_mut().clone_from(&found);
+            found
+        };
         let mode = reference.mode;
-        match self.current {
+        let next = match self.current {
             FsmState::Passive => self.passive.check_transition(mode),
             FsmState::StandUp => self.stand_up.check_transition(fault, mode, self.state_time),
             FsmState::Stand => self.stand.check_transition(fault, mode),
             FsmState::Locomotion => self.locomotion.check_transition(fault, mode),
             FsmState::Damping => self.damping.check_transition(mode),
-        }
+        }?;
+        let reason = reason.into_inner().filter(|_| next == FsmState::Damping);
+        Some(FsmTransition {
+            from: self.current,
+            to: next,
+            reason,
+        })
     }
 
     /// Enters `next`: resets the state time, makes the MPC solve on the next balancing tick and
