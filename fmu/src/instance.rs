@@ -2,7 +2,7 @@
 //! Everything here is safe Rust; `exports.rs` only converts the C arguments.
 
 use quad_controller::{
-    Command, Controller, ControllerConfig, FsmState, HeightMap, Reference, RobotState,
+    Command, Controller, ControllerConfig, FsmTransition, HeightMap, Reference, RobotState,
 };
 
 use crate::budget::max_ticks_per_step;
@@ -324,7 +324,6 @@ impl Instance {
                 "no controller in state stepComplete".to_owned(),
             ));
         };
-        let fsm_before = self.command.fsm_state;
         // The inputs stay in force for the whole step and the outputs for the next one.
         controller
             .set_input_period(step.max(dt))
@@ -339,10 +338,15 @@ impl Instance {
             });
         }
         while self.ticks_done < target {
+            let before = self.command.fsm_state;
             match controller.step(&self.state, &self.reference, dt) {
                 Ok(command) => {
                     self.command = command;
                     self.ticks_done += 1;
+                    if self.command.fsm_state != before {
+                        let time = self.start_time + self.ticks_done as f64 * dt;
+                        log_transition(&self.logger, time, controller.last_transition());
+                    }
                 }
                 Err(e) => {
                     self.command = controller.safe_command(&self.state);
@@ -357,17 +361,7 @@ impl Instance {
         }
         self.time = end;
         self.last_successful_time = end;
-        if self.command.fsm_state != fsm_before {
-            self.log_transition(fsm_before, self.command.fsm_state);
-        }
         Ok(())
-    }
-
-    fn log_transition(&self, from: FsmState, to: FsmState) {
-        self.logger.log(
-            Fmi2Status::Ok,
-            &format!("t = {}: controller state {from:?} -> {to:?}", self.time),
-        );
     }
 
     /// `fmi2GetRealStatus(fmi2LastSuccessfulTime)`.
@@ -396,6 +390,25 @@ impl Instance {
     }
 }
 
+/// Logs a state change of the controller at `time` (the end of the tick that made it). A drop
+/// to damping is a warning, always passed on, with the failed check and its value; the other
+/// changes are `logEvents` messages.
+fn log_transition(logger: &Logger, time: f64, transition: Option<&FsmTransition>) {
+    let Some(FsmTransition { from, to, reason }) = transition else {
+        return;
+    };
+    match reason {
+        Some(reason) => logger.log(
+            Fmi2Status::Warning,
+            &format!("t = {time}: controller state {from:?} -> {to:?}: {reason}"),
+        ),
+        None => logger.log(
+            Fmi2Status::Ok,
+            &format!("t = {time}: controller state {from:?} -> {to:?}"),
+        ),
+    }
+}
+
 /// The table row of `vr` if it exists and has type `expected`.
 fn lookup(vr: u32, expected: ScalarType) -> Result<&'static crate::variables::Variable, FmuError> {
     table()
@@ -409,7 +422,7 @@ mod tests {
     use super::*;
     use crate::bundle::repo_root;
     use crate::variables::by_name;
-    use quad_controller::RobotModel;
+    use quad_controller::{FsmState, RobotModel};
 
     fn instance() -> Instance {
         let model = RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))
@@ -669,6 +682,26 @@ mod tests {
             let _ = i.do_step(start, 0.5);
             assert!(began.elapsed().as_secs_f64() < 1.0, "start {start}");
         }
+    }
+
+    /// With every input at its start value (the robot standing on flat ground, mode Stand) the
+    /// controller stands up and holds the stand with finite, non-zero torques.
+    #[test]
+    fn start_values_stand_up_and_hold_the_stand() {
+        let mut i = running();
+        let mut reached_stand_at = None;
+        for k in 0..300 {
+            let t = i.time();
+            i.do_step(t, 0.01).unwrap();
+            if reached_stand_at.is_none() && i.command.fsm_state == FsmState::Stand {
+                reached_stand_at = Some(k);
+            }
+        }
+        assert!(reached_stand_at.is_some(), "never reached Stand");
+        assert_eq!(i.command.fsm_state, FsmState::Stand);
+        let torques = i.command.joint_torques;
+        assert!(torques.iter().all(|t| t.is_finite()), "{torques:?}");
+        assert!(torques.iter().any(|t| t.abs() > 0.1), "{torques:?}");
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Messages to the importer through its `fmi2CallbackLogger`.
 //!
-//! Errors, discards and warnings are always passed on (they explain a non-OK return status);
+//! Errors, discards and warnings (a fault that sent the controller to damping) are always passed on (they explain a non-OK return status);
 //! informational messages (`logEvents`) only after `loggingOn` / `fmi2SetDebugLogging` enabled them.
 
 use std::ffi::CString;
@@ -13,7 +13,10 @@ pub const LOG_CATEGORIES: [(&str, &str); 4] = [
         "logEvents",
         "Informational messages: instantiation, FSM state changes, termination.",
     ),
-    ("logStatusWarning", "Messages accompanying fmi2Warning."),
+    (
+        "logStatusWarning",
+        "Warnings: a controller fault (failed check and its value) that dropped the state machine to damping.",
+    ),
     (
         "logStatusDiscard",
         "Messages accompanying fmi2Discard (a doStep the controller could not complete).",

@@ -33,10 +33,13 @@ fn scalar_variable(out: &mut String, v: &Variable) {
         v.causality.xml_name(),
         v.variability.xml_name(),
     );
-    // Parameters default to initial="exact"; outputs are given exact start values (the zero
-    // command before the first doStep), so none of them is an initial unknown.
-    if v.causality == Causality::Output {
-        out.push_str(" initial=\"exact\"");
+    // Parameters and inputs have initial="exact" (the default) and a start value. Outputs are
+    // initial="calculated" (the default for outputs, written out): the FMU computes them in
+    // initialization mode (the zero command of the passive state, whatever the inputs), so they
+    // have no start value and are listed in <InitialUnknowns>.
+    let calculated = v.causality == Causality::Output;
+    if calculated {
+        out.push_str(" initial=\"calculated\"");
     }
     match v.declared_type {
         Some(type_name) => {
@@ -63,11 +66,49 @@ fn scalar_variable(out: &mut String, v: &Variable) {
     if let Some(max) = v.max {
         let _ = write!(out, " max=\"{}\"", bound(max));
     }
-    let _ = writeln!(
-        out,
-        " start=\"{}\"/>\n    </ScalarVariable>",
-        v.start.xml_text()
-    );
+    if !calculated {
+        let _ = write!(out, " start=\"{}\"", v.start.xml_text());
+    }
+    out.push_str("/>\n    </ScalarVariable>\n");
+}
+
+/// `generationDateAndTime` (xs:dateTime, UTC). Deterministic when the build asks for it: the
+/// reproducible-builds convention `SOURCE_DATE_EPOCH` (seconds since 1970, e.g. the commit time,
+/// `git log -1 --format=%ct`) is used when set, so two bundles of the same sources are
+/// byte-identical; otherwise the time of the bundling, which is what the attribute means.
+pub fn generation_date_and_time() -> String {
+    let seconds = std::env::var("SOURCE_DATE_EPOCH")
+        .ok()
+        .and_then(|text| text.trim().parse::<i64>().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| i64::try_from(d.as_secs()).unwrap_or(i64::MAX))
+        });
+    utc_date_time(seconds)
+}
+
+/// `YYYY-MM-DDThh:mm:ssZ` of `seconds` since 1970-01-01T00:00:00Z (proleptic Gregorian; the
+/// days-to-civil conversion of H. Hinnant's date algorithms).
+fn utc_date_time(seconds: i64) -> String {
+    let days = seconds.div_euclid(86_400);
+    let second_of_day = seconds.rem_euclid(86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let day_of_era = z.rem_euclid(146_097);
+    let year_of_era =
+        (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
+    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
+    let mp = (5 * day_of_year + 2) / 153;
+    let day = day_of_year - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = year_of_era + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        second_of_day / 3600,
+        second_of_day / 60 % 60,
+        second_of_day % 60
+    )
 }
 
 /// The complete `modelDescription.xml` text.
@@ -78,13 +119,14 @@ pub fn model_description_xml() -> String {
         out,
         "<fmiModelDescription fmiVersion=\"2.0\" modelName=\"{MODEL_IDENTIFIER}\" guid=\"{GUID}\" \
          description=\"{}\" author=\"pfnav\" version=\"{}\" generationTool=\"quad-controller-fmu bundle-fmu\" \
-         variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">",
+         generationDateAndTime=\"{}\" variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">",
         xml_escape(
             "Quadruped controller stack (gait FSM, convex MPC on ground reaction forces, leg torque control) \
              as an FMI 2.0 Co-Simulation slave. Frames: world x east, y north, z up; base quaternion (w,x,y,z) \
              rotates body to world; base linear and angular velocities in the world frame."
         ),
         env!("CARGO_PKG_VERSION"),
+        generation_date_and_time(),
     );
     let _ = writeln!(
         out,
@@ -154,11 +196,33 @@ pub fn model_description_xml() -> String {
     }
     out.push_str("  </ModelVariables>\n");
 
+    // Outputs change only inside fmi2DoStep (the inputs are sampled at the step's start and the
+    // outputs hold the command of its last tick), so no output depends directly on an input:
+    // dependencies="" (FMI 2.0: an absent attribute would mean "depends on every input", i.e.
+    // false algebraic loops). The initial unknowns are the calculated outputs (no continuous
+    // states, no calculated parameters); before the first doStep they are the passive zero
+    // command, independent of every input and parameter.
+    let outputs: Vec<&Variable> = table()
+        .iter()
+        .filter(|v| v.causality == Causality::Output)
+        .collect();
     out.push_str("  <ModelStructure>\n    <Outputs>\n");
-    for v in table().iter().filter(|v| v.causality == Causality::Output) {
-        let _ = writeln!(out, "      <Unknown index=\"{}\"/>", v.index());
+    for v in &outputs {
+        let _ = writeln!(
+            out,
+            "      <Unknown index=\"{}\" dependencies=\"\"/>",
+            v.index()
+        );
     }
-    out.push_str("    </Outputs>\n  </ModelStructure>\n</fmiModelDescription>\n");
+    out.push_str("    </Outputs>\n    <InitialUnknowns>\n");
+    for v in &outputs {
+        let _ = writeln!(
+            out,
+            "      <Unknown index=\"{}\" dependencies=\"\"/>",
+            v.index()
+        );
+    }
+    out.push_str("    </InitialUnknowns>\n  </ModelStructure>\n</fmiModelDescription>\n");
     out
 }
 
@@ -185,7 +249,7 @@ pub fn documentation_html() -> String {
             v.variability.xml_name(),
             v.declared_type
                 .map_or_else(|| v.scalar_type().xml_name().to_owned(), |t| format!("Enumeration {t}")),
-            v.start.xml_text(),
+            if v.causality == Causality::Output { String::new() } else { v.start.xml_text() },
             v.min.map(|b| format!("{b:?}")).unwrap_or_default(),
             v.max.map(|b| format!("{b:?}")).unwrap_or_default(),
             v.unit.map(|u| u.name()).unwrap_or(""),
@@ -208,7 +272,10 @@ mod tests {
             .iter()
             .filter(|v| v.causality == Causality::Output)
             .count();
-        assert_eq!(xml.matches("<Unknown ").count(), outputs);
+        // Each output once in <Outputs> and once in <InitialUnknowns>, with no dependencies.
+        assert_eq!(xml.matches("<Unknown ").count(), 2 * outputs);
+        assert_eq!(xml.matches("dependencies=\"\"/>").count(), 2 * outputs);
+        assert!(xml.contains("generationDateAndTime=\""));
         assert!(xml.contains(&format!("guid=\"{GUID}\"")));
         assert!(xml.contains("canHandleVariableCommunicationStepSize=\"true\""));
         assert!(!xml.contains("<Derivatives/>"));
@@ -235,12 +302,47 @@ mod tests {
                 state.as_code()
             )));
         }
-        assert!(xml.contains("<Enumeration declaredType=\"FsmState\" start=\"0\"/>"));
+        assert!(xml.contains(
+            "causality=\"output\" variability=\"discrete\" initial=\"calculated\">\n      <Enumeration declaredType=\"FsmState\"/>"
+        ));
         assert!(xml.contains(
             "<Enumeration declaredType=\"ModeRequest\" min=\"0\" max=\"2\" start=\"1\"/>"
         ));
         assert!(xml
             .contains("<Enumeration declaredType=\"GaitKind\" min=\"0\" max=\"1\" start=\"0\"/>"));
+    }
+
+    #[test]
+    fn generation_time_is_an_xs_date_time_in_utc() {
+        assert_eq!(utc_date_time(0), "1970-01-01T00:00:00Z");
+        assert_eq!(utc_date_time(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(utc_date_time(1_700_000_000), "2023-11-14T22:13:20Z");
+        assert_eq!(utc_date_time(4_102_444_799), "2099-12-31T23:59:59Z");
+    }
+
+    #[test]
+    fn inputs_and_parameters_have_ranges_and_every_variable_a_description() {
+        let xml = model_description_xml();
+        for v in table() {
+            assert!(!v.description.trim().is_empty(), "{}", v.name);
+            let limited = matches!(
+                v.binding,
+                crate::variables::Binding::JointPosition(_)
+                    | crate::variables::Binding::JointVelocity(_)
+                    | crate::variables::Binding::JointTorque(_)
+            );
+            if limited || v.causality == Causality::Parameter {
+                assert!(v.min.is_some() && v.max.is_some(), "{}", v.name);
+            }
+        }
+        let model = crate::variables::robot_model();
+        let knee = crate::variables::by_name("joint.q[3]").unwrap();
+        assert_eq!(
+            (knee.min, knee.max),
+            (Some(model.lower_limits()[2]), Some(model.upper_limits()[2]))
+        );
+        assert!(xml.contains("unit=\"rad\" min=\"-2.7\" max=\"-0.5\" start=\""));
+        assert!(xml.contains("unit=\"N.m\" min=\"-35.0\" max=\"35.0\"/>"));
     }
 
     #[test]

@@ -55,6 +55,9 @@ pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
         Value::Integer(v) => f64::from(v),
         Value::Boolean(_) => return Ok(()),
     };
+    if !variable.range_is_enforced() {
+        return Ok(());
+    }
     if let Some(min) = variable.min.filter(|&min| number < min) {
         return Err(invalid(format!("{number} is below the minimum {min}")));
     }

@@ -10,10 +10,10 @@
 
 use std::sync::OnceLock;
 
-use quad_controller::{Command, FsmState, Reference, RobotState, NUM_JOINTS, NUM_LEGS};
-
-#[cfg(doc)]
-use quad_controller::ControllerConfig;
+use quad_controller::{
+    Command, Controller, ControllerConfig, FsmState, Reference, RobotModel, RobotState, NUM_JOINTS,
+    NUM_LEGS,
+};
 
 mod enums;
 mod exchange;
@@ -112,9 +112,10 @@ pub struct Variable {
     pub unit: Option<Unit>,
     /// Enumeration type (an [`EnumType`] name) of an Integer variable, if it has one.
     pub declared_type: Option<&'static str>,
-    /// Inclusive lower bound checked by `fmi2Set*`.
+    /// Inclusive lower bound (`min` in the XML), checked by `fmi2Set*` unless
+    /// [`Variable::range_is_enforced`] says it only documents the operating region.
     pub min: Option<f64>,
-    /// Inclusive upper bound checked by `fmi2Set*`.
+    /// Inclusive upper bound (`max` in the XML), checked like `min`.
     pub max: Option<f64>,
     /// Where the value lives.
     pub binding: Binding,
@@ -129,6 +130,17 @@ impl Variable {
     /// The 1-based `index` used in `<ModelStructure>`.
     pub fn index(&self) -> usize {
         self.value_reference as usize + 1
+    }
+
+    /// Whether `fmi2Set*` refuses values outside `min`/`max`. Measured joint positions and
+    /// velocities are not refused: their range is the URDF's (the region the controller is
+    /// designed for), but a real or simulated robot can leave it, and the controller's own fault
+    /// checks must see that (they drop to damping and log the joint and value).
+    pub fn range_is_enforced(&self) -> bool {
+        !matches!(
+            self.binding,
+            Binding::JointPosition(_) | Binding::JointVelocity(_)
+        )
     }
 
     /// Whether `fmi2Set*` may write it while the simulation runs (step complete).
@@ -150,9 +162,41 @@ pub fn initial_command() -> Command {
     }
 }
 
-/// The inputs of a fresh instance (also the XML `start` values): the controller crate's defaults.
+/// The robot the variable table describes: `robot/quadruped.urdf`, compiled in. The bundle ships
+/// the same file as `resources/quadruped.urdf`; the joint ranges and the standing start pose of
+/// the table come from it.
+pub fn robot_model() -> &'static RobotModel {
+    static MODEL: OnceLock<RobotModel> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        RobotModel::from_urdf_str(ROBOT_URDF)
+            .unwrap_or_else(|e| panic!("the compiled-in robot/quadruped.urdf is invalid: {e}"))
+    })
+}
+
+/// `robot/quadruped.urdf` as compiled into the FMU.
+pub const ROBOT_URDF: &str = include_str!("../../../robot/quadruped.urdf");
+
+/// The inputs of a fresh instance (also the XML `start` values): the robot standing still on
+/// flat ground at z = 0 in its nominal stance, so that a run with no inputs set stands up and
+/// holds the stand. Joint angles are the controller's standing pose (inverse kinematics of the
+/// nominal feet at the default `stand.bodyHeight`), the base is at that height with identity
+/// orientation, every velocity is zero; the reference is the controller's default (mode Stand,
+/// flat terrain at z = 0, default body height).
 pub fn initial_inputs() -> (RobotState, Reference) {
-    (RobotState::default(), Reference::default())
+    static INPUTS: OnceLock<(RobotState, Reference)> = OnceLock::new();
+    *INPUTS.get_or_init(|| {
+        let config = ControllerConfig::default();
+        let body_height = config.body_height;
+        let controller = Controller::new(robot_model().clone(), config).unwrap_or_else(|e| {
+            panic!("the default configuration cannot stand the compiled-in robot: {e}")
+        });
+        let state = RobotState {
+            base_position: [0.0, 0.0, body_height],
+            joint_positions: controller.stand_joint_positions(),
+            ..RobotState::default()
+        };
+        (state, Reference::default())
+    })
 }
 
 /// The table, built once.

@@ -8,8 +8,8 @@ use quad_controller::{
 };
 
 use super::{
-    enum_type, initial_command, initial_inputs, read_parameter, Binding, Causality, Unit, Value,
-    Variability, Variable, FSM_STATE_TYPE, GAIT_KIND_TYPE, MODE_REQUEST_TYPE,
+    enum_type, initial_command, initial_inputs, read_parameter, robot_model, Binding, Causality,
+    Unit, Value, Variability, Variable, FSM_STATE_TYPE, GAIT_KIND_TYPE, MODE_REQUEST_TYPE,
 };
 
 struct TableBuilder {
@@ -44,6 +44,15 @@ impl TableBuilder {
             max: range.1,
             binding,
         });
+    }
+
+    /// Gives the row pushed last the range `[min, max]`.
+    fn with_range(&mut self, min: f64, max: f64) {
+        debug_assert!(min < max, "{min} < {max}");
+        if let Some(row) = self.rows.last_mut() {
+            row.min = Some(min);
+            row.max = Some(max);
+        }
     }
 
     /// Gives the row pushed last the enumeration type `type_name`.
@@ -142,6 +151,12 @@ pub(super) fn build_table() -> Vec<Variable> {
     let mut t = TableBuilder { rows: Vec::new() };
     let (state, reference) = initial_inputs();
     let command = initial_command();
+    // Joint ranges from the URDF: positions and velocities are the region the controller is
+    // designed for (documented, not refused, see `Variable::range_is_enforced`); torques are
+    // clamped to the effort limits.
+    let model = robot_model();
+    let (lower, upper) = (model.lower_limits(), model.upper_limits());
+    let (velocity, effort) = (model.velocity_limits(), model.effort_limits());
 
     // Inputs: measured state.
     for (i, axis) in AXES.iter().enumerate() {
@@ -184,19 +199,27 @@ pub(super) fn build_table() -> Vec<Variable> {
         t.input(
             format!("joint.q[{}]", i + 1),
             state.joint_positions[i],
-            format!("Joint position, {}", joint_label(i)),
+            format!(
+                "Measured joint position, {} (range: URDF limits; outside them, beyond the fault margin, the controller drops to damping)",
+                joint_label(i)
+            ),
             Some(Radian),
             Binding::JointPosition(i),
         );
+        t.with_range(lower[i], upper[i]);
     }
-    for i in 0..NUM_JOINTS {
+    for (i, &limit) in velocity.iter().enumerate() {
         t.input(
             format!("joint.dq[{}]", i + 1),
             state.joint_velocities[i],
-            format!("Joint velocity, {}", joint_label(i)),
+            format!(
+                "Measured joint velocity, {} (range: URDF velocity limit)",
+                joint_label(i)
+            ),
             Some(RadianPerSecond),
             Binding::JointVelocity(i),
         );
+        t.with_range(-limit, limit);
     }
 
     // Inputs: reference from the planner.
@@ -293,7 +316,7 @@ pub(super) fn build_table() -> Vec<Variable> {
     t.of_type(MODE_REQUEST_TYPE);
 
     // Outputs.
-    for i in 0..NUM_JOINTS {
+    for (i, &limit) in effort.iter().enumerate() {
         t.output(
             format!("joint.tau[{}]", i + 1),
             Value::Real(command.joint_torques[i]),
@@ -304,6 +327,7 @@ pub(super) fn build_table() -> Vec<Variable> {
             Some(NewtonMetre),
             Binding::JointTorque(i),
         );
+        t.with_range(-limit, limit);
     }
     for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
         t.output(

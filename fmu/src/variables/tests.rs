@@ -230,3 +230,66 @@ fn values_are_checked() {
     let dt = by_name("control.dt").unwrap();
     assert!(check_value(dt, Value::Real(0.0)).is_err());
 }
+
+/// The start values are the robot standing still on flat ground in its nominal stance: joint
+/// angles of the controller's standing pose, inside the URDF ranges, base at the nominal height.
+#[test]
+fn start_values_are_the_nominal_stance_inside_the_joint_ranges() {
+    use quad_controller::{Controller, ModeRequest};
+    let config = ControllerConfig::default();
+    let stand = Controller::new(robot_model().clone(), config.clone())
+        .unwrap()
+        .stand_joint_positions();
+    let model = robot_model();
+    let (lower, upper) = (model.lower_limits(), model.upper_limits());
+    for (i, q) in stand.iter().enumerate() {
+        let v = by_name(&format!("joint.q[{}]", i + 1)).unwrap();
+        assert_eq!(v.start, Value::Real(*q), "{}", v.name);
+        assert_eq!(
+            (v.min, v.max),
+            (Some(lower[i]), Some(upper[i])),
+            "{}",
+            v.name
+        );
+        assert!(lower[i] < *q && *q < upper[i], "{} = {q}", v.name);
+        let dq = by_name(&format!("joint.dq[{}]", i + 1)).unwrap();
+        assert_eq!(dq.start, Value::Real(0.0));
+    }
+    let start = |name: &str| by_name(name).unwrap().start;
+    assert_eq!(start("base.pos.z"), Value::Real(config.body_height));
+    assert_eq!(start("base.pos.x"), Value::Real(0.0));
+    assert_eq!(start("base.quat.w"), Value::Real(1.0));
+    for name in [
+        "base.quat.x",
+        "base.quat.y",
+        "base.quat.z",
+        "ref.z",
+        "ref.vx",
+    ] {
+        assert_eq!(start(name), Value::Real(0.0), "{name}");
+    }
+    assert_eq!(
+        start("cmd.mode"),
+        Value::Integer(ModeRequest::Stand.as_code())
+    );
+    // The feet of the start pose touch the flat ground (z = 0) below the hips.
+    let (state, _) = initial_inputs();
+    for leg in quad_controller::Leg::ALL {
+        let l = leg.index();
+        let q = [stand[3 * l], stand[3 * l + 1], stand[3 * l + 2]];
+        let foot = model.foot_position_body(leg, q);
+        let bottom = state.base_position[2] + foot[2] - model.foot_radius();
+        assert!(bottom.abs() < 1e-9, "{leg:?}: foot bottom at z = {bottom}");
+    }
+}
+
+/// Measured joint values outside the URDF range are accepted (the controller's fault check
+/// handles them); the declared range is informative for them.
+#[test]
+fn joint_measurements_outside_their_range_are_accepted() {
+    let knee = by_name("joint.q[3]").unwrap();
+    assert!(!knee.range_is_enforced());
+    check_value(knee, Value::Real(-0.1)).unwrap();
+    assert!(check_value(knee, Value::Real(f64::NAN)).is_err());
+    assert!(by_name("cmd.mode").unwrap().range_is_enforced());
+}
