@@ -1,0 +1,324 @@
+use super::*;
+use crate::bundle::repo_root;
+use crate::variables::by_name;
+use quad_controller::{FsmState, RobotModel};
+
+fn instance() -> Instance {
+    let model = RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))
+        .expect("robot/quadruped.urdf");
+    let resources = Resources {
+        model,
+        config: ControllerConfig::default(),
+    };
+    Instance::new(
+        resources,
+        Logger::new(None, std::ptr::null_mut(), "test", false),
+    )
+}
+
+fn running() -> Instance {
+    let mut i = instance();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    i
+}
+
+fn vr(name: &str) -> u32 {
+    by_name(name).unwrap().value_reference
+}
+
+#[test]
+fn do_step_runs_the_ticks_of_the_absolute_grid() {
+    let mut i = running();
+    // Multiples of the 1 ms tick.
+    i.do_step(0.0, 0.01).unwrap();
+    assert_eq!(i.ticks_done(), 10);
+    i.do_step(0.01, 0.001).unwrap();
+    assert_eq!(i.ticks_done(), 11);
+    // 1.4 ms steps: ends at 12.4, 13.8, 15.2, 16.6 ticks -> rounded 12, 14, 15, 17.
+    let mut t = 0.011;
+    let mut ticks = Vec::new();
+    for _ in 0..4 {
+        i.do_step(t, 0.0014).unwrap();
+        t += 0.0014;
+        ticks.push(i.ticks_done());
+    }
+    assert_eq!(ticks, [12, 14, 15, 17]);
+    // A step shorter than half a tick runs nothing and keeps the outputs.
+    let before = i.command;
+    i.do_step(t, 0.0004).unwrap();
+    assert_eq!(i.ticks_done(), 17);
+    assert_eq!(i.command, before);
+    assert!((i.time() - (t + 0.0004)).abs() < 1e-15);
+}
+
+#[test]
+fn start_time_offsets_the_grid() {
+    let mut i = instance();
+    i.setup_experiment(100.0, Some(200.0)).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    assert!(
+        i.do_step(0.0, 0.01).is_err(),
+        "time must start at startTime"
+    );
+    i.do_step(100.0, 0.02).unwrap();
+    assert_eq!(i.ticks_done(), 20);
+}
+
+#[test]
+fn calls_out_of_order_are_rejected_and_change_nothing() {
+    let mut i = instance();
+    assert!(matches!(
+        i.do_step(0.0, 0.01),
+        Err(FmuError::WrongState { .. })
+    ));
+    assert!(i.exit_initialization_mode().is_err());
+    assert!(i.terminate().is_err());
+    assert!(i
+        .get("fmi2GetReal", ScalarType::Real, &[0], |_, _| {})
+        .is_err());
+    assert_eq!(i.phase(), Phase::Instantiated);
+    i.enter_initialization_mode().unwrap();
+    assert!(i.enter_initialization_mode().is_err());
+    assert!(i.setup_experiment(0.0, None).is_err());
+    assert!(i.do_step(0.0, 0.01).is_err());
+    i.exit_initialization_mode().unwrap();
+    assert!(i.enter_initialization_mode().is_err());
+    i.terminate().unwrap();
+    assert!(i.do_step(0.0, 0.01).is_err());
+    assert!(i
+        .set("fmi2SetReal", &[vr("ref.x")], &[Value::Real(1.0)])
+        .is_err());
+    assert_eq!(i.phase(), Phase::Terminated);
+    i.reset();
+    assert_eq!(i.phase(), Phase::Instantiated);
+}
+
+#[test]
+fn fixed_parameters_apply_before_initialisation_only() {
+    let mut i = instance();
+    i.set("fmi2SetReal", &[vr("control.dt")], &[Value::Real(0.002)])
+        .unwrap();
+    i.set(
+        "fmi2SetInteger",
+        &[vr("mpc.everyTicks")],
+        &[Value::Integer(5)],
+    )
+    .unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    i.do_step(0.0, 0.01).unwrap();
+    assert_eq!(i.ticks_done(), 5, "10 ms at a 2 ms tick");
+    let err = i
+        .set("fmi2SetReal", &[vr("control.dt")], &[Value::Real(0.001)])
+        .unwrap_err();
+    assert!(err.to_string().contains("fixed parameter"), "{err}");
+}
+
+#[test]
+fn invalid_parameters_keep_the_instance_in_initialisation() {
+    let mut i = instance();
+    // Each value is inside its own range, but f_min must stay below f_max: checked when the
+    // controller is built in fmi2ExitInitializationMode.
+    i.set(
+        "fmi2SetReal",
+        &[vr("mpc.fMin"), vr("mpc.fMax")],
+        &[Value::Real(500.0), Value::Real(400.0)],
+    )
+    .unwrap();
+    i.enter_initialization_mode().unwrap();
+    let err = i.exit_initialization_mode().unwrap_err();
+    assert!(matches!(err, FmuError::Config(_)), "{err}");
+    assert!(err.to_string().contains("f_min must be < f_max"), "{err}");
+    assert_eq!(i.phase(), Phase::InitializationMode);
+    i.set("fmi2SetReal", &[vr("mpc.fMax")], &[Value::Real(600.0)])
+        .unwrap();
+    i.exit_initialization_mode().unwrap();
+}
+
+#[test]
+fn parameters_outside_their_range_are_refused_at_set_time() {
+    let mut i = instance();
+    let horizon = vr("mpc.horizon");
+    for bad in [9, 41, 0, -1, i32::MIN, i32::MAX] {
+        let err = i
+            .set("fmi2SetInteger", &[horizon], &[Value::Integer(bad)])
+            .unwrap_err();
+        assert!(matches!(err, FmuError::InvalidValue { .. }), "{bad}: {err}");
+    }
+    let every = vr("mpc.everyTicks");
+    assert!(i
+        .set("fmi2SetInteger", &[every], &[Value::Integer(0)])
+        .is_err());
+    assert!(i
+        .set("fmi2SetInteger", &[every], &[Value::Integer(1001)])
+        .is_err());
+    // Nothing was stored: the defaults still build a controller.
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    assert_eq!(i.config, ControllerConfig::default());
+}
+
+/// The control.dt values of the issue: 1e-12 (first doStep of 1 ms never returned), 1e-9
+/// (3.6 s per step), 10 and 1e300 (no control tick ever ran).
+#[test]
+fn regression_extreme_control_dt_is_refused_at_set_time() {
+    let mut i = instance();
+    let dt = vr("control.dt");
+    for bad in [
+        1e-12,
+        1e-9,
+        10.0,
+        1e300,
+        0.0,
+        -1e-3,
+        f64::NAN,
+        f64::INFINITY,
+    ] {
+        let err = i
+            .set("fmi2SetReal", &[dt], &[Value::Real(bad)])
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("invalid value for control.dt"), "{err}");
+    }
+    for good in [1e-4, 0.05] {
+        i.set("fmi2SetReal", &[dt], &[Value::Real(good)]).unwrap();
+    }
+}
+
+#[test]
+fn a_step_longer_than_the_tick_cap_is_refused_and_changes_nothing() {
+    let mut i = running();
+    let max = i.max_ticks_per_step();
+    assert_eq!(max, crate::budget::max_ticks_per_step(&i.config));
+    let dt = i.config.control_dt;
+    let err = i.do_step(0.0, (max + 1) as f64 * dt).unwrap_err();
+    assert!(matches!(err, FmuError::StepTooLong { .. }), "{err}");
+    assert!(err.to_string().contains("use shorter steps"), "{err}");
+    assert_eq!(
+        (i.ticks_done(), i.time(), i.phase()),
+        (0, 0.0, Phase::StepComplete)
+    );
+    i.do_step(0.0, max as f64 * dt).unwrap();
+    assert_eq!(i.ticks_done(), max);
+    // The cap counts the ticks of this step, not since the start.
+    let t = i.time();
+    i.do_step(t, max as f64 * dt).unwrap();
+    assert_eq!(i.ticks_done(), 2 * max);
+}
+
+/// h = 1e12…1e15 hung and h = 1000 took 27 s: now each is refused before any tick runs.
+#[test]
+fn regression_huge_and_invalid_steps_return_at_once() {
+    let mut i = running();
+    for h in [
+        1e12,
+        1e13,
+        1e14,
+        1e15,
+        1000.0,
+        1e300,
+        f64::MAX,
+        f64::INFINITY,
+        f64::NAN,
+        f64::NEG_INFINITY,
+        -1.0,
+        0.0,
+        -0.0,
+    ] {
+        let start = std::time::Instant::now();
+        assert!(i.do_step(0.0, h).is_err(), "h = {h}");
+        assert!(start.elapsed().as_secs_f64() < 0.5, "h = {h}");
+        assert_eq!(i.ticks_done(), 0, "h = {h}");
+    }
+    for t in [f64::NAN, f64::INFINITY, -1e300, 1e300] {
+        assert!(matches!(
+            i.do_step(t, 0.001),
+            Err(FmuError::TimeMismatch { .. })
+        ));
+    }
+    // Subnormal and tiny steps run no tick but advance the time exactly.
+    let tiny = f64::from_bits(1);
+    i.do_step(0.0, tiny).unwrap();
+    i.do_step(tiny, 1e-300).unwrap();
+    assert_eq!(i.ticks_done(), 0);
+    assert_eq!(i.time(), tiny + 1e-300);
+    let t = i.time();
+    i.do_step(t, 0.01).unwrap();
+    assert_eq!(i.ticks_done(), 10);
+}
+
+#[test]
+fn far_start_times_run_no_ticks_but_do_not_hang() {
+    for start in [1e15, 1e300, -1e300] {
+        let mut i = instance();
+        i.setup_experiment(start, None).unwrap();
+        i.enter_initialization_mode().unwrap();
+        i.exit_initialization_mode().unwrap();
+        let began = std::time::Instant::now();
+        let _ = i.do_step(start, 0.5);
+        assert!(began.elapsed().as_secs_f64() < 1.0, "start {start}");
+    }
+}
+
+/// With every input at its start value (the robot standing on flat ground, mode Stand) the
+/// controller stands up and holds the stand with finite, non-zero torques.
+#[test]
+fn start_values_stand_up_and_hold_the_stand() {
+    let mut i = running();
+    let mut reached_stand_at = None;
+    for k in 0..300 {
+        let t = i.time();
+        i.do_step(t, 0.01).unwrap();
+        if reached_stand_at.is_none() && i.command.fsm_state == FsmState::Stand {
+            reached_stand_at = Some(k);
+        }
+    }
+    assert!(reached_stand_at.is_some(), "never reached Stand");
+    assert_eq!(i.command.fsm_state, FsmState::Stand);
+    let torques = i.command.joint_torques;
+    assert!(torques.iter().all(|t| t.is_finite()), "{torques:?}");
+    assert!(torques.iter().any(|t| t.abs() > 0.1), "{torques:?}");
+}
+
+#[test]
+fn a_rejected_state_switches_to_damping_and_step_failed() {
+    let mut i = running();
+    let quaternion = ["base.quat.w", "base.quat.x", "base.quat.y", "base.quat.z"].map(vr);
+    i.set("fmi2SetReal", &quaternion, &[Value::Real(0.0); 4])
+        .unwrap();
+    i.set("fmi2SetReal", &[vr("joint.dq[1]")], &[Value::Real(2.0)])
+        .unwrap();
+    let err = i.do_step(0.0, 0.01).unwrap_err();
+    assert!(matches!(err, FmuError::StepRejected { .. }), "{err}");
+    assert_eq!(i.phase(), Phase::StepFailed);
+    assert_eq!(i.command.fsm_state, FsmState::Damping);
+    let kd = ControllerConfig::default().damping_kd;
+    assert_eq!(i.command.joint_torques[0], -kd * 2.0);
+    assert_eq!(i.last_successful_time().unwrap(), 0.0);
+    assert!(i.do_step(0.0, 0.01).is_err());
+    i.terminate().unwrap();
+}
+
+#[test]
+fn a_rejected_set_call_stores_none_of_its_values() {
+    let mut i = running();
+    let vrs = [vr("ref.x"), vr("ref.y")];
+    assert!(i
+        .set(
+            "fmi2SetReal",
+            &vrs,
+            &[Value::Real(1.0), Value::Real(f64::NAN)]
+        )
+        .is_err());
+    let mut got = [f64::NAN; 2];
+    i.get("fmi2GetReal", ScalarType::Real, &vrs, |k, v| {
+        if let Value::Real(x) = v {
+            got[k] = x;
+        }
+    })
+    .unwrap();
+    assert_eq!(got, [0.0, 0.0]);
+}
