@@ -84,7 +84,6 @@ fn bench(c: &mut Criterion) {
     write_fmu(
         &BundleInputs {
             shared_library: library,
-            urdf: repo_root().join("robot").join("quadruped.urdf"),
         },
         &fmu,
     )

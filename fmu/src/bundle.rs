@@ -41,8 +41,6 @@ pub enum BundleError {
 pub struct BundleInputs {
     /// The cdylib built by cargo (`libquad_controller_fmu.so`).
     pub shared_library: PathBuf,
-    /// The robot model (`robot/quadruped.urdf`).
-    pub urdf: PathBuf,
 }
 
 /// The default configuration as shipped in `resources/controller.json`.
@@ -60,7 +58,9 @@ fn read(path: &Path) -> Result<Vec<u8>, BundleError> {
 /// Writes the `.fmu` archive to `output` (parent folders are created).
 pub fn write_fmu(inputs: &BundleInputs, output: &Path) -> Result<(), BundleError> {
     let library = read(&inputs.shared_library)?;
-    let urdf = read(&inputs.urdf)?;
+    // The variable table (joint ranges, standing start values) is built from the compiled-in
+    // robot, so the archive ships exactly that URDF: any other would contradict modelDescription.
+    let urdf = crate::variables::ROBOT_URDF.as_bytes();
     let config = default_config_json()?;
     let model_description = model_description_xml();
     let documentation = documentation_html();
@@ -84,7 +84,7 @@ pub fn write_fmu(inputs: &BundleInputs, output: &Path) -> Result<(), BundleError
             model_description.as_bytes(),
         ),
         (format!("binaries/linux64/{MODEL_IDENTIFIER}.so"), &library),
-        (format!("resources/{URDF_FILE}"), &urdf),
+        (format!("resources/{URDF_FILE}"), urdf),
         (format!("resources/{CONFIG_FILE}"), config.as_bytes()),
         (
             "documentation/index.html".to_owned(),

@@ -5,7 +5,8 @@
 //! cargo run --release -p quad-controller-fmu --bin bundle-fmu -- --out /tmp/x.fmu
 //! ```
 //! Options: `--out PATH` (archive), `--lib PATH` (cdylib; default: next to this executable, so
-//! `CARGO_TARGET_DIR` and the profile are respected), `--urdf PATH` (default `robot/quadruped.urdf`).
+//! `CARGO_TARGET_DIR` and the profile are respected). The robot is the compiled-in
+//! `robot/quadruped.urdf` (the variable table's ranges and start values come from it).
 //! `PFNAV_FMU_OUT` overrides the default output path.
 
 use std::path::PathBuf;
@@ -27,14 +28,11 @@ struct Args {
     /// CARGO_TARGET_DIR and the profile are respected].
     #[arg(long)]
     lib: Option<PathBuf>,
-    /// The robot [default: <repo>/robot/quadruped.urdf].
-    #[arg(long)]
-    urdf: Option<PathBuf>,
 }
 
 fn main() -> Result<()> {
     tracing_subscriber::fmt().with_target(false).init();
-    let Args { out, lib, urdf } = Args::parse();
+    let Args { out, lib } = Args::parse();
     let out = out
         .or_else(|| std::env::var_os("PFNAV_FMU_OUT").map(PathBuf::from))
         .unwrap_or_else(|| {
@@ -43,7 +41,6 @@ fn main() -> Result<()> {
                 .join("fmu")
                 .join(format!("{MODEL_IDENTIFIER}.fmu"))
         });
-    let urdf = urdf.unwrap_or_else(|| repo_root().join("robot").join("quadruped.urdf"));
     let shared_library = match lib {
         Some(lib) => lib,
         None => {
@@ -59,16 +56,14 @@ fn main() -> Result<()> {
     write_fmu(
         &BundleInputs {
             shared_library: shared_library.clone(),
-            urdf: urdf.clone(),
         },
         &out,
     )
     .with_context(|| format!("bundling {}", out.display()))?;
     tracing::info!(
-        "wrote {} (binary {}, robot {})",
+        "wrote {} (binary {})",
         out.display(),
-        shared_library.display(),
-        urdf.display()
+        shared_library.display()
     );
     println!("{}", out.display());
     Ok(())

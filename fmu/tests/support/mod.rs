@@ -81,7 +81,6 @@ pub fn fmu_path() -> &'static Path {
             .join(format!("QuadController-{}.fmu", std::process::id()));
         let inputs = BundleInputs {
             shared_library: shared_library(),
-            urdf: repo_root().join("robot").join("quadruped.urdf"),
         };
         write_fmu(&inputs, &out).expect("bundling the test FMU");
         out
