@@ -127,11 +127,7 @@ impl Locomotion {
         }
     }
 
-    pub fn check_transition(
-        &self,
-        fault: impl Fn() -> Option<String>,
-        mode: ModeRequest,
-    ) -> Option<FsmState> {
+    pub fn check_transition(&self, fault: Option<&str>, mode: ModeRequest) -> Option<FsmState> {
         balancing_transition(fault, mode, FsmState::Locomotion)
     }
 

@@ -81,11 +81,11 @@ pub struct Tick<'a> {
 /// The exit of a balancing state: damping on a fault (logged with its reason), else the state
 /// the mode asks for when that is not `current`.
 fn balancing_transition(
-    fault: impl Fn() -> Option<String>,
+    fault: Option<&str>,
     mode: ModeRequest,
     current: FsmState,
 ) -> Option<FsmState> {
-    if let Some(reason) = fault() {
+    if let Some(reason) = fault {
         tracing::warn!(%reason, state = ?current, "fault: entering damping");
         return Some(FsmState::Damping);
     }
@@ -189,21 +189,25 @@ impl Fsm {
         estimate: &Estimate,
         reference: &Reference,
     ) -> Option<FsmTransition> {
-        let reason = std::cell::RefCell::new(None);
-        let fault = || {
-            let found = self.faults.check(estimate, &stages.legs);
-            reason.borrow_mut().clone_from(&found);
-            found
+        // Only the balancing states watch for faults.
+        let fault = match self.current {
+            FsmState::Passive | FsmState::Damping => None,
+            FsmState::StandUp | FsmState::Stand | FsmState::Locomotion => {
+                self.faults.check(estimate, &stages.legs)
+            }
         };
         let mode = reference.mode;
         let next = match self.current {
             FsmState::Passive => self.passive.check_transition(mode),
-            FsmState::StandUp => self.stand_up.check_transition(fault, mode, self.state_time),
-            FsmState::Stand => self.stand.check_transition(fault, mode),
-            FsmState::Locomotion => self.locomotion.check_transition(fault, mode),
+            FsmState::StandUp => {
+                self.stand_up
+                    .check_transition(fault.as_deref(), mode, self.state_time)
+            }
+            FsmState::Stand => self.stand.check_transition(fault.as_deref(), mode),
+            FsmState::Locomotion => self.locomotion.check_transition(fault.as_deref(), mode),
             FsmState::Damping => self.damping.check_transition(mode),
         }?;
-        let reason = reason.into_inner().filter(|_| next == FsmState::Damping);
+        let reason = fault.filter(|_| next == FsmState::Damping);
         Some(FsmTransition {
             from: self.current,
             to: next,

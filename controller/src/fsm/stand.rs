@@ -58,11 +58,7 @@ impl Stand {
         Actuation::all_stance(torques, forces, estimate)
     }
 
-    pub fn check_transition(
-        &self,
-        fault: impl Fn() -> Option<String>,
-        mode: ModeRequest,
-    ) -> Option<FsmState> {
+    pub fn check_transition(&self, fault: Option<&str>, mode: ModeRequest) -> Option<FsmState> {
         balancing_transition(fault, mode, FsmState::Stand)
     }
 }

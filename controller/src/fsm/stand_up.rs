@@ -49,7 +49,7 @@ impl StandUp {
 
     pub fn check_transition(
         &self,
-        fault: impl Fn() -> Option<String>,
+        fault: Option<&str>,
         mode: ModeRequest,
         state_time: f64,
     ) -> Option<FsmState> {
