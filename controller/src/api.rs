@@ -26,6 +26,9 @@ pub enum Leg {
     RL = 3,
 }
 
+/// The joints of a leg, in index order `3·leg + j`.
+pub const LEG_JOINT_NAMES: [&str; 3] = ["hip abduction", "hip flexion", "knee"];
+
 impl Leg {
     /// All legs in index order.
     pub const ALL: [Leg; NUM_LEGS] = [Leg::FR, Leg::FL, Leg::RR, Leg::RL];
@@ -48,6 +51,11 @@ impl Leg {
             Leg::RR => "RR",
             Leg::RL => "RL",
         }
+    }
+
+    /// Name of joint `j` of this leg, e.g. `FR knee` (logs, FMU descriptions).
+    pub fn joint_label(self, j: usize) -> String {
+        format!("{} {}", self.name(), LEG_JOINT_NAMES[j])
     }
 
     /// +1 for left legs, −1 for right legs (sign of the hip's body-frame y).

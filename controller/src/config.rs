@@ -310,7 +310,7 @@ const MPC_STATE_LABELS: &[&str] = &[
     "gravity state",
 ];
 /// Labels of the per-joint gains (the same for every leg).
-const JOINT_LABELS: &[&str] = &["hip abduction", "hip flexion", "knee"];
+const JOINT_LABELS: &[&str] = &crate::api::LEG_JOINT_NAMES;
 
 controller_config! {
     /// Controller tuning. `Default` is the tuning used with the DART model of

@@ -10,7 +10,7 @@ mod passive;
 mod stand;
 mod stand_up;
 
-use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
+use crate::api::{FsmState, Leg, ModeRequest, Reference, LEG_JOINT_NAMES, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
 use crate::footholds::FootholdPlanner;
@@ -97,9 +97,6 @@ fn balancing_transition(
     (requested != current).then_some(requested)
 }
 
-/// Joint names within a leg, index j of `3·leg + j` (for the fault reasons).
-const JOINT_NAMES: [&str; 3] = ["hip abduction", "hip flexion", "knee"];
-
 /// A change of state, with the fault that caused it when it is a drop to damping.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FsmTransition {
@@ -130,13 +127,15 @@ impl FaultMonitor {
         let margin = self.joint_limit_margin;
         let (lower, upper) = legs.joint_limits();
         for leg in Leg::ALL {
-            for (j, joint) in JOINT_NAMES.iter().enumerate() {
+            for j in 0..LEG_JOINT_NAMES.len() {
                 let i = 3 * leg.index() + j;
                 let q = estimate.q[leg.index()][j];
                 if q < lower[i] - margin || q > upper[i] + margin {
                     return Some(format!(
-                        "joint-limit check: joint {i} ({leg:?} {joint}) at {q:.3} rad beyond its limits [{:.3}, {:.3}] rad by more than the margin {margin:.3} rad",
-                        lower[i], upper[i]
+                        "joint-limit check: joint {i} ({}) at {q:.3} rad beyond its limits [{:.3}, {:.3}] rad by more than the margin {margin:.3} rad",
+                        leg.joint_label(j),
+                        lower[i],
+                        upper[i]
                     ));
                 }
             }

@@ -4,7 +4,7 @@
 
 use quad_controller::config::FieldKind;
 use quad_controller::{
-    ControllerConfig, HeightMap, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS, NUM_LEGS,
+    ControllerConfig, HeightMap, Leg, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS,
 };
 
 use super::{
@@ -139,11 +139,8 @@ impl TableBuilder {
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 const QUATERNION: [&str; 4] = ["w", "x", "y", "z"];
-const LEG_NAMES: [&str; NUM_LEGS] = ["FR", "FL", "RR", "RL"];
-const JOINT_NAMES: [&str; 3] = ["hip abduction", "hip flexion", "knee"];
-
 fn joint_label(index: usize) -> String {
-    format!("{} {}", LEG_NAMES[index / 3], JOINT_NAMES[index % 3])
+    Leg::ALL[index / 3].joint_label(index % 3)
 }
 
 pub(super) fn build_table() -> Vec<Variable> {
@@ -329,7 +326,7 @@ pub(super) fn build_table() -> Vec<Variable> {
         );
         t.with_range(-limit, limit);
     }
-    for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
+    for (leg, leg_name) in Leg::ALL.iter().map(|l| l.name()).enumerate() {
         t.output(
             format!("contact[{}]", leg + 1),
             Value::Boolean(command.contacts[leg]),
@@ -346,7 +343,7 @@ pub(super) fn build_table() -> Vec<Variable> {
         Binding::FsmState,
     );
     t.of_type(FSM_STATE_TYPE);
-    for (leg, leg_name) in LEG_NAMES.iter().enumerate() {
+    for (leg, leg_name) in Leg::ALL.iter().map(|l| l.name()).enumerate() {
         for (axis, axis_name) in AXES.iter().enumerate() {
             t.output(
                 format!("force[{}].{axis_name}", leg + 1),
