@@ -279,6 +279,31 @@ class QuadrupedWorld:
         self.robot.setForces(self._forces)
         self.world.step()
 
+    # Whether the trunk carries a force from `apply_trunk_force` that has not been cleared yet.
+    _trunk_force_applied = False
+
+    def apply_trunk_force(self, force: tuple[float, float, float] | NDArray[np.float64] | None) -> None:
+        """External force (world frame, N) at the trunk's centre of mass for the next `step()` only.
+
+        Call it before every physics step with that step's force (None: no force). dartpy 6.20's
+        `world.step()` clears external forces itself (test_hs_pushes checks it); the previous force
+        is cleared here as well, so a push acts on exactly the steps it was given for whatever a
+        DART version does.
+        """
+        if force is None:
+            if self._trunk_force_applied:
+                self.base.clearExternalForces()
+                self._trunk_force_applied = False
+            return
+        self.base.clearExternalForces()
+        # Force in the world frame, point of application the trunk's own centre of mass (body frame).
+        self.base.addExtForce(np.asarray(force, dtype=np.float64), self.base.getLocalCOM(), False, True)
+        self._trunk_force_applied = True
+
+    def linear_momentum(self) -> NDArray[np.float64]:
+        """The whole robot's linear momentum (world frame, N·s)."""
+        return self.mass * np.asarray(self.robot.getCOMLinearVelocity())
+
     def foot_positions(self) -> NDArray[np.float64]:
         return np.array([foot.getWorldTransform().translation() for foot in self.feet])
 
