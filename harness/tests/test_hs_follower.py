@@ -323,6 +323,7 @@ def test_slows_down_near_the_goal_and_stops_inside() -> None:
         y += cmd.vy * dt
         yaw = cmd.yaw
     assert reached_at is not None and reached_at < 15.0
+    assert cmd.cost_to_go == 0.0
     assert (cmd.vx, cmd.vy, cmd.yaw_rate) == (0.0, 0.0, 0.0)
     assert cmd.reached and cmd.status == STATUS_GOAL
     # Stopped just inside the edge, not overshooting through the disc.
@@ -368,6 +369,7 @@ def test_fallback_descends_the_cost_and_stops_without_a_field() -> None:
     follower = FieldFollower(blocked)
     commands = [follower.command(x + 0.01, y, 0.0, dt) for _ in range(1000)]
     assert all(c.status == STATUS_FALLBACK for c in commands)
+    assert commands[-1].cost_to_go == pytest.approx(blocked.cost_to_go[10, 10])  # the nearest reachable cell's
     ux, uy = commands[-1].vx, commands[-1].vy
     assert ux > 0.0 and abs(math.atan2(uy, ux)) <= math.radians(45.0) + 1e-9
 
@@ -375,7 +377,7 @@ def test_fallback_descends_the_cost_and_stops_without_a_field() -> None:
     follower.swap_field(blocked)
     centre_x, centre_y = ORIGIN[0] + 7.0 * RES, ORIGIN[1] + 11.0 * RES
     commands = [follower.command(centre_x, centre_y, 0.0, dt) for _ in range(1000)]
-    assert all(c.status == STATUS_NO_FIELD and not c.reached for c in commands)
+    assert all(c.status == STATUS_NO_FIELD and not c.reached and math.isnan(c.cost_to_go) for c in commands)
     assert math.hypot(commands[0].vx, commands[0].vy) > 0.0  # still slowing from the fallback's motion ...
     assert (commands[-1].vx, commands[-1].vy) == (0.0, 0.0)  # ... then stopped
     # Far off the map, and at a NaN position: no field either.

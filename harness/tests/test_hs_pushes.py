@@ -151,3 +151,17 @@ def test_push_changes_the_robots_momentum_by_its_impulse(tmp_path: Path) -> None
     np.testing.assert_allclose(per_step[50:250], 60.0 * dt, atol=1e-4)
     assert per_step[:50].max() < 1e-9
     assert per_step[250:].max() < 1e-4
+
+
+def test_trunk_force_is_set_per_step_not_accumulated(tmp_path: Path) -> None:
+    """`apply_trunk_force` replaces the previous step's force and None removes it, without relying on DART's own clearing."""
+    terrain = Terrain((0.0, 0.0), 0.25, np.zeros((12, 12)))
+    world = QuadrupedWorld(terrain, paths.urdf_path(), tmp_path)
+    world.place(1.5, 1.5, 0.0)
+    base = world.base
+    world.apply_trunk_force((30.0, -10.0, 0.0))
+    world.apply_trunk_force((30.0, -10.0, 0.0))
+    wrench = np.asarray(base.getExternalForceGlobal())  # (torque, force) about the body origin, world frame
+    np.testing.assert_allclose(wrench[3:], [30.0, -10.0, 0.0], atol=1e-12)
+    world.apply_trunk_force(None)
+    np.testing.assert_allclose(np.asarray(base.getExternalForceGlobal()), np.zeros(6), atol=1e-12)

@@ -52,7 +52,8 @@ class _FlatTables(NamedTuple):
     height: int
 
 
-@dataclass(frozen=True)
+# eq=False: field-wise == would compare numpy arrays (ambiguous truth value); use `same_grid` and the arrays.
+@dataclass(frozen=True, eq=False)
 class FeedbackField:
     """The optimal feedback law on the planner's grid (arrays indexed [iy, ix])."""
 
@@ -222,23 +223,28 @@ class FeedbackField:
         vy_table = tables.vy
         total = vx = vy = c = 0.0
         reachable = 0
+        # The four corners unrolled (this runs once per control step): lower row iy0, upper row iy0 + 1.
+        x_in_lo = ix0 >= 0
+        x_in_hi = ix0 + 1 < width
         for iy, wy in ((iy0, 1.0 - fy), (iy0 + 1, fy)):
             if iy < 0 or iy >= height:
                 continue
-            row = iy * width
-            for ix, wx in ((ix0, 1.0 - fx), (ix0 + 1, fx)):
-                if ix < 0 or ix >= width:
-                    continue
-                k = row + ix
-                ck = cost[k]
-                if ck < 0.0:
-                    continue
+            k = iy * width + ix0
+            if x_in_lo and cost[k] >= 0.0:
+                w = (1.0 - fx) * wy
                 reachable += 1
-                w = wx * wy
                 total += w
                 vx += w * vx_table[k]
                 vy += w * vy_table[k]
-                c += w * ck
+                c += w * cost[k]
+            k += 1
+            if x_in_hi and cost[k] >= 0.0:
+                w = fx * wy
+                reachable += 1
+                total += w
+                vx += w * vx_table[k]
+                vy += w * vy_table[k]
+                c += w * cost[k]
         if reachable == 0:
             return None
         if total <= 1e-12:
@@ -269,6 +275,11 @@ class FeedbackField:
         tables = self._tables
         k = iy * tables.width + ix
         return FieldSample(tables.vx[k], tables.vy[k], tables.cost[k])
+
+    def cell_cost(self, ix: int, iy: int) -> float:
+        """Cost-to-go of one cell (−1: unreachable)."""
+        tables = self._tables
+        return tables.cost[iy * tables.width + ix]
 
     def max_speed(self) -> float:
         reachable = self.cost_to_go >= 0.0
