@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pfnav_harness.pipeline import export_scenario
 from pfnav_harness.scenario import (
     Scenario,
     paper_scenario_names,
@@ -82,3 +83,49 @@ def test_exported_scenario_is_a_standable_world(
         < 0.15
     )
     assert world.foot_contacts().sum() >= 3
+
+
+def test_surprise_is_exported_by_name_with_its_prior(
+    pf_plan_bin: Path, paper_scenarios: dict[str, Scenario], tmp_path: Path
+) -> None:
+    # `surprise` is a built-in scenario but not one of the paper's: the demo's default list
+    # leaves it out, `--all` lists it, and it exports by name with the map the robot is told
+    # beforehand (the prior) beside the true one.
+    assert "surprise" not in paper_scenario_names()
+    assert planner_scenario_names(pf_plan_bin, every=True) == (
+        *paper_scenario_names(),
+        "surprise",
+    )
+    assert all(s.prior is None for s in paper_scenarios.values())
+    listed = json.loads(
+        subprocess.run(
+            [str(pf_plan_bin), "scenario", "list", "--all", "--json"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=120,
+        ).stdout
+    )
+    assert {e["name"]: (e["paper"], e["prior"]) for e in listed}["surprise"] == (
+        False,
+        True,
+    )
+
+    scenario = export_scenario(pf_plan_bin, "surprise", tmp_path)
+    assert scenario.seed == 4
+    prior, truth = scenario.prior, scenario.terrain
+    assert prior is not None and truth.obstacles is not None
+    assert prior.shape == truth.shape and prior.origin == truth.origin
+    assert prior.resolution == truth.resolution == 0.125
+    assert prior.obstacles is None
+    # The prior shows flat ground where the true map has its trench, and agrees elsewhere.
+    np.testing.assert_array_equal(
+        prior.heights[~truth.obstacles], truth.heights[~truth.obstacles]
+    )
+    assert np.all(truth.heights[truth.obstacles] < prior.heights[truth.obstacles])
+    # The trench crosses the straight line start -> goal, at least 4 m from the start.
+    (sx, sy), (gx, gy) = scenario.start, scenario.goal.center
+    ts = np.linspace(0.0, 1.0, 2000)
+    on_line = [(sx + t * (gx - sx), sy + t * (gy - sy)) for t in ts]
+    blocked = [np.hypot(x - sx, y - sy) for x, y in on_line if truth.is_obstacle(x, y)]
+    assert blocked and min(blocked) >= 4.0

@@ -2,6 +2,11 @@
 
 The paper's scenarios are defined once, in the planner (`planner/core/src/scenarios.rs`): the
 harness asks `pf-plan scenario list` for their names and `pf-plan scenario export` for their maps.
+Further built-in scenarios (`pf-plan scenario list --all`, e.g. `surprise`) are exported by name.
+
+A scenario may carry a *prior*: the map the robot is given before it moves (`Scenario.prior`), while
+`Scenario.terrain` is the true ground its sensors reveal. The prior has the true map's geometry; the
+paper's scenarios have none (the robot then starts knowing nothing).
 
 The planner's map stores one height per cell centre. The physics terrain is the triangle mesh
 through those centres, each cell quad split along its (ix, iy)→(ix+1, iy+1) diagonal. `Terrain`
@@ -184,6 +189,8 @@ class Scenario:
     seed: int | None = None
     traversability: dict[str, Any] = field(default_factory=dict)
     source: Path | None = None
+    prior: Terrain | None = None
+    """The map known before the robot moves (same geometry as `terrain`), or None."""
 
     @property
     def origin(self) -> tuple[float, float]:
@@ -208,6 +215,39 @@ def _pair(value: Any, what: str, path: Path) -> tuple[float, float]:
     if not (math.isfinite(a) and math.isfinite(b)):
         raise ScenarioError(f"{path}: '{what}' must be finite, got {value!r}")
     return (a, b)
+
+
+def _array_file(folder: Path, value: Any, what: str, json_path: Path) -> Path:
+    """A sidecar's array file: a relative path inside the sidecar's folder (as pf-plan requires)."""
+    name = str(value)
+    relative = Path(name)
+    if not name or relative.is_absolute() or any(part in ("..", "") for part in relative.parts):
+        raise ScenarioError(f"{json_path}: {what} file {name!r} must be a relative path inside the sidecar's directory")
+    return folder / relative
+
+
+def _load_prior(meta: dict[str, Any], folder: Path, terrain: Terrain, json_path: Path) -> Terrain | None:
+    """The sidecar's `prior` map (heights + optional obstacles on the true map's grid), or None."""
+    prior_meta = meta.get("prior")
+    if prior_meta is None:
+        return None
+    if not isinstance(prior_meta, dict):
+        raise ScenarioError(f"{json_path}: 'prior' must be an object with 'heights' (and 'obstacles')")
+    heights_file = _array_file(folder, _require(prior_meta, "heights", json_path), "prior heights", json_path)
+    try:
+        heights = np.load(heights_file, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise ScenarioError(f"cannot read prior heights {heights_file}: {err}") from err
+    if heights.shape != terrain.shape:
+        raise ScenarioError(f"{heights_file}: prior shape {heights.shape} differs from the map's {terrain.shape}")
+    obstacles = None
+    if prior_meta.get("obstacles"):
+        obstacles_file = _array_file(folder, prior_meta["obstacles"], "prior obstacles", json_path)
+        try:
+            obstacles = np.load(obstacles_file, allow_pickle=False).astype(bool)
+        except (OSError, ValueError) as err:
+            raise ScenarioError(f"cannot read prior obstacles {obstacles_file}: {err}") from err
+    return Terrain(terrain.origin, terrain.resolution, heights.astype(np.float64), obstacles)
 
 
 def load_scenario(json_path: Path) -> Scenario:
@@ -266,6 +306,7 @@ def load_scenario(json_path: Path) -> Scenario:
         seed=None if seed is None else int(seed),
         traversability=dict(meta.get("traversability") or {}),
         source=json_path,
+        prior=_load_prior(meta, folder, terrain, json_path),
     )
 
 
@@ -302,10 +343,11 @@ def write_map(terrain: Terrain, folder: Path, name: str, traversability: dict[st
     return path
 
 
-def planner_scenario_names(pf_plan: Path, timeout: float = 60.0) -> tuple[str, ...]:
-    """The planner's built-in (paper) scenarios, from `pf-plan scenario list`."""
+def planner_scenario_names(pf_plan: Path, timeout: float = 60.0, every: bool = False) -> tuple[str, ...]:
+    """The planner's paper scenarios, from `pf-plan scenario list` (`every`: all built-in ones, `--all`)."""
+    command = [str(pf_plan), "scenario", "list", *(["--all"] if every else [])]
     try:
-        proc = subprocess.run([str(pf_plan), "scenario", "list"], capture_output=True, text=True, timeout=timeout, check=False)
+        proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout, check=False)
     except OSError as err:
         raise MissingArtifactError(f"cannot run {pf_plan}: {err}") from err
     except subprocess.TimeoutExpired as err:

@@ -13,7 +13,13 @@
 //!    "traversability": {"height_weight": 1.0, "slope_weight": 0.0, ...}}
 //!   ```
 //!   `origin` is the lower-left corner of cell (0, 0); `heights`/`obstacles` are paths relative to
-//!   the JSON file; `seed` and `traversability` may be omitted (defaults apply).
+//!   the JSON file; `seed` and `traversability` may be omitted (defaults apply);
+//! - a scenario with a *prior* (the map the robot is given before it moves; the true map above is
+//!   what its sensors reveal) adds `DIR/NAME.prior.heights.npy`, optionally
+//!   `DIR/NAME.prior.obstacles.npy`, and to the sidecar
+//!   `"prior": {"heights": "NAME.prior.heights.npy", "obstacles": null}`. The prior has the true
+//!   map's geometry (origin, resolution, width, height); its arrays obey the same rules (same
+//!   shape, files inside the sidecar's directory). Sidecars without `prior` have none.
 //!
 //! The `.npy` reader accepts versions 1.0–3.0 with little-endian `f8`, `f4`, `i8`, `i4`, `u1`,
 //! `b1` data in C or Fortran order; anything else is a typed [`PlanError::Format`].
@@ -48,6 +54,51 @@ pub struct MapScenario {
     pub goal: GoalRegion,
     /// Traversability model to plan with.
     pub traversability: TraversabilityParams,
+    /// What the robot knows before it moves (same geometry as `map`), when that differs from the
+    /// true map; `None`: nothing is known beforehand.
+    pub prior: Option<GridMap>,
+}
+
+impl MapScenario {
+    /// Checks the map and, if present, that the prior is a valid map of the same geometry.
+    pub fn validate(&self) -> Result<(), PlanError> {
+        self.map.validate()?;
+        if let Some(prior) = &self.prior {
+            prior.validate()?;
+            let map = &self.map;
+            let same = prior.origin == map.origin
+                && prior.resolution == map.resolution
+                && prior.width == map.width
+                && prior.height == map.height;
+            if !same {
+                return Err(PlanError::InvalidOption {
+                    name: "prior",
+                    reason: format!(
+                        "the prior map ({} x {} cells of {} m at {:?}) must have the true map's \
+                         geometry ({} x {} cells of {} m at {:?})",
+                        prior.width,
+                        prior.height,
+                        prior.resolution,
+                        prior.origin,
+                        map.width,
+                        map.height,
+                        map.resolution,
+                        map.origin
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The sidecar's `prior` object: the prior map's arrays (its geometry is the true map's).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PriorSidecar {
+    pub heights: String,
+    #[serde(default)]
+    pub obstacles: Option<String>,
 }
 
 /// The JSON sidecar, field for field.
@@ -70,26 +121,24 @@ pub struct Sidecar {
     pub goal: GoalRegion,
     #[serde(default)]
     pub traversability: TraversabilityParams,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<PriorSidecar>,
 }
 
-/// Writes `DIR/NAME.json`, `DIR/NAME.heights.npy` and (with obstacles) `DIR/NAME.obstacles.npy`;
-/// returns the path of the JSON file.
+/// Writes `DIR/NAME.json`, `DIR/NAME.heights.npy`, (with obstacles) `DIR/NAME.obstacles.npy` and
+/// (with a prior) `DIR/NAME.prior.heights.npy` [+ `DIR/NAME.prior.obstacles.npy`]; returns the
+/// path of the JSON file.
 pub fn save_scenario(scenario: &MapScenario, dir: &Path) -> Result<PathBuf, PlanError> {
-    scenario.map.validate()?;
+    scenario.validate()?;
     check_name(&scenario.name)?;
     fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
-    let heights_file = format!("{}.heights.npy", scenario.name);
     let map = &scenario.map;
-    write_npy_f64(
-        &dir.join(&heights_file),
-        (map.height, map.width),
-        &map.heights,
-    )?;
-    let obstacles_file = match &map.obstacles {
-        Some(mask) => {
-            let file = format!("{}.obstacles.npy", scenario.name);
-            write_npy_bool(&dir.join(&file), (map.height, map.width), mask)?;
-            Some(file)
+    let (heights_file, obstacles_file) = write_map_arrays(map, dir, &scenario.name)?;
+    let prior = match &scenario.prior {
+        Some(prior) => {
+            let (heights, obstacles) =
+                write_map_arrays(prior, dir, &format!("{}.prior", scenario.name))?;
+            Some(PriorSidecar { heights, obstacles })
         }
         None => None,
     };
@@ -106,11 +155,36 @@ pub fn save_scenario(scenario: &MapScenario, dir: &Path) -> Result<PathBuf, Plan
         start_yaw: scenario.start_yaw,
         goal: scenario.goal,
         traversability: scenario.traversability,
+        prior,
     };
     let json_path = dir.join(format!("{}.json", scenario.name));
     let text = serde_json::to_string_pretty(&sidecar).map_err(|e| format_error(&json_path, e))?;
     fs::write(&json_path, text + "\n").map_err(|e| io_error(&json_path, e))?;
     Ok(json_path)
+}
+
+/// Writes `DIR/STEM.heights.npy` and (with obstacles) `DIR/STEM.obstacles.npy`; returns their
+/// file names.
+fn write_map_arrays(
+    map: &GridMap,
+    dir: &Path,
+    stem: &str,
+) -> Result<(String, Option<String>), PlanError> {
+    let heights_file = format!("{stem}.heights.npy");
+    write_npy_f64(
+        &dir.join(&heights_file),
+        (map.height, map.width),
+        &map.heights,
+    )?;
+    let obstacles_file = match &map.obstacles {
+        Some(mask) => {
+            let file = format!("{stem}.obstacles.npy");
+            write_npy_bool(&dir.join(&file), (map.height, map.width), mask)?;
+            Some(file)
+        }
+        None => None,
+    };
+    Ok((heights_file, obstacles_file))
 }
 
 /// Largest sidecar accepted, bytes (a real one is a few hundred bytes).
@@ -143,39 +217,25 @@ pub fn load_scenario_limited(json_path: &Path, max_cells: usize) -> Result<MapSc
             ),
         ));
     }
-    let dir = json_path.parent().unwrap_or(Path::new("."));
-    let heights_path = array_path(json_path, dir, &sidecar.heights)?;
-    let heights = read_npy_limited(&heights_path, max_cells)?;
-    let expect_shape = |array: &NpyArray, path: &Path| {
-        if array.shape != (sidecar.height, sidecar.width) {
-            return Err(PlanError::Format {
-                path: path.display().to_string(),
-                reason: format!(
-                    "array shape {:?} does not match the sidecar's (height, width) = ({}, {})",
-                    array.shape, sidecar.height, sidecar.width
-                ),
-            });
-        }
-        Ok(())
-    };
-    expect_shape(&heights, &heights_path)?;
-    let obstacles = match &sidecar.obstacles {
-        Some(file) => {
-            let path = array_path(json_path, dir, file)?;
-            let mask = read_npy_limited(&path, max_cells)?;
-            expect_shape(&mask, &path)?;
-            Some(mask.values.iter().map(|&v| v != 0.0).collect())
-        }
+    let map = read_map_arrays(
+        json_path,
+        &sidecar,
+        &sidecar.heights,
+        sidecar.obstacles.as_deref(),
+        max_cells,
+        "",
+    )?;
+    let prior = match &sidecar.prior {
+        Some(prior) => Some(read_map_arrays(
+            json_path,
+            &sidecar,
+            &prior.heights,
+            prior.obstacles.as_deref(),
+            max_cells,
+            "prior ",
+        )?),
         None => None,
     };
-    let map = GridMap::new(
-        sidecar.origin,
-        sidecar.resolution,
-        sidecar.width,
-        sidecar.height,
-        heights.values,
-        obstacles,
-    )?;
     let finite = |p: Point| p[0].is_finite() && p[1].is_finite();
     if !finite(sidecar.start) || !sidecar.start_yaw.is_finite() {
         return Err(PlanError::Format {
@@ -201,7 +261,54 @@ pub fn load_scenario_limited(json_path: &Path, max_cells: usize) -> Result<MapSc
         start_yaw: sidecar.start_yaw,
         goal: sidecar.goal,
         traversability: sidecar.traversability,
+        prior,
     })
+}
+
+/// The map of a sidecar's geometry with the arrays in `heights_file` [+ `obstacles_file`], each
+/// confined to the sidecar's directory and of the sidecar's shape. `what` ("" or "prior ") names
+/// the map in errors.
+fn read_map_arrays(
+    json_path: &Path,
+    sidecar: &Sidecar,
+    heights_file: &str,
+    obstacles_file: Option<&str>,
+    max_cells: usize,
+    what: &str,
+) -> Result<GridMap, PlanError> {
+    let dir = json_path.parent().unwrap_or(Path::new("."));
+    let expect_shape = |array: &NpyArray, path: &Path| {
+        if array.shape != (sidecar.height, sidecar.width) {
+            return Err(PlanError::Format {
+                path: path.display().to_string(),
+                reason: format!(
+                    "{what}array shape {:?} does not match the sidecar's (height, width) = ({}, {})",
+                    array.shape, sidecar.height, sidecar.width
+                ),
+            });
+        }
+        Ok(())
+    };
+    let heights_path = array_path(json_path, dir, heights_file, what)?;
+    let heights = read_npy_limited(&heights_path, max_cells)?;
+    expect_shape(&heights, &heights_path)?;
+    let obstacles = match obstacles_file {
+        Some(file) => {
+            let path = array_path(json_path, dir, file, what)?;
+            let mask = read_npy_limited(&path, max_cells)?;
+            expect_shape(&mask, &path)?;
+            Some(mask.values.iter().map(|&v| v != 0.0).collect())
+        }
+        None => None,
+    };
+    Ok(GridMap::new(
+        sidecar.origin,
+        sidecar.resolution,
+        sidecar.width,
+        sidecar.height,
+        heights.values,
+        obstacles,
+    )?)
 }
 
 /// Largest path CSV accepted, bytes (a 10-minute walk logged at 1 kHz is about 40 MB).
@@ -506,7 +613,8 @@ pub fn parse_npy(bytes: &[u8]) -> Result<NpyArray, String> {
 }
 
 /// A sidecar's array file: a relative path inside the sidecar's directory (no `..`, no root).
-fn array_path(json_path: &Path, dir: &Path, file: &str) -> Result<PathBuf, PlanError> {
+/// `what` ("" or "prior ") names the map the file belongs to in the error.
+fn array_path(json_path: &Path, dir: &Path, file: &str, what: &str) -> Result<PathBuf, PlanError> {
     let relative = Path::new(file);
     let inside = !file.is_empty()
         && relative
@@ -517,7 +625,9 @@ fn array_path(json_path: &Path, dir: &Path, file: &str) -> Result<PathBuf, PlanE
     } else {
         Err(format_error(
             json_path,
-            format!("array file {file:?} must be a relative path inside the sidecar's directory"),
+            format!(
+                "{what}array file {file:?} must be a relative path inside the sidecar's directory"
+            ),
         ))
     }
 }

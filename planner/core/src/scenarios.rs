@@ -1,4 +1,5 @@
-//! The paper's three test terrains, generated deterministically from a seed.
+//! The paper's three test terrains and the `surprise` terrain, generated deterministically from a
+//! seed.
 //!
 //! All are 16 m × 16 m at 0.125 m resolution (128 × 128 cells), heights in metres ≥ 0 so that
 //! they can double as the physics terrain. The gentle background undulation is a sum of seeded
@@ -13,6 +14,16 @@
 //! - `c_shape`: a 2.2 m ridge shaped like a C whose opening faces the start; the goal lies behind
 //!   the closed side, so a greedy (Euclidean-heuristic) search walks into the C and has to climb
 //!   over the ridge, while the optimum walks around it.
+//!
+//! Not one of the paper's ([`SCENARIO_NAMES`]), but accepted by [`by_name`]
+//! ([`EXTRA_SCENARIO_NAMES`]):
+//!
+//! - `surprise`: the only scenario with a *prior* map (what the robot is told before it moves).
+//!   Gentle ground with a shallow valley from the start to the goal, so on the prior the direct
+//!   route is the optimum; the true map has a trench of hard obstacles across that route, at least
+//!   4 m from the start (a 3 m height sensor sees it only after walking), which the prior shows as
+//!   flat ground. The way around one of its ends is walkable (slopes ≤ 10°, gaps of ≥ 3 m to
+//!   the map's edge) and costs noticeably more than the prior's direct route.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -23,8 +34,15 @@ use crate::io::MapScenario;
 use crate::map::{GridMap, Point};
 use crate::traversability::TraversabilityParams;
 
-/// Names accepted by [`by_name`].
+/// The paper's scenarios: what `pf-plan scenario list` and the demo use.
 pub const SCENARIO_NAMES: [&str; 3] = ["mountain_pass", "pits", "c_shape"];
+/// Further scenarios accepted by [`by_name`] (`pf-plan scenario list --all` adds them).
+pub const EXTRA_SCENARIO_NAMES: [&str; 1] = ["surprise"];
+
+/// Every name accepted by [`by_name`]: the paper's first.
+pub fn all_names() -> impl Iterator<Item = &'static str> {
+    SCENARIO_NAMES.into_iter().chain(EXTRA_SCENARIO_NAMES)
+}
 
 /// Side of every scenario map, metres.
 pub const SIDE_M: f64 = 16.0;
@@ -32,6 +50,9 @@ pub const SIDE_M: f64 = 16.0;
 pub const CELLS: usize = 128;
 /// Slope bound of the background undulation, degrees.
 const BACKGROUND_SLOPE_DEG: f64 = 6.0;
+/// `surprise`: slope bound of its background undulation and slope of its valley's sides, degrees.
+const SURPRISE_BACKGROUND_SLOPE_DEG: f64 = 4.0;
+const SURPRISE_VALLEY_SLOPE_DEG: f64 = 6.0;
 
 /// Default seed of each scenario (what `pf-plan` uses unless told otherwise).
 pub fn default_seed(name: &str) -> Option<u64> {
@@ -39,6 +60,7 @@ pub fn default_seed(name: &str) -> Option<u64> {
         "mountain_pass" => Some(1),
         "pits" => Some(2),
         "c_shape" => Some(3),
+        "surprise" => Some(4),
         _ => None,
     }
 }
@@ -55,9 +77,10 @@ pub fn with_seed(name: &str, seed: u64) -> Result<MapScenario, PlanError> {
         "mountain_pass" => mountain_pass(seed),
         "pits" => pits(seed),
         "c_shape" => c_shape(seed),
+        "surprise" => surprise(seed),
         _ => return Err(unknown(name)),
     };
-    scenario.map.validate()?;
+    scenario.validate()?;
     Ok(scenario)
 }
 
@@ -66,7 +89,7 @@ fn unknown(name: &str) -> PlanError {
         name: "scenario",
         reason: format!(
             "unknown scenario {name:?}; known: {}",
-            SCENARIO_NAMES.join(", ")
+            all_names().collect::<Vec<_>>().join(", ")
         ),
     }
 }
@@ -155,6 +178,7 @@ fn build(
         start_yaw,
         goal,
         traversability: TraversabilityParams::default(),
+        prior: None,
     }
 }
 
@@ -343,21 +367,212 @@ pub fn c_shape(seed: u64) -> MapScenario {
     )
 }
 
+/// Gentle valley from start to goal; on the true map a trench of hard obstacles crosses it, on
+/// the prior (what the robot is told) the ground there is flat.
+pub fn surprise(seed: u64) -> MapScenario {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let background = Undulation::new(&mut rng, 10, 3.0, 8.0, SURPRISE_BACKGROUND_SLOPE_DEG);
+    let valley_y = 0.5 * SIDE_M + rng.random_range(-0.5..0.5);
+    // The trench: a capsule (a segment of half-width `half_width`) crossing the valley at
+    // x = `trench_x`, tilted by up to 15° from the valley's normal, reaching 3–4 m to each side.
+    let trench_x = rng.random_range(7.5..9.0);
+    let tilt = rng.random_range(-15f64..15.0).to_radians();
+    let (below, above) = (rng.random_range(3.0..4.0), rng.random_range(3.0..4.0));
+    let along = [tilt.sin(), tilt.cos()];
+    let ends = [
+        [trench_x - below * along[0], valley_y - below * along[1]],
+        [trench_x + above * along[0], valley_y + above * along[1]],
+    ];
+    let half_width = 0.5;
+    let trench_distance = move |p: Point| {
+        let (a, b) = (ends[0], ends[1]);
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let t = (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / (ab[0] * ab[0] + ab[1] * ab[1]))
+            .clamp(0.0, 1.0);
+        (p[0] - a[0] - t * ab[0]).hypot(p[1] - a[1] - t * ab[1])
+    };
+    // The valley: a rounded V rising at `SURPRISE_VALLEY_SLOPE_DEG` away from y = valley_y.
+    let valley_slope = SURPRISE_VALLEY_SLOPE_DEG.to_radians().tan();
+    let valley_round = 0.5;
+    let ground = |p: Point| {
+        let d = p[1] - valley_y;
+        0.1 + background.amplitude()
+            + background.at(p)
+            + valley_slope * (d.hypot(valley_round) - valley_round)
+    };
+    let (wall, bottom) = (0.3, 0.02);
+    let prior_heights = sample(ground);
+    let heights = sample(|p| {
+        let g = ground(p);
+        let d = trench_distance(p);
+        if d < half_width {
+            g + (bottom - g) * ((half_width - d) / wall).min(1.0)
+        } else {
+            g
+        }
+    });
+    let res = SIDE_M / CELLS as f64;
+    let obstacles = (0..CELLS * CELLS)
+        .map(|i| {
+            let p = [
+                ((i % CELLS) as f64 + 0.5) * res,
+                ((i / CELLS) as f64 + 0.5) * res,
+            ];
+            trench_distance(p) < half_width
+        })
+        .collect();
+    // p = h / h_max with h_max fixed to the prior's highest cell (the trench only lowers the
+    // ground, so that is the true map's too): a cell costs the same on both maps wherever they
+    // agree, and what a robot learns while walking never rescales the rest of the map.
+    let h_max = prior_heights.iter().copied().fold(0.0, f64::max);
+    let start = [1.5, valley_y];
+    let mut scenario = build(
+        "surprise",
+        seed,
+        heights,
+        Some(obstacles),
+        start,
+        0.0,
+        GoalRegion {
+            center: [SIDE_M - 1.5, valley_y],
+            radius: 0.5,
+        },
+    );
+    scenario.traversability.h_max = Some(h_max);
+    let map = &scenario.map;
+    scenario.prior = Some(GridMap {
+        origin: map.origin,
+        resolution: map.resolution,
+        width: map.width,
+        height: map.height,
+        heights: prior_heights,
+        obstacles: None,
+    });
+    scenario
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    use crate::graph::{dijkstra_path, Connectivity, GraphPath};
+    use crate::grid::PlanningGrid;
+    use crate::metrics::{clearance, evaluate_path, PathMetrics};
+    use crate::traversability::TraversabilityField;
+
     #[test]
     fn same_seed_same_map_other_seed_other_map() {
-        for name in SCENARIO_NAMES {
+        for name in all_names() {
             let a = by_name(name).expect("scenario");
             let b = by_name(name).expect("scenario");
             assert_eq!(a, b, "{name} is not deterministic");
             let c = with_seed(name, 1234).expect("scenario");
             assert_ne!(a.map.heights, c.map.heights, "{name} ignores its seed");
             assert!(a.map.heights.iter().all(|&h| h >= 0.0));
+            // Only `surprise` carries a prior; it differs with the seed like the true map.
+            assert_eq!(a.prior.is_some(), name == "surprise", "{name}");
+            if let (Some(pa), Some(pc)) = (&a.prior, &c.prior) {
+                assert_ne!(pa.heights, pc.heights, "{name}'s prior ignores its seed");
+            }
         }
-        assert!(by_name("volcano").is_err());
+        assert_eq!(default_seed("surprise"), Some(4));
+        assert!(!SCENARIO_NAMES.contains(&"surprise"));
+        let err = by_name("volcano").unwrap_err().to_string();
+        assert!(err.contains("surprise"), "{err}");
+    }
+
+    /// Dijkstra at the map's own resolution (8 directions) on `map` with the scenario's model.
+    fn optimum(s: &MapScenario, map: &GridMap) -> GraphPath {
+        let grid = PlanningGrid::from_map(map, &s.traversability, CELLS).expect("grid");
+        dijkstra_path(&grid, s.start, &s.goal, Connectivity::Eight).expect("path")
+    }
+
+    fn measure(s: &MapScenario, map: &GridMap, path: &[Point]) -> PathMetrics {
+        let field = TraversabilityField::from_map(map, &s.traversability).expect("field");
+        evaluate_path(map, &field, path)
+    }
+
+    /// The surprise's defining property, for its default seed and a few others: on the prior the
+    /// optimum is the direct route along the valley; on the true map that route crosses the trench
+    /// and the true optimum (a walkable detour) costs noticeably more.
+    #[test]
+    fn surprise_prior_optimum_is_the_direct_route_which_the_true_map_blocks() {
+        for seed in [4, 5, 6, 7, 8] {
+            let s = with_seed("surprise", seed).expect("scenario");
+            let prior = s.prior.as_ref().expect("surprise has a prior");
+            let on_prior = optimum(&s, prior);
+            let off_line = on_prior
+                .points
+                .iter()
+                .map(|p| (p[1] - s.start[1]).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                off_line <= 0.5,
+                "seed {seed}: the prior's optimum strays {off_line:.2} m from the direct line"
+            );
+            let crossing = measure(&s, &s.map, &on_prior.points);
+            assert!(
+                crossing.length_in_obstacles >= 0.5,
+                "seed {seed}: the prior's route crosses only {:.2} m of the trench",
+                crossing.length_in_obstacles
+            );
+            let on_true = optimum(&s, &s.map);
+            assert!(
+                on_true.cost > 1.5 * on_prior.cost,
+                "seed {seed}: true optimum {:.4} vs the prior's route {:.4}",
+                on_true.cost,
+                on_prior.cost
+            );
+            assert_eq!(
+                measure(&s, &s.map, &on_true.points).length_in_obstacles,
+                0.0
+            );
+            // Walkable with the co-simulation's footprint (0.25 m): gentle all the way round.
+            let mut robot = s.clone();
+            robot.traversability.footprint_radius_m = 0.25;
+            let walked = measure(&robot, &s.map, &optimum(&robot, &s.map).points);
+            assert_eq!(walked.length_in_obstacles, 0.0, "seed {seed}");
+            assert!(
+                walked.max_slope_deg <= 12.0,
+                "seed {seed}: the detour climbs {:.1}°",
+                walked.max_slope_deg
+            );
+        }
+    }
+
+    #[test]
+    fn surprise_trench_is_out_of_sensor_range_at_the_start_and_can_be_walked_around() {
+        for seed in [4, 5, 6, 7, 8, 1234] {
+            let s = with_seed("surprise", seed).expect("scenario");
+            let prior = s.prior.as_ref().expect("prior");
+            let to_trench = clearance(&s.map, s.start);
+            assert!(
+                to_trench >= 4.0,
+                "seed {seed}: the trench is {to_trench:.2} m from the start"
+            );
+            assert!(clearance(&s.map, s.goal.center) >= 2.0, "seed {seed}");
+            // The prior shows no trench: no obstacles, and the true map differs only inside it
+            // (where it is lower).
+            let mask = s.map.obstacles.as_ref().expect("the trench is an obstacle");
+            assert!(prior.obstacles.is_none());
+            let mut rows_blocked = Vec::new();
+            for (i, (&h, &hp)) in s.map.heights.iter().zip(&prior.heights).enumerate() {
+                if mask[i] {
+                    assert!(h < hp, "seed {seed}: the trench lowers the ground");
+                    rows_blocked.push(i / s.map.width);
+                } else {
+                    assert_eq!(h, hp, "seed {seed}: cell {i} differs outside the trench");
+                }
+            }
+            // Gaps of at least 1.5 m between the trench's ends and the map's edges.
+            let res = s.map.resolution;
+            let low = *rows_blocked.iter().min().expect("trench") as f64 * res;
+            let high = (*rows_blocked.iter().max().expect("trench") + 1) as f64 * res;
+            assert!(
+                low >= 1.5 && SIDE_M - high >= 1.5,
+                "seed {seed}: trench spans y {low:.2}..{high:.2}"
+            );
+        }
     }
 
     #[test]

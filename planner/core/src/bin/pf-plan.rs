@@ -72,9 +72,10 @@ enum Command {
 
 #[derive(Subcommand)]
 enum ScenarioCommand {
-    /// Write DIR/NAME.json, DIR/NAME.heights.npy and (with obstacles) DIR/NAME.obstacles.npy.
+    /// Write DIR/NAME.json, DIR/NAME.heights.npy, (with obstacles) DIR/NAME.obstacles.npy and
+    /// (with a prior map) DIR/NAME.prior.heights.npy [+ DIR/NAME.prior.obstacles.npy].
     Export {
-        /// mountain_pass, pits or c_shape.
+        /// mountain_pass, pits, c_shape (the paper's) or surprise (has a prior map).
         name: String,
         /// Output directory.
         #[arg(long, default_value = ".")]
@@ -83,11 +84,15 @@ enum ScenarioCommand {
         #[arg(long)]
         seed: Option<u64>,
     },
-    /// The built-in scenarios, one name a line; with --json their start, goal, seed and map size.
+    /// The paper's scenarios, one name a line; with --json their start, goal, seed, map size and
+    /// whether they have a prior map.
     List {
         /// One JSON array of objects instead of names.
         #[arg(long)]
         json: bool,
+        /// Every built-in scenario, not only the paper's (adds surprise, which has a prior map).
+        #[arg(long)]
+        all: bool,
     },
 }
 
@@ -230,8 +235,8 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Scenario {
-            command: ScenarioCommand::List { json },
-        } => list_scenarios(json),
+            command: ScenarioCommand::List { json, all },
+        } => list_scenarios(json, all),
         Command::PathCost(args) => run_path_cost(&args),
         Command::Traversability(args) => {
             let (_, field) = args.map.field()?;
@@ -255,17 +260,24 @@ fn emit(line: &str) -> Result<()> {
         .context("writing to standard output")
 }
 
-fn list_scenarios(json: bool) -> Result<()> {
+/// The paper's scenarios (`all`: every built-in one), one name a line or as JSON objects.
+fn list_scenarios(json: bool, all: bool) -> Result<()> {
+    let names: Vec<&str> = if all {
+        scenarios::all_names().collect()
+    } else {
+        SCENARIO_NAMES.to_vec()
+    };
     if !json {
-        return emit(&SCENARIO_NAMES.join("\n"));
+        return emit(&names.join("\n"));
     }
     let mut list = Vec::new();
-    for name in SCENARIO_NAMES {
+    for name in names {
         let s = scenarios::by_name(name)?;
         list.push(json!({
             "name": s.name, "seed": s.seed, "start": s.start, "start_yaw": s.start_yaw,
             "goal": s.goal, "origin": s.map.origin, "resolution": s.map.resolution,
             "width": s.map.width, "height": s.map.height, "traversability": s.traversability,
+            "paper": SCENARIO_NAMES.contains(&name), "prior": s.prior.is_some(),
         }));
     }
     emit(&serde_json::to_string_pretty(&list)?)

@@ -119,3 +119,105 @@ fn a_sidecar_claiming_a_map_above_the_limit_is_refused_before_its_arrays_are_rea
         .to_string();
     assert!(err.contains("not a map sidecar"), "{err}");
 }
+
+#[test]
+fn a_scenario_with_a_prior_round_trips_and_one_without_writes_no_prior_key() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let surprise = crate::scenarios::by_name("surprise").expect("scenario");
+    assert!(surprise.prior.is_some());
+    let json = save_scenario(&surprise, dir.path()).expect("save");
+    assert!(dir.path().join("surprise.prior.heights.npy").is_file());
+    assert!(!dir.path().join("surprise.prior.obstacles.npy").exists());
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(&json).expect("read")).expect("json");
+    assert_eq!(
+        sidecar["prior"],
+        serde_json::json!({"heights": "surprise.prior.heights.npy", "obstacles": null})
+    );
+    assert_eq!(load_scenario(&json).expect("load"), surprise);
+
+    // A sidecar without a prior (every sidecar written before priors existed) has no such key
+    // and reads back without one.
+    let c_shape = crate::scenarios::by_name("c_shape").expect("scenario");
+    let json = save_scenario(&c_shape, dir.path()).expect("save");
+    let text = fs::read_to_string(&json).expect("read");
+    assert!(!text.contains("prior"), "{text}");
+    let loaded = load_scenario(&json).expect("load");
+    assert_eq!(loaded.prior, None);
+    assert_eq!(loaded, c_shape);
+}
+
+#[test]
+fn a_prior_with_obstacles_round_trips() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scenario = crate::scenarios::by_name("surprise").expect("scenario");
+    let prior = scenario.prior.as_mut().expect("prior");
+    let mut mask = vec![false; prior.len()];
+    mask[7] = true;
+    prior.obstacles = Some(mask);
+    let json = save_scenario(&scenario, dir.path()).expect("save");
+    assert!(dir.path().join("surprise.prior.obstacles.npy").is_file());
+    assert_eq!(load_scenario(&json).expect("load"), scenario);
+}
+
+#[test]
+fn a_prior_of_another_shape_or_outside_the_sidecar_directory_is_refused_with_a_reason() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scenario = crate::scenarios::by_name("surprise").expect("scenario");
+    let (w, h) = (scenario.map.width, scenario.map.height);
+    let json = save_scenario(&scenario, dir.path()).expect("save");
+    let prior_file = dir.path().join("surprise.prior.heights.npy");
+
+    write_npy_f64(&prior_file, (h / 2, w), &vec![0.5; h / 2 * w]).expect("write");
+    let err = load_scenario(&json).unwrap_err().to_string();
+    assert!(
+        err.contains(
+            "prior array shape (64, 128) does not match the sidecar's (height, width) = (128, 128)"
+        ),
+        "{err}"
+    );
+    write_npy_f64(&prior_file, (w, h), &vec![f64::NAN; w * h]).expect("write");
+    assert!(load_scenario(&json).is_err(), "a prior with NaN heights");
+
+    let text = fs::read_to_string(&json).expect("read");
+    let outside = dir.path().join("outside.npy");
+    fs::copy(dir.path().join("surprise.heights.npy"), &outside).expect("copy");
+    for bad in [
+        outside.display().to_string(),
+        "../surprise.prior.heights.npy".to_owned(),
+    ] {
+        let edited = text.replace(
+            "\"surprise.prior.heights.npy\"",
+            &serde_json::to_string(&bad).expect("json"),
+        );
+        assert_ne!(edited, text);
+        fs::write(&json, edited).expect("write");
+        let err = load_scenario(&json).unwrap_err().to_string();
+        assert!(
+            err.contains("prior array file") && err.contains("must be a relative path inside"),
+            "{bad}: {err}"
+        );
+    }
+    let edited = text.replace(
+        "\"obstacles\": null\n  }",
+        "\"obstacles\": null, \"extra\": 1\n  }",
+    );
+    assert_ne!(edited, text);
+    fs::write(&json, edited).expect("write");
+    let err = load_scenario(&json).unwrap_err().to_string();
+    assert!(err.contains("unknown field `extra`"), "{err}");
+}
+
+#[test]
+fn a_prior_of_other_geometry_is_not_saved() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scenario = crate::scenarios::by_name("surprise").expect("scenario");
+    if let Some(prior) = scenario.prior.as_mut() {
+        prior.resolution *= 2.0;
+    }
+    let err = save_scenario(&scenario, dir.path())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("must have the true map's geometry"), "{err}");
+    assert!(!dir.path().join("surprise.json").exists());
+}
