@@ -14,11 +14,13 @@ from typing import TYPE_CHECKING
 
 from . import paths
 from .errors import HarnessError
-from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, Plan, PlannerClient
+from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
 from .scenario import paper_scenario_names
 
 if TYPE_CHECKING:
     from .cosim import CoSimConfig
+    from .online import OnlineConfig
+    from .pushes import PushSchedule
     from .report import RunRecord
     from .scenario import Scenario
 
@@ -69,6 +71,29 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retries", type=int, default=2, help="plan request retries after a timeout (default 2)")
     p.add_argument("--lcm-log", action="store_true", help="also write OUT/logs/SCENARIO_METHOD.lcmlog (robot state, 100 Hz) for lcm-logplayer")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--follow",
+        choices=("trajectory", "feedback"),
+        default=None,
+        help="trajectory: track the plan's time-indexed reference (default offline); feedback: velocity and heading from the "
+        "P-F feedback field at the robot's current position (default online)",
+    )
+    p.add_argument("--online", action="store_true", help="sense the terrain while walking, publish map updates and replan (P-F: feedback mode)")
+    p.add_argument("--sensor-range", type=float, default=3.0, help="online: height sensor range around the base, m (default 3)")
+    p.add_argument("--unknown-traversability", type=float, default=0.5, help="online: traversability p of unseen cells, in (0, 1] (default 0.5)")
+    p.add_argument("--update-period", type=float, default=0.5, help="online: simulated seconds between map updates (default 0.5 = 2 Hz)")
+    p.add_argument("--replan-budget", type=float, default=0.2, help="online: simulated seconds from a map update to its plan in use (default 0.2)")
+    p.add_argument(
+        "--bad-map-updates",
+        default="",
+        help="online robustness check: comma-separated broken updates (nan, shape, stale) sent instead of regular ones",
+    )
+    p.add_argument("--push", action="append", default=[], help="force on the trunk: MAG@DIR:START+DURATION (N, degrees or 'side', walk-clock s); repeatable")
+    p.add_argument("--random-pushes", type=int, default=0, help="this many seeded random pushes (see --push-seed, --push-magnitude)")
+    p.add_argument("--push-seed", type=int, default=0, help="seed of --random-pushes (default 0)")
+    p.add_argument("--push-magnitude", type=float, default=60.0, help="force of --random-pushes, N (default 60)")
+    p.add_argument("--push-duration", type=float, default=0.2, help="duration of --random-pushes, s (default 0.2)")
+    p.add_argument("--push-window", default="2,10", help="walk-clock window A,B of the random push start times, s (default 2,10)")
     p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
 
 
@@ -100,33 +125,83 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
         raise HarnessError(f"--duration must be positive, got {duration}")
     if not (math.isfinite(args.footprint_radius) and args.footprint_radius >= 0.0):
         raise HarnessError(f"--footprint-radius must be finite and >= 0, got {args.footprint_radius}")
-    return CoSimConfig(comm_step=args.comm_step, max_duration=duration, fall=FallThresholds())
+    follow = args.follow or ("feedback" if args.online else "trajectory")
+    return CoSimConfig(comm_step=args.comm_step, max_duration=duration, fall=FallThresholds(), follow=follow, pushes=_pushes(args))
 
 
-def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods: Sequence[str], out: Path) -> dict[str, dict[str, Plan]]:
+def _pushes(args: argparse.Namespace) -> PushSchedule | None:
+    from .pushes import PushSchedule, parse_push, random_pushes
+
+    pushes = [parse_push(text) for text in args.push]
+    if args.random_pushes < 0:
+        raise HarnessError(f"--random-pushes must be >= 0, got {args.random_pushes}")
+    if args.random_pushes:
+        try:
+            first, last = (float(v) for v in args.push_window.split(","))
+        except ValueError as err:
+            raise HarnessError(f"--push-window must be two numbers A,B, got {args.push_window!r}") from err
+        pushes.extend(random_pushes(args.push_seed, args.random_pushes, args.push_magnitude, args.push_duration, (first, last)).pushes)
+    return PushSchedule(pushes) if pushes else None
+
+
+def _online_config(args: argparse.Namespace) -> OnlineConfig:
+    from .errors import SimulationError
+    from .online import OnlineConfig
+    from .sensing import SensorConfig
+
+    config = OnlineConfig(
+        sensor=SensorConfig(range_m=args.sensor_range, unknown_traversability=args.unknown_traversability),
+        update_period=args.update_period,
+        apply_delay=args.replan_budget,
+        method=args.method if args.command == "run" else "pf",
+        options=_request_options(args),
+        bad_updates=tuple(k.strip() for k in args.bad_map_updates.split(",") if k.strip()),
+    )
+    try:
+        config.validate()
+    except SimulationError as err:
+        raise HarnessError(str(err)) from err
+    return config
+
+
+def _request_options(args: argparse.Namespace) -> RequestOptions:
+    return RequestOptions(speed=args.speed, max_solve_time=args.max_solve_time)
+
+
+def _client(args: argparse.Namespace, out: Path) -> PlannerClient:
     binary = None if args.connect else paths.planner_service_path()
-    plans: dict[str, dict[str, Plan]] = {}
-    log = out / "logs" / "pf-planner-service.log"
-    with PlannerClient(
-        args.lcm_url, args.channel_prefix, binary, service_log=log, startup_timeout=args.service_timeout, footprint_radius=args.footprint_radius
-    ) as client:
-        if args.connect:
-            client.wait_for_service(timeout=args.service_timeout)
+    client = PlannerClient(
+        args.lcm_url,
+        args.channel_prefix,
+        binary,
+        service_log=out / "logs" / "pf-planner-service.log",
+        startup_timeout=args.service_timeout,
+        footprint_radius=args.footprint_radius,
+    )
+    if args.connect:
+        client.wait_for_service(timeout=args.service_timeout)
+    return client
+
+
+def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods: Sequence[str], out: Path) -> dict[str, dict[str, PlanAnswer]]:
+    answers: dict[str, dict[str, PlanAnswer]] = {}
+    with _client(args, out) as client:
         for name, scenario in scenarios.items():
             seq = client.publish_map(scenario.terrain)
-            plans[name] = {}
+            answers[name] = {}
             for method in methods:
                 print(f"planning {name} with {method} ...", file=sys.stderr, flush=True)
-                plans[name][method] = client.request_plan(
-                    scenario,
+                answers[name][method] = client.request_answer(
+                    StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw),
+                    scenario.goal,
                     method,
                     seq,
-                    speed=args.speed,
+                    _request_options(args),
                     timeout=args.plan_timeout,
                     retries=args.retries,
-                    max_solve_time=args.max_solve_time,
+                    context=f"'{name}'",
                 )
-    return plans
+    return answers
 
 
 def _summary_line(rec: RunRecord) -> str:
@@ -159,17 +234,20 @@ def execute(args: argparse.Namespace) -> int:
     pf_plan = paths.pf_plan_path()
 
     from .metrics import TraversabilityField
-    from .pipeline import export_scenario, simulate
+    from .pipeline import export_scenario, run_label, simulate, simulate_online
     from .report import write_report
 
     config = _config(args)
+    if config.follow == "feedback" and any(m != "pf" for m in methods):
+        raise HarnessError("feedback mode follows the P-F feedback field: use --method pf (graph planners give only a path)")
+    online_config = _online_config(args) if args.online else None
     scenarios = {name: export_scenario(pf_plan, name, out / "scenarios") for name in names}
     if not args.connect:
         # ∫p ds on the field the started service plans with (a running service's is unknown).
         for scenario in scenarios.values():
             scenario.traversability["footprint_radius_m"] = args.footprint_radius
     _check_lcm_url(args.lcm_url, args.allow_host_network)
-    plans = _plan_all(args, scenarios, methods, out)
+    answers = {} if online_config is not None else _plan_all(args, scenarios, methods, out)
     plan_time = time.perf_counter() - started
 
     runs: dict[str, list[RunRecord]] = {}
@@ -178,8 +256,29 @@ def execute(args: argparse.Namespace) -> int:
         field = TraversabilityField(scenario.terrain, scenario.traversability)
         runs[name] = []
         for method in methods:
-            log_file = out / "logs" / f"{name}_{method}.npz"
-            outcome = simulate(scenario, plans[name][method], fmu, urdf, out / "cache", config, log_file, not args.no_progress, field)
+            label = run_label(method, config, online_config is not None)
+            log_file = out / "logs" / f"{name}_{label}.npz"
+            if online_config is not None:
+                with _client(args, out) as client:
+                    outcome = simulate_online(
+                        client,
+                        scenario,
+                        fmu,
+                        urdf,
+                        out / "cache",
+                        config,
+                        online_config,
+                        args.plan_timeout,
+                        args.retries,
+                        log_file,
+                        not args.no_progress,
+                        field,
+                    )
+            else:
+                answer = answers[name][method]
+                outcome = simulate(
+                    scenario, answer.plan_or_raise(method), fmu, urdf, out / "cache", config, log_file, not args.no_progress, field, feedback_field=answer.field
+                )
             rec = outcome.record(str(log_file.relative_to(out)))
             runs[name].append(rec)
             line = _summary_line(rec)
@@ -208,7 +307,13 @@ def execute(args: argparse.Namespace) -> int:
         json.dumps(
             {
                 "runs": [
-                    {**r.metrics.as_dict(), "wall_seconds": r.wall_seconds, "timing_per_sim_second": r.timing_per_sim_second, "stop_reason": r.stop_reason}
+                    {
+                        **r.metrics.as_dict(),
+                        "wall_seconds": r.wall_seconds,
+                        "timing_per_sim_second": r.timing_per_sim_second,
+                        "stop_reason": r.stop_reason,
+                        **({"online": r.online.as_dict()} if r.online is not None else {}),
+                    }
                     for rs in runs.values()
                     for r in rs
                 ],

@@ -19,9 +19,13 @@ from numpy.typing import NDArray
 
 from . import fmu_runner as fr
 from .errors import SimulationError
+from .feedback_field import FeedbackField
 from .metrics import FallThresholds
+from .online import OnlineNavigator
 from .planner_client import Plan
-from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, ReferenceTrajectory, X, Y
+from .pushes import PushSchedule
+from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, X, Y
+from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
 from .scenario import Scenario
 from .world import NUM_JOINTS, QuadrupedWorld, quaternion_to_rpy
 
@@ -72,6 +76,14 @@ class CoSimConfig:
     fall: FallThresholds = field(default_factory=FallThresholds)
     # Hard cap on simulated time (None: stand + plan + settle).
     max_duration: float | None = None
+    # "trajectory": track the plan's time-indexed reference; "feedback": velocity and heading from
+    # the planner's feedback field at the robot's current position.
+    follow: str = "trajectory"
+    # Feedback mode has no plan clock: the walk may take this many times the plan's duration
+    # (plus 10 s) before the run ends without reaching the goal.
+    feedback_time_factor: float = 2.0
+    # Force impulses on the trunk (walk-clock times).
+    pushes: PushSchedule | None = None
 
     def validate(self) -> None:
         if not (self.physics_dt > 0 and math.isfinite(self.physics_dt)):
@@ -81,6 +93,8 @@ class CoSimConfig:
             raise SimulationError(f"the FMU communication step ({self.comm_step}) must be a positive multiple of the physics step ({self.physics_dt})")
         if self.stand_time < 0 or self.settle_time < 0:
             raise SimulationError("stand_time and settle_time must be >= 0")
+        if self.follow not in FOLLOW_MODES:
+            raise SimulationError(f"unknown follow mode '{self.follow}' (choose from {', '.join(FOLLOW_MODES)})")
 
 
 @dataclass
@@ -114,7 +128,7 @@ class RunResult:
 
 
 class CoSimulation:
-    """One run: one scenario, one plan, one FMU instance, one DART world."""
+    """One run: one scenario, one plan (or an online navigator that replans), one FMU instance, one DART world."""
 
     def __init__(
         self,
@@ -125,13 +139,28 @@ class CoSimulation:
         cache_dir: Path,
         config: CoSimConfig | None = None,
         controller: fr.ControllerFmu | None = None,
+        field: FeedbackField | None = None,
+        online: OnlineNavigator | None = None,
     ) -> None:
-        """`controller` replaces the FMU at `fmu_path` (tests use a Python stand-in with the same interface)."""
+        """`controller` replaces the FMU at `fmu_path` (tests use a Python stand-in with the same interface).
+
+        Feedback mode needs the plan's `field`; with `online` the navigator's replans replace the
+        plan (or field) while the robot walks.
+        """
         self.config = config or CoSimConfig()
         self.config.validate()
         self.scenario = scenario
         self.plan = plan
-        self.reference = ReferenceTrajectory(plan, scenario.terrain, self.config.plane_radius, self.config.heading_smoothing)
+        self.online = online
+        c = self.config
+        self.source: TrajectorySource | FieldSource
+        if c.follow == "feedback":
+            if field is None:
+                raise SimulationError("feedback mode needs the plan's feedback field (P-F plans carry one)")
+            start_yaw = float(plan.yaw[0]) if len(plan.yaw) else scenario.start_yaw
+            self.source = FieldSource(field, scenario.terrain, c.plane_radius, c.physics_dt, start_yaw)
+        else:
+            self.source = TrajectorySource(plan, scenario.terrain, c.plane_radius, c.heading_smoothing)
         self.world = QuadrupedWorld(scenario.terrain, urdf, cache_dir, self.config.physics_dt, self.config.friction)
         start_yaw = float(plan.yaw[0]) if len(plan.yaw) else scenario.start_yaw
         self.world.place(float(plan.x[0]), float(plan.y[0]), start_yaw)
@@ -153,7 +182,10 @@ class CoSimulation:
 
     def duration(self) -> float:
         c = self.config
-        total = c.stand_time + self.reference.duration + c.settle_time
+        walk = self.plan.duration
+        if c.follow == "feedback" or self.online is not None:
+            walk = c.feedback_time_factor * walk + 10.0
+        total = c.stand_time + walk + c.settle_time
         return min(total, c.max_duration) if c.max_duration is not None else total
 
     def run(self, progress: Progress | None = None) -> RunResult:
@@ -187,6 +219,12 @@ class CoSimulation:
         use_map = c.height_map
         ref_row = np.zeros(N_COLUMNS)
         torques = np.zeros(NUM_JOINTS)
+        source = self.source
+        online = self.online
+        pushes = c.pushes
+        push_force = np.zeros(3)
+        log_push = np.zeros((n_steps, 3)) if pushes is not None else None
+        goal_since: float | None = None
         timing = Timing()
         contacts_view = fmu.contacts_array
         perf = time.perf_counter
@@ -205,7 +243,24 @@ class CoSimulation:
                 stop_reason = f"physics state became non-finite at t={t:.3f} s"
                 break
             walking = t >= walk_start
-            self.reference.sample(t - walk_start if walking else 0.0, ref_row)
+            tau = t - walk_start
+            if online is not None and walking and k % ratio == 0:
+                answer = online.tick(tau, float(state[0]), float(state[1]), yaw_of(state[3:7]))
+                if answer is not None:
+                    if isinstance(source, FieldSource):
+                        assert answer.field is not None  # the navigator only passes on P-F answers with a field
+                        source.replace(answer.field)
+                    else:
+                        assert answer.plan is not None
+                        source.replace(answer.plan, online.replans[-1].t_publish)
+            source.sample(tau, state, walking, ref_row)
+            if pushes is not None and walking:
+                force = pushes.force_at(tau, yaw_of(state[3:7]))
+                if force is not None:
+                    push_force[:] = force
+                    world.apply_trunk_force(force)
+                    assert log_push is not None
+                    log_push[k] = push_force
             if k % ratio == 0:
                 input_values[ref_in] = ref_row[ref_columns]
                 input_values[body_height_in] = c.body_height
@@ -246,11 +301,20 @@ class CoSimulation:
             if fall_step is not None and (k - fall_step) * dt >= c.after_fall:
                 stop_reason = f"fell at t={fall_step * dt:.2f} s"
                 break
+            if source.finished:
+                goal_since = t if goal_since is None else goal_since
+                if t - goal_since >= c.settle_time:
+                    stop_reason = "completed: stood at the goal"
+                    break
+            else:
+                goal_since = None
             if progress is not None and k % progress_every == 0:
                 progress(t)
         else:
             k = n_steps
-        if fall_step is not None and stop_reason == "completed":
+        if online is not None:
+            online.finish()
+        if fall_step is not None and stop_reason.startswith("completed"):
             stop_reason = f"fell at t={fall_step * dt:.2f} s"
         n = min(k + 1, n_steps) if stop_reason != "completed" else n_steps
         timing.total = perf() - t_begin
@@ -274,8 +338,13 @@ class CoSimulation:
             "walk_start": np.array(walk_start),
             "comm_step": np.array(c.comm_step),
             "physics_dt": np.array(dt),
+            "follow": np.array(c.follow),
             **self.plan.to_npz_dict(),
         }
+        if log_push is not None:
+            log["push_force"] = log_push[:n]
+        if online is not None:
+            log.update(replan_log(online))
         return RunResult(self.scenario.name, self.plan.method, log, timing, stop_reason)
 
     def _fallen(self, state: NDArray[np.float64], min_height: float) -> bool:
@@ -286,6 +355,26 @@ class CoSimulation:
         roll, pitch, _ = quaternion_to_rpy(state[3:7])
         # Absolute tilt with margin for the slope the robot stands on (≤ ~15° on walkable routes).
         return abs(roll) > self.config.fall.max_roll + 0.3 or abs(pitch) > self.config.fall.max_pitch + 0.3
+
+
+def replan_log(online: OnlineNavigator) -> dict[str, NDArray[np.float64]]:
+    """The replans as flat arrays (npz-friendly): one row per map update, paths concatenated."""
+    replans = online.replans
+    lengths = np.array([len(r.path_x) for r in replans], dtype=np.int64)
+    nan = float("nan")
+    return {
+        "replan_t_publish": np.array([r.t_publish for r in replans]),
+        "replan_t_apply": np.array([nan if r.t_apply is None else r.t_apply for r in replans]),
+        "replan_latency": np.array([nan if r.service_latency is None else r.service_latency for r in replans]),
+        "replan_in_use": np.array([r.in_use for r in replans]),
+        "replan_kind": np.array([r.kind for r in replans]),
+        "replan_outcome": np.array([r.outcome for r in replans]),
+        "replan_changed_cells": np.array([r.changed_cells for r in replans], dtype=np.int64),
+        "replan_path_lengths": lengths,
+        "replan_path_x": np.concatenate([r.path_x for r in replans]) if replans else np.zeros(0),
+        "replan_path_y": np.concatenate([r.path_y for r in replans]) if replans else np.zeros(0),
+        "known_final": online.belief.known.copy(),
+    }
 
 
 def save_log(result: RunResult, path: Path) -> None:

@@ -188,6 +188,9 @@ class RunMetrics:
     planned_cost: float
     planned_length: float
     planner_cost: float | None
+    # Largest horizontal distance of the walked path from the plan's path (in feedback mode the
+    # reference is the robot's own position, so this, not the tracking error, says how far it strayed).
+    max_path_deviation: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -261,6 +264,8 @@ def compute_metrics(
 
     executed_cost, executed_length = path_cost(field, pos[walking, 0], pos[walking, 1])
     planned_cost, planned_length = path_cost(field, log["plan_x"], log["plan_y"])
+    walked = pos[walking][::10]
+    deviation = distance_to_polyline(walked[:, 0], walked[:, 1], np.asarray(log["plan_x"]), np.asarray(log["plan_y"]))
     return RunMetrics(
         scenario=scenario,
         method=method,
@@ -282,4 +287,87 @@ def compute_metrics(
         planned_cost=planned_cost,
         planned_length=planned_length,
         planner_cost=planner_cost,
+        max_path_deviation=float(deviation.max()) if len(deviation) else 0.0,
+    )
+
+
+@dataclass
+class OnlineMetrics:
+    """What online navigation adds to a run's metrics."""
+
+    map_updates: int
+    replans_in_use: int
+    # Why answers were not used (bad updates, lost fields, timeouts).
+    rejected: list[str]
+    # Map published → reply sent by the service, wall seconds, over the regular updates.
+    latency_p50: float | None
+    latency_p99: float | None
+    latency_max: float | None
+    # Simulated seconds the simulation allowed for a replan (a latency above it would have been late).
+    latency_budget: float
+    # Map updates per simulated second.
+    update_rate: float
+    # ∫p ds on the true map of the walked path and of the full-knowledge plan.
+    executed_cost: float
+    full_knowledge_cost: float
+    # Largest horizontal distance of the walked path from the first plan's path, m.
+    max_deviation: float
+    known_fraction: float
+    pushes: int
+
+    @property
+    def cost_ratio(self) -> float:
+        return self.executed_cost / self.full_knowledge_cost if self.full_knowledge_cost > 0 else math.inf
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "cost_ratio": self.cost_ratio}
+
+
+def distance_to_polyline(px: FloatArray, py: FloatArray, x: FloatArray, y: FloatArray) -> FloatArray:
+    """Horizontal distance of each point (px, py) to the polyline (x, y)."""
+    ax, ay = x[:-1], y[:-1]
+    dx, dy = np.diff(x), np.diff(y)
+    seg2 = np.maximum(dx * dx + dy * dy, 1e-18)
+    out = np.empty(len(px))
+    # Chunked so memory stays bounded on long runs (points × segments).
+    for start in range(0, len(px), 2048):
+        qx = px[start : start + 2048, None]
+        qy = py[start : start + 2048, None]
+        s = np.clip(((qx - ax) * dx + (qy - ay) * dy) / seg2, 0.0, 1.0)
+        d = np.hypot(qx - (ax + s * dx), qy - (ay + s * dy))
+        out[start : start + 2048] = d.min(axis=1)
+    return out
+
+
+def compute_online_metrics(log: dict[str, Any], replans: Any, field: TraversabilityField, full_plan: Any, config: Any) -> OnlineMetrics:
+    """Online figures of a run (`replans`: the navigator's `Replan` list; `full_plan`: the plan on the true map)."""
+    from .online import latency_summary
+
+    summary = latency_summary(replans)
+    t = log["t"]
+    walking = t >= float(log["walk_start"])
+    pos = log["base_pos"][walking]
+    executed_cost, _ = path_cost(field, pos[:, 0], pos[:, 1])
+    full_cost, _ = path_cost(field, full_plan.x, full_plan.y)
+    deviation = distance_to_polyline(pos[::10, 0], pos[::10, 1], np.asarray(log["plan_x"]), np.asarray(log["plan_y"]))
+    walk_time = float(t[walking][-1] - t[walking][0]) if np.any(walking) else 0.0
+    pushes = 0
+    if "push_force" in log:
+        active = np.any(log["push_force"] != 0.0, axis=1)
+        pushes = int(np.count_nonzero(active[1:] & ~active[:-1]) + int(active[0])) if len(active) else 0
+    known = log.get("known_final")
+    return OnlineMetrics(
+        map_updates=int(summary["map_updates"]),
+        replans_in_use=int(summary["replans_in_use"]),
+        rejected=[f"{r.kind} update seq {r.map_seq}: {r.outcome}" for r in replans if not r.in_use and r.outcome != "pending"],
+        latency_p50=summary.get("latency_p50"),
+        latency_p99=summary.get("latency_p99"),
+        latency_max=summary.get("latency_max"),
+        latency_budget=float(config.apply_delay),
+        update_rate=summary["map_updates"] / walk_time if walk_time > 0 else 0.0,
+        executed_cost=executed_cost,
+        full_knowledge_cost=full_cost,
+        max_deviation=float(np.max(deviation)) if len(deviation) else 0.0,
+        known_fraction=float(np.mean(known)) if known is not None else 1.0,
+        pushes=pushes,
     )

@@ -11,8 +11,10 @@ from tqdm import tqdm
 
 from .cosim import CoSimConfig, CoSimulation, RunResult, save_log
 from .errors import MissingArtifactError, ScenarioError
-from .metrics import RunMetrics, TraversabilityField, compute_metrics
-from .planner_client import Plan
+from .feedback_field import FeedbackField
+from .metrics import OnlineMetrics, RunMetrics, TraversabilityField, compute_metrics, compute_online_metrics
+from .online import OnlineConfig, OnlineNavigator, check_first_answer
+from .planner_client import Plan, PlannerClient, StartPose
 from .report import RunRecord
 from .scenario import Scenario, load_scenario
 from .state_log import write_state_log
@@ -49,6 +51,7 @@ class SimOutcome:
     result: RunResult
     metrics: RunMetrics
     wall_seconds: float
+    online: OnlineMetrics | None = None
 
     def record(self, log_file: str | None = None) -> RunRecord:
         return RunRecord(
@@ -58,7 +61,15 @@ class SimOutcome:
             timing_per_sim_second=self.result.timing.per_sim_second(),
             stop_reason=self.result.stop_reason,
             log_file=log_file,
+            online=self.online,
         )
+
+
+def run_label(method: str, config: CoSimConfig, online: bool) -> str:
+    """How a run is named in logs and the report: the method, plus the way its plan was followed."""
+    if online:
+        return f"{method}-online"
+    return f"{method}-feedback" if config.follow == "feedback" else method
 
 
 def simulate(
@@ -72,12 +83,15 @@ def simulate(
     show_progress: bool = True,
     field: TraversabilityField | None = None,
     lcm_log_path: Path | None = None,
+    feedback_field: FeedbackField | None = None,
+    online: OnlineNavigator | None = None,
 ) -> SimOutcome:
     """Co-simulates one plan and computes its metrics (optionally saving the npz log)."""
     start = time.perf_counter()
-    with CoSimulation(scenario, plan, fmu, urdf, cache_dir, config) as sim:
+    label = run_label(plan.method, config, online is not None)
+    with CoSimulation(scenario, plan, fmu, urdf, cache_dir, config, field=feedback_field, online=online) as sim:
         total = sim.duration()
-        desc = f"{scenario.name}/{plan.method}"
+        desc = f"{scenario.name}/{label}"
         with tqdm(
             total=round(total, 1),
             desc=desc,
@@ -101,7 +115,7 @@ def simulate(
         scenario.goal,
         field,
         scenario.name,
-        plan.method,
+        label,
         config.fall,
         planner_cost=plan.metrics.get("cost"),
     )
@@ -110,3 +124,36 @@ def simulate(
     if lcm_log_path is not None:
         write_state_log(result.log, lcm_log_path)
     return SimOutcome(result, metrics, wall)
+
+
+def simulate_online(
+    client: PlannerClient,
+    scenario: Scenario,
+    fmu: Path,
+    urdf: Path,
+    cache_dir: Path,
+    config: CoSimConfig,
+    online_config: OnlineConfig,
+    plan_timeout: float,
+    retries: int,
+    log_path: Path | None = None,
+    show_progress: bool = True,
+    field: TraversabilityField | None = None,
+) -> SimOutcome:
+    """Online navigation of one scenario: sense, replan, follow; compared with the full-knowledge plan."""
+    method = online_config.method
+    field = field or TraversabilityField(scenario.terrain, scenario.traversability)
+    # The full-knowledge optimum, for ∫p ds of the walked path against it.
+    seq = client.publish_map(scenario.terrain)
+    start = StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw)
+    full = client.request_answer(
+        start, scenario.goal, method, seq, online_config.options, timeout=plan_timeout, retries=retries, context=f"'{scenario.name}' (full knowledge)"
+    )
+    full_plan = full.plan_or_raise(method)
+    navigator = OnlineNavigator(client, scenario, online_config)
+    first = navigator.start(start.x, start.y, start.yaw, timeout=plan_timeout, retries=retries)
+    check_first_answer(first, method)
+    assert first.plan is not None
+    outcome = simulate(scenario, first.plan, fmu, urdf, cache_dir, config, log_path, show_progress, field, feedback_field=first.field, online=navigator)
+    outcome.online = compute_online_metrics(outcome.result.log, navigator.replans, field, full_plan, online_config)
+    return outcome

@@ -23,8 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import HarnessError, PlannerError
+from .feedback_field import FeedbackField
 from .paths import repo_root
-from .scenario import Scenario, Terrain
+from .scenario import GoalRegion, Scenario, Terrain
 
 DEFAULT_LCM_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304"
 DEFAULT_CHANNEL_PREFIX = "PFNAV_"
@@ -94,8 +95,58 @@ class Plan:
         return {f"{prefix}{name}": getattr(self, name) for name in ("t", "x", "y", "z", "yaw", "vx", "vy", "yaw_rate")}
 
 
-def terrain_map_message(terrain: Terrain, seq: int, utime: int | None = None) -> Any:
-    """The terrain as `pfnav.terrain_map_t` (heights row-major iy·width + ix, like the map)."""
+@dataclass(frozen=True)
+class StartPose:
+    x: float
+    y: float
+    yaw: float
+
+
+@dataclass(frozen=True)
+class RequestOptions:
+    """Planner settings of a request (0 = the service's default for each)."""
+
+    speed: float = 0.0
+    directions: int = 0
+    sample_period: float = 0.0
+    max_solve_time: float = 0.0
+
+
+@dataclass
+class PlanAnswer:
+    """The service's answer to one request: a plan (and its feedback field) or a status with the reason."""
+
+    request_id: int
+    status: int
+    error: str
+    plan: Plan | None
+    field: FeedbackField | None
+    # When the service sent the reply (its header utime, µs) and when it was read here (s, epoch).
+    reply_utime: int
+    received: float
+
+    @property
+    def ok(self) -> bool:
+        return self.plan is not None
+
+    def plan_or_raise(self, method: str) -> Plan:
+        if self.plan is None:
+            raise PlannerError(f"no {method} plan: status {self.status}: {self.error}")
+        return self.plan
+
+
+def terrain_map_message(
+    terrain: Terrain,
+    seq: int,
+    utime: int | None = None,
+    known: NDArray[np.bool_] | None = None,
+    unknown_traversability: float = 0.0,
+) -> Any:
+    """The terrain as `pfnav.terrain_map_t` (heights row-major iy·width + ix, like the map).
+
+    `known` marks the observed cells of a partially known map (None: every cell is known); the
+    planner gives the others `unknown_traversability` (0: its default).
+    """
     pfnav = _import_types()
     msg = pfnav.terrain_map_t()
     msg.header.utime = int(time.time() * 1e6) if utime is None else utime
@@ -114,6 +165,15 @@ def terrain_map_message(terrain: Terrain, seq: int, utime: int | None = None) ->
     else:
         msg.num_obstacle_cells = 0
         msg.obstacle_mask = []
+    if known is None:
+        msg.num_known_cells = 0
+        msg.known_mask = []
+    else:
+        if known.shape != terrain.shape:
+            raise PlannerError(f"known-cell mask shape {known.shape} differs from the map's {terrain.shape}")
+        msg.num_known_cells = nx * ny
+        msg.known_mask = [bool(v) for v in known.ravel()]
+    msg.unknown_traversability = float(unknown_traversability)
     return msg
 
 
@@ -167,14 +227,18 @@ class PlannerClient:
         except Exception as err:  # the lcm module raises a bare RuntimeError/IOError subclass
             raise PlannerError(f"cannot open LCM at {lcm_url}: {err} (udpm:// needs a multicast route: run inside scripts/netns.sh)") from err
         self._replies: dict[int, Any] = {}
+        self._fields: dict[int, Any] = {}
         self._status: Any = None
         self._status_count = 0
         self._next_request_id = int(time.time()) % 1_000_000 * 1000 + 1
-        self._map_seq = 0
+        # Map sequence numbers rise across client restarts too (milliseconds since the epoch), so a
+        # long-running service never takes a new client's first map for a stale update.
+        self._map_seq = time.time_ns() // 1_000_000
         self._published_map: Any = None
         self._subs = [
             self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply),
             self.lc.subscribe(self.prefix + "SERVICE_STATUS", self._on_status),
+            self.lc.subscribe(self.prefix + "FEEDBACK_FIELD", self._on_field),
         ]
         self.process: subprocess.Popen[bytes] | None = None
         self._service_log_path = service_log
@@ -189,6 +253,16 @@ class PlannerClient:
         except ValueError:
             return
         self._replies[int(reply.request_id)] = reply
+
+    def _on_field(self, _channel: str, data: bytes) -> None:
+        try:
+            message = self._pfnav.feedback_field_t.decode(data)
+        except ValueError:
+            return
+        self._fields[int(message.request_id)] = message
+        # Fields of requests nobody waits for any more must not pile up.
+        while len(self._fields) > 16:
+            self._fields.pop(next(iter(self._fields)))
 
     def _on_status(self, _channel: str, data: bytes) -> None:
         try:
@@ -277,16 +351,85 @@ class PlannerClient:
         self.close()
 
     # --- requests -----------------------------------------------------------------------------
-    def publish_map(self, terrain: Terrain) -> int:
+    def publish_map(self, terrain: Terrain, known: NDArray[np.bool_] | None = None, unknown_traversability: float = 0.0) -> int:
         """Publishes the terrain on `<prefix>MAP` with a new sequence number and returns it."""
-        self._map_seq += 1
-        self._published_map = terrain_map_message(terrain, self._map_seq)
+        seq = self.reserve_map_seq()
+        self._published_map = terrain_map_message(terrain, seq, known=known, unknown_traversability=unknown_traversability)
         self.lc.publish(self.prefix + "MAP", self._published_map.encode())
+        return seq
+
+    def reserve_map_seq(self) -> int:
+        """A new map sequence number (the next map published gets a higher one)."""
+        self._map_seq += 1
         return self._map_seq
+
+    def publish_raw_map(self, message: Any) -> None:
+        """Publishes a prepared `terrain_map_t` as is (tests of how the service treats bad updates)."""
+        self.lc.publish(self.prefix + "MAP", message.encode())
 
     def _republish_map(self) -> None:
         if self._published_map is not None:
             self.lc.publish(self.prefix + "MAP", self._published_map.encode())
+
+    def send_request(self, pose: StartPose, goal: GoalRegion, method: str, map_seq: int, options: RequestOptions | None = None) -> int:
+        """Publishes one plan request and returns its id without waiting for the answer."""
+        if method not in METHODS:
+            raise PlannerError(f"unknown planning method '{method}' (choose from {', '.join(METHODS)})")
+        options = options or RequestOptions()
+        pfnav = self._pfnav
+        request_id = self._next_request_id
+        self._next_request_id += 1
+        req = pfnav.plan_request_t()
+        req.header.utime = int(time.time() * 1e6)
+        req.header.seq = request_id
+        req.header.frame_id = "world"
+        req.request_id = request_id
+        req.num_inline_maps = 0
+        req.inline_map = []
+        req.map_seq = map_seq
+        req.start_x, req.start_y = pose.x, pose.y
+        req.start_yaw = pose.yaw
+        req.goal_x, req.goal_y = goal.center
+        req.goal_radius = goal.radius
+        req.method = METHODS.index(method)
+        req.options.directions = options.directions
+        req.options.speed = options.speed
+        req.options.sample_period = options.sample_period
+        req.options.max_solve_time = options.max_solve_time
+        self.lc.publish(self.prefix + "PLAN_REQUEST", req.encode())
+        return request_id
+
+    def await_answer(self, request_id: int, timeout: float) -> PlanAnswer | None:
+        """The service's answer to `request_id`, or None after `timeout` seconds of silence.
+
+        The feedback field of a P-F plan is published just before its reply; an answer whose
+        field was lost on the bus comes back with `field` None.
+        """
+        deadline = time.monotonic() + timeout
+        while request_id not in self._replies:
+            if self.process is not None and self.process.poll() is not None:
+                raise PlannerError(f"pf-planner-service died (exit code {self.process.returncode}){self._log_hint()}")
+            if time.monotonic() > deadline:
+                self._fields.pop(request_id, None)
+                return None
+            self._handle_for(0.05)
+        received = time.time()
+        reply = self._replies.pop(request_id)
+        field_message = self._fields.pop(request_id, None)
+        pfnav = self._pfnav
+        if reply.status != pfnav.plan_reply_t.STATUS_OK:
+            return PlanAnswer(request_id, int(reply.status), str(reply.error), None, None, int(reply.header.utime), received)
+        plan = plan_from_reply(reply)
+        field = None
+        if field_message is not None:
+            field = FeedbackField.from_message(field_message)
+            field.validate()
+        return PlanAnswer(request_id, int(reply.status), "", plan, field, int(reply.header.utime), received)
+
+    def status_is_retryable(self, status: int) -> bool:
+        """BUSY (queue full) and INVALID_MAP (the map may have been lost on the bus) are worth a retry."""
+        reply_type = self._pfnav.plan_reply_t
+        return status in (reply_type.STATUS_BUSY, reply_type.STATUS_INVALID_MAP)
 
     def request_plan(
         self,
@@ -300,54 +443,46 @@ class PlannerClient:
         retries: int = 3,
         max_solve_time: float = 0.0,
     ) -> Plan:
-        """Asks for a plan on the published map `map_seq`; retries on silence and on a lost map."""
-        if method not in METHODS:
-            raise PlannerError(f"unknown planning method '{method}' (choose from {', '.join(METHODS)})")
-        pfnav = self._pfnav
+        """Asks for a plan from the scenario's start on the published map `map_seq`; retries on silence and on a lost map."""
+        return self.request_answer(
+            StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw),
+            scenario.goal,
+            method,
+            map_seq,
+            RequestOptions(speed=speed, directions=directions, sample_period=sample_period, max_solve_time=max_solve_time),
+            timeout=timeout,
+            retries=retries,
+            context=f"'{scenario.name}'",
+        ).plan_or_raise(method)
+
+    def request_answer(
+        self,
+        pose: StartPose,
+        goal: GoalRegion,
+        method: str,
+        map_seq: int,
+        options: RequestOptions | None = None,
+        timeout: float = 60.0,
+        retries: int = 3,
+        context: str = "",
+    ) -> PlanAnswer:
+        """A successful answer for the request, retried on silence and on retryable statuses."""
         last_error = "no reply"
         for attempt in range(retries + 1):
-            request_id = self._next_request_id
-            self._next_request_id += 1
-            req = pfnav.plan_request_t()
-            req.header.utime = int(time.time() * 1e6)
-            req.header.seq = request_id
-            req.header.frame_id = "world"
-            req.request_id = request_id
-            req.num_inline_maps = 0
-            req.inline_map = []
-            req.map_seq = map_seq
-            req.start_x, req.start_y = scenario.start
-            req.start_yaw = scenario.start_yaw
-            req.goal_x, req.goal_y = scenario.goal.center
-            req.goal_radius = scenario.goal.radius
-            req.method = METHODS.index(method)
-            req.options.directions = directions
-            req.options.speed = speed
-            req.options.sample_period = sample_period
-            req.options.max_solve_time = max_solve_time
-            self.lc.publish(self.prefix + "PLAN_REQUEST", req.encode())
-            deadline = time.monotonic() + timeout
-            while request_id not in self._replies:
-                if self.process is not None and self.process.poll() is not None:
-                    raise PlannerError(f"pf-planner-service died (exit code {self.process.returncode}){self._log_hint()}")
-                if time.monotonic() > deadline:
-                    break
-                self._handle_for(0.1)
-            reply = self._replies.pop(request_id, None)
-            if reply is None:
+            request_id = self.send_request(pose, goal, method, map_seq, options)
+            answer = self.await_answer(request_id, timeout)
+            if answer is None:
                 last_error = f"no reply within {timeout:.0f} s"
                 self._republish_map()
                 continue
-            if reply.status == pfnav.plan_reply_t.STATUS_OK:
-                return plan_from_reply(reply)
-            retryable = (pfnav.plan_reply_t.STATUS_BUSY, pfnav.plan_reply_t.STATUS_INVALID_MAP)
-            last_error = f"status {reply.status}: {reply.error}"
-            if reply.status not in retryable:
+            if answer.ok:
+                return answer
+            last_error = f"status {answer.status}: {answer.error}"
+            if not self.status_is_retryable(answer.status):
                 break
-            # The map may have been lost on the bus (INVALID_MAP: unknown seq) or the queue full.
             self._republish_map()
             time.sleep(min(2.0, 0.2 * (attempt + 1)))
-        raise PlannerError(f"the planner gave no {method} plan for '{scenario.name}' after {retries + 1} attempt(s): {last_error}")
+        raise PlannerError(f"the planner gave no {method} plan for {context or 'the request'} after {retries + 1} attempt(s): {last_error}")
 
 
 def plan_scenario(

@@ -14,12 +14,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
-from .metrics import RunMetrics
+from .metrics import OnlineMetrics, RunMetrics
 from .scenario import Scenario
 from .world import LEGS
 
-METHOD_COLOURS = {"pf": "tab:red", "astar": "tab:blue", "dijkstra": "tab:green"}
-METHOD_LABELS = {"pf": "P-F", "astar": "A*", "dijkstra": "Dijkstra"}
+METHOD_COLOURS = {"pf": "tab:red", "astar": "tab:blue", "dijkstra": "tab:green", "pf-feedback": "tab:purple", "pf-online": "tab:orange"}
+METHOD_LABELS = {"pf": "P-F", "astar": "A*", "dijkstra": "Dijkstra", "pf-feedback": "P-F feedback", "pf-online": "P-F online"}
 
 
 @dataclass
@@ -32,6 +32,7 @@ class RunRecord:
     timing_per_sim_second: dict[str, float]
     stop_reason: str
     log_file: str | None = None
+    online: OnlineMetrics | None = None
 
 
 def _label(method: str) -> str:
@@ -214,7 +215,92 @@ def write_report(
             lines.append("")
             lines.append(f"![{name} {m.method} torques]({torque_png}) ![{name} {m.method} contacts]({contact_png})")
             lines.append("")
+    online_lines = online_section(scenarios, runs, out_dir)
+    lines.extend(online_lines)
     lines.extend(footer_lines)
     report = out_dir / "report.md"
     report.write_text("\n".join(lines) + "\n")
     return report
+
+
+def plot_replans(scenario: Scenario, run: RunRecord, path: Path) -> None:
+    """The walked path over the terrain, each replan's path overlaid (early light, late dark), unseen cells hatched."""
+    terrain = scenario.terrain
+    log = run.log
+    (x0, y0), (x1, y1) = terrain.bounds()
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    im = ax.imshow(terrain.heights, origin="lower", extent=(x0, x1, y0, y1), cmap="terrain", interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="terrain height [m]", shrink=0.8)
+    if terrain.obstacles is not None and terrain.obstacles.any():
+        mask = np.ma.masked_where(~terrain.obstacles, np.ones_like(terrain.heights))
+        ax.imshow(mask, origin="lower", extent=(x0, x1, y0, y1), cmap="Greys", vmin=0, vmax=1.2, alpha=0.8, interpolation="nearest")
+    if "known_final" in log:
+        unseen = np.ma.masked_where(np.asarray(log["known_final"], dtype=bool), np.ones_like(terrain.heights))
+        ax.imshow(unseen, origin="lower", extent=(x0, x1, y0, y1), cmap="Greys", vmin=0, vmax=3, alpha=0.35, interpolation="nearest")
+    lengths = np.asarray(log.get("replan_path_lengths", np.zeros(0, dtype=np.int64)), dtype=np.int64)
+    in_use = np.asarray(log.get("replan_in_use", np.zeros(len(lengths), dtype=bool)), dtype=bool)
+    xs, ys = np.asarray(log.get("replan_path_x", np.zeros(0))), np.asarray(log.get("replan_path_y", np.zeros(0)))
+    offsets = np.concatenate([[0], np.cumsum(lengths)])
+    cmap = plt.get_cmap("Oranges")
+    used = np.nonzero(in_use & (lengths > 1))[0]
+    for rank, i in enumerate(used):
+        shade = cmap(0.3 + 0.7 * rank / max(len(used) - 1, 1))
+        ax.plot(xs[offsets[i] : offsets[i + 1]], ys[offsets[i] : offsets[i + 1]], "-", color=shade, lw=1.0, label="replanned paths" if rank == 0 else None)
+    pos = log["base_pos"]
+    ax.plot(pos[:, 0], pos[:, 1], "-", color="tab:red", lw=2.0, label="walked")
+    if "push_force" in log:
+        pushed = np.nonzero(np.any(log["push_force"] != 0.0, axis=1))[0]
+        if len(pushed):
+            ax.plot(pos[pushed, 0], pos[pushed, 1], "o", color="magenta", ms=3, label="pushed")
+    ax.plot(*scenario.start, "k^", ms=9, label="start")
+    ax.add_patch(plt.Circle(scenario.goal.center, scenario.goal.radius, fill=False, color="k", lw=1.5))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{scenario.name} / {_label(run.metrics.method)}: walked path and replans")
+    ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def online_section(scenarios: dict[str, Scenario], runs: dict[str, list[RunRecord]], out_dir: Path) -> list[str]:
+    """The report's online-navigation table and replan plots (empty when no run was online)."""
+    online_runs = [(name, rec) for name, records in runs.items() for rec in records if rec.online is not None]
+    if not online_runs:
+        return []
+    lines = [
+        "## Online navigation",
+        "",
+        "The robot starts with the scenario's prior map (or nothing), a height sensor reveals the true terrain around it, "
+        "the belief map goes to the planner service over LCM at every update and the service replans from the robot's "
+        "current pose; the robot follows the newest feedback field. Latency: map published → reply sent by the service "
+        "(wall clock); the simulation puts each answer in use after the stated budget of simulated time.",
+        "",
+        "| scenario | run | goal | fell | updates [Hz] | replans used | latency p50 / p99 / max [ms] | budget [ms] | ∫p ds walked | "
+        "full-knowledge ∫p ds | ratio | max deviation [m] | pushes | known at end | rejected updates |",
+        "|" + "---|" * 15,
+    ]
+    for name, rec in online_runs:
+        o = rec.online
+        assert o is not None
+        m = rec.metrics
+
+        def ms(v: float | None) -> str:
+            return "–" if v is None else f"{v * 1000:.0f}"
+
+        lines.append(
+            f"| {name} | {_label(m.method)} | {'yes' if m.goal_reached else 'no'} | {'yes' if m.fell else 'no'} | "
+            f"{o.map_updates} ({o.update_rate:.1f}) | {o.replans_in_use} | {ms(o.latency_p50)} / {ms(o.latency_p99)} / {ms(o.latency_max)} | "
+            f"{o.latency_budget * 1000:.0f} | {_fmt(o.executed_cost, 2)} | {_fmt(o.full_knowledge_cost, 2)} | {_fmt(o.cost_ratio, 2)} | "
+            f"{_fmt(o.max_deviation, 2)} | {o.pushes} | {o.known_fraction * 100:.0f} % | {'; '.join(o.rejected) or '–'} |"
+        )
+    lines.append("")
+    for name, rec in online_runs:
+        png = f"{name}_{rec.metrics.method}_replans.png"
+        plot_replans(scenarios[name], rec, out_dir / png)
+        lines.append(f"![{name} replans]({png})")
+        lines.append("")
+    return lines

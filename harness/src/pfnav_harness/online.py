@@ -1,0 +1,242 @@
+"""Online navigation: the robot senses the terrain while it walks and the planner replans.
+
+Every `update_period` simulated seconds the height sensor reveals the cells around the base, the
+belief map goes out on `<prefix>MAP` like a perception system's elevation map, and a plan request
+from the robot's current pose follows on it. The answer (feedback field and trajectory) is put in
+use `apply_delay` simulated seconds after the map went out: the simulation waits there for it if
+it is late, so a run is the same whatever the machine's load; the wall-clock latency of every
+replan is measured and reported against that budget. An answer that fails (the service's status
+and reason, a field on another grid, nothing within `answer_timeout`) is logged and the robot keeps
+the plan it has.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import PlannerError, SimulationError
+from .feedback_field import FeedbackField
+from .planner_client import PlanAnswer, PlannerClient, RequestOptions, StartPose, terrain_map_message
+from .scenario import Scenario
+from .sensing import BeliefMap, SensorConfig
+
+# Kinds of deliberately bad map updates (robustness checks): non-finite heights, a map of another
+# shape, and a sequence number older than the last accepted map.
+BAD_UPDATE_KINDS = ("nan", "shape", "stale")
+
+
+@dataclass(frozen=True)
+class OnlineConfig:
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    # Simulated seconds between map updates (2 Hz).
+    update_period: float = 0.5
+    # Simulated seconds from a map update to the new plan being in use: the latency budget.
+    apply_delay: float = 0.2
+    # Wall seconds to wait for an answer at its apply time before keeping the last plan.
+    answer_timeout: float = 10.0
+    method: str = "pf"
+    options: RequestOptions = field(default_factory=RequestOptions)
+    # Bad updates sent instead of the regular ones, in this order, from the second update on.
+    bad_updates: tuple[str, ...] = ()
+
+    def validate(self) -> None:
+        self.sensor.validate()
+        if not (math.isfinite(self.update_period) and self.update_period > 0.0):
+            raise SimulationError(f"the map update period must be positive, got {self.update_period}")
+        if not (math.isfinite(self.apply_delay) and 0.0 <= self.apply_delay < self.update_period):
+            raise SimulationError(f"the replan latency budget must lie in [0, update period = {self.update_period}), got {self.apply_delay}")
+        unknown = [k for k in self.bad_updates if k not in BAD_UPDATE_KINDS]
+        if unknown:
+            raise SimulationError(f"unknown bad map update kind(s) {', '.join(unknown)}; choose from {', '.join(BAD_UPDATE_KINDS)}")
+
+
+@dataclass
+class Replan:
+    """One map update and what became of its plan request."""
+
+    t_publish: float
+    map_seq: int
+    request_id: int
+    changed_cells: int
+    kind: str = "update"
+    t_apply: float | None = None
+    # "in use", or why the answer was not used.
+    outcome: str = "pending"
+    # Wall seconds from the map going out to the reply being sent by the service, and to the
+    # answer being decoded here (the latter includes waiting for the simulation to ask).
+    service_latency: float | None = None
+    path_x: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    path_y: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    planner_cost: float | None = None
+    _published_wall: float = 0.0
+
+    @property
+    def in_use(self) -> bool:
+        return self.outcome == "in use"
+
+
+class OnlineNavigator:
+    """Sensing, map updates and replanning for one run; the co-simulation asks it every control step."""
+
+    def __init__(self, client: PlannerClient, scenario: Scenario, config: OnlineConfig) -> None:
+        config.validate()
+        self.client = client
+        self.scenario = scenario
+        self.config = config
+        self.belief = BeliefMap(scenario.terrain, scenario.prior, config.sensor)
+        self.replans: list[Replan] = []
+        self._pending: Replan | None = None
+        self._next_update = 0.0
+        self._current_field: FeedbackField | None = None
+        self._last_good_seq = -1
+        self._bad_updates = list(config.bad_updates)
+
+    def start(self, x: float, y: float, yaw: float, timeout: float, retries: int) -> PlanAnswer:
+        """Senses at the start pose and plans on that knowledge (blocking): the first plan."""
+        changed = self.belief.observe(x, y)
+        seq = self._publish_belief()
+        published = time.time()
+        answer = self.client.request_answer(
+            StartPose(x, y, yaw),
+            self.scenario.goal,
+            self.config.method,
+            seq,
+            self.config.options,
+            timeout=timeout,
+            retries=retries,
+            context=f"'{self.scenario.name}' (start)",
+        )
+        replan = Replan(0.0, seq, answer.request_id, changed, kind="start", _published_wall=published)
+        self._accept(replan, answer, 0.0)
+        self.replans.append(replan)
+        self._next_update = self.config.update_period
+        return answer
+
+    def tick(self, t: float, x: float, y: float, yaw: float) -> PlanAnswer | None:
+        """Called with the walk clock `t`; returns an answer to put in use now, else None."""
+        answer_now: PlanAnswer | None = None
+        pending = self._pending
+        if pending is not None and t >= pending.t_publish + self.config.apply_delay - 1e-9:
+            self._pending = None
+            answer = self.client.await_answer(pending.request_id, self.config.answer_timeout)
+            if answer is None:
+                pending.outcome = f"no answer within {self.config.answer_timeout:.0f} s; kept the last plan"
+            elif self._accept(pending, answer, t):
+                answer_now = answer
+        if t >= self._next_update - 1e-9 and self._pending is None:
+            self._next_update += self.config.update_period
+            self._send_update(t, x, y, yaw)
+        return answer_now
+
+    def _publish_belief(self) -> int:
+        b = self.belief
+        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.config.unknown_traversability)
+
+    def _send_update(self, t: float, x: float, y: float, yaw: float) -> None:
+        changed = self.belief.observe(x, y)
+        kind = "update"
+        if self._bad_updates and len(self.replans) >= 2:
+            kind = self._bad_updates.pop(0)
+            seq = self._publish_bad(kind)
+        else:
+            seq = self._publish_belief()
+        published = time.time()
+        request_id = self.client.send_request(StartPose(x, y, yaw), self.scenario.goal, self.config.method, seq, self.config.options)
+        replan = Replan(t, seq, request_id, changed, kind=kind, _published_wall=published)
+        self.replans.append(replan)
+        self._pending = replan
+
+    def _publish_bad(self, kind: str) -> int:
+        """Publishes a deliberately broken update of the belief map; returns the seq it names."""
+        b = self.belief
+        terrain = b.terrain()
+        known = b.known_mask()
+        if kind == "stale":
+            # An older sequence number with other content: a delayed, superseded map.
+            seq = self._last_good_seq - 1
+            message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.config.unknown_traversability)
+            message.heights = [h + 0.01 for h in message.heights]
+            self.client.publish_raw_map(message)
+            return seq
+        seq = self.client.reserve_map_seq()
+        message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.config.unknown_traversability)
+        if kind == "nan":
+            heights = list(message.heights)
+            heights[len(heights) // 2] = math.nan
+            message.heights = heights
+        else:  # shape: the same area at half the resolution
+            from .scenario import Terrain
+
+            coarse = Terrain(terrain.origin, terrain.resolution * 2.0, terrain.heights[::2, ::2].copy(), None)
+            message = terrain_map_message(coarse, seq, unknown_traversability=b.config.unknown_traversability)
+        self.client.publish_raw_map(message)
+        return seq
+
+    def _accept(self, replan: Replan, answer: PlanAnswer, t: float) -> bool:
+        replan.service_latency = answer.reply_utime * 1e-6 - replan._published_wall
+        if not answer.ok or answer.plan is None:
+            replan.outcome = f"status {answer.status}: {answer.error}; kept the last plan"
+            return False
+        if self.config.method == "pf":
+            if answer.field is None:
+                replan.outcome = "the feedback field was lost on the bus; kept the last plan"
+                return False
+            current = self._current_field
+            if current is not None and not current.same_grid(answer.field):
+                replan.outcome = (
+                    f"the feedback field's grid changed ({current.dir_x.shape[1]}x{current.dir_x.shape[0]} cells of "
+                    f"{current.resolution:g} m -> {answer.field.dir_x.shape[1]}x{answer.field.dir_x.shape[0]} of "
+                    f"{answer.field.resolution:g} m); kept the last plan"
+                )
+                return False
+            self._current_field = answer.field
+        plan = answer.plan
+        replan.t_apply = t
+        replan.outcome = "in use"
+        replan.path_x = plan.x.copy()
+        replan.path_y = plan.y.copy()
+        replan.planner_cost = plan.metrics.get("cost")
+        self._last_good_seq = replan.map_seq
+        return True
+
+    def finish(self) -> None:
+        """Collects the answer of a request still in flight at the end of the run (for the latency figures)."""
+        pending = self._pending
+        if pending is None:
+            return
+        self._pending = None
+        answer = self.client.await_answer(pending.request_id, self.config.answer_timeout)
+        if answer is not None:
+            pending.service_latency = answer.reply_utime * 1e-6 - pending._published_wall
+        pending.outcome = "run ended before its apply time"
+
+
+def latency_summary(replans: Sequence[Replan]) -> dict[str, float | int]:
+    """Replan count and latency percentiles (map published → reply sent), seconds."""
+    regular = [r for r in replans if r.kind in ("update", "start")]
+    latencies = np.array([r.service_latency for r in regular if r.service_latency is not None and r.kind == "update"])
+    used = [r for r in replans if r.in_use and r.kind == "update"]
+    rejected = [r for r in replans if not r.in_use and r.outcome != "pending"]
+    summary: dict[str, float | int] = {
+        "map_updates": len([r for r in replans if r.kind != "start"]),
+        "replans_in_use": len(used),
+        "rejected": len(rejected),
+    }
+    if len(latencies):
+        summary["latency_p50"] = float(np.percentile(latencies, 50))
+        summary["latency_p99"] = float(np.percentile(latencies, 99))
+        summary["latency_max"] = float(latencies.max())
+    return summary
+
+
+def check_first_answer(answer: PlanAnswer, method: str) -> None:
+    if answer.plan is None:
+        raise PlannerError(f"no first {method} plan: status {answer.status}: {answer.error}")
+    if method == "pf" and answer.field is None:
+        raise PlannerError("the first P-F answer came without its feedback field")
