@@ -63,6 +63,7 @@ fn map(width: i32, height: i32) -> TerrainMap {
         heights: (0..cells).map(|i| i as f64 * 0.01).collect(),
         num_obstacle_cells: 0,
         obstacle_mask: Vec::new(),
+        ..TerrainMap::default()
     }
 }
 
@@ -89,7 +90,8 @@ fn a_map_claiming_two_billion_cells_is_rejected_without_allocating() {
         }) => {
             assert_eq!(field, "heights");
             assert_eq!(elements, i32::MAX as u128);
-            assert_eq!(available, 16 * 8 + 4);
+            // The heights, then num_obstacle_cells, num_known_cells, unknown_traversability.
+            assert_eq!(available, 16 * 8 + 4 + 4 + 8);
         }
         other => panic!("expected ArrayExceedsBuffer, got {other:?}"),
     }

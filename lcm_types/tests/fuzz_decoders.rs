@@ -11,8 +11,8 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
 use lcm_types::pfnav::{
-    Header, PlanMetrics, PlanOptions, PlanReply, PlanRequest, ServiceStatus, TerrainMap,
-    TrajectorySample,
+    FeedbackField, Header, PlanMetrics, PlanOptions, PlanReply, PlanRequest, ServiceStatus,
+    TerrainMap, TrajectorySample,
 };
 use lcm_types::{AnyMessage, Message};
 
@@ -56,6 +56,9 @@ fn sample_map() -> TerrainMap {
         heights: vec![0.0, 0.1, -0.2, 1.5, 2.25, -3.0],
         num_obstacle_cells: 6,
         obstacle_mask: vec![false, true, false, false, false, true],
+        num_known_cells: 6,
+        known_mask: vec![true, true, false, true, false, true],
+        unknown_traversability: 0.7,
     }
 }
 
@@ -151,8 +154,27 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
         queue_capacity: 16,
         cached_generators: 1,
     };
+    let field = FeedbackField {
+        header: header(12),
+        request_id: 77,
+        map_seq: 3,
+        origin_x: -1.5,
+        origin_y: 2.0,
+        resolution: 0.5,
+        width: 2,
+        height: 2,
+        num_cells: 4,
+        dir_x: vec![1.0, 0.0, 0.0, -0.6],
+        dir_y: vec![0.0, 0.0, 1.0, 0.8],
+        speed: vec![0.5, 0.0, 0.5, 0.5],
+        cost_to_go: vec![0.25, 0.0, -1.0, 0.75],
+        goal_x: -1.0,
+        goal_y: 2.4,
+        goal_radius: 0.3,
+    };
     let mut seeds = vec![
         AnyMessage::TerrainMap(sample_map()),
+        AnyMessage::FeedbackField(field),
         AnyMessage::PlanRequest(request),
         AnyMessage::PlanReply(reply),
         AnyMessage::PlanReply(failed),

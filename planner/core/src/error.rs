@@ -29,6 +29,8 @@ pub enum MapError {
         "height of cell ({ix}, {iy}) is {value} m; traversability p = h/h_max needs heights >= 0"
     )]
     NegativeHeight { ix: usize, iy: usize, value: f64 },
+    #[error("unknown_traversability (the p of unobserved cells) must lie in (0, 1], got {0}")]
+    BadUnknownTraversability(f64),
 }
 
 /// Why a planning request cannot be answered. Every stage (grid, graph search, P-F pipeline,

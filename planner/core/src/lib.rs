@@ -8,6 +8,7 @@ pub mod certificate;
 pub mod deadline;
 pub mod error;
 pub mod feedback;
+pub mod feedback_grid;
 pub mod generators;
 pub mod graph;
 pub mod grid;

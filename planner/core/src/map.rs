@@ -183,6 +183,85 @@ impl GridMap {
     }
 }
 
+/// Which cells of a map were observed, and the traversability assumed for the others: a map
+/// that a sensor reveals while the robot walks.
+///
+/// Kept beside [`GridMap`] rather than inside it so that every fully known map (files,
+/// scenarios) stays exactly what it was. The planners read it through
+/// [`crate::traversability::TraversabilityField::from_partial_map`]: an unknown cell costs
+/// `unknown_traversability`, its height and obstacle flag are ignored, and the map statistics
+/// (h_max, slope, roughness) use known cells only. An obstacle flag on an unknown cell must
+/// also not block planning cells: [`MapKnowledge::clear_unknown_obstacles`] removes it from
+/// the map the planning grid is built from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapKnowledge {
+    /// `true` where the cell's height was observed, row-major like the heights.
+    known: Vec<bool>,
+    /// p of every unknown cell, in (0, 1].
+    unknown_traversability: f64,
+}
+
+impl MapKnowledge {
+    /// Checks the mask length against `map` and the prior p against (0, 1].
+    pub fn new(
+        map: &GridMap,
+        known: Vec<bool>,
+        unknown_traversability: f64,
+    ) -> Result<Self, MapError> {
+        if known.len() != map.len() {
+            return Err(MapError::LengthMismatch {
+                what: "known_mask",
+                expected: map.len(),
+                actual: known.len(),
+            });
+        }
+        if !(unknown_traversability.is_finite()
+            && unknown_traversability > 0.0
+            && unknown_traversability <= 1.0)
+        {
+            return Err(MapError::BadUnknownTraversability(unknown_traversability));
+        }
+        Ok(Self {
+            known,
+            unknown_traversability,
+        })
+    }
+
+    /// Whether the cell with row-major index `index` was observed.
+    #[inline]
+    pub fn is_known(&self, index: usize) -> bool {
+        self.known[index]
+    }
+
+    /// The mask, row-major.
+    pub fn known(&self) -> &[bool] {
+        &self.known
+    }
+
+    /// p assumed for unknown cells.
+    pub fn unknown_traversability(&self) -> f64 {
+        self.unknown_traversability
+    }
+
+    /// Number of observed cells.
+    pub fn known_count(&self) -> usize {
+        self.known.iter().filter(|&&k| k).count()
+    }
+
+    /// Drops the obstacle flags of unknown cells from `map` (an unobserved cell is never an
+    /// obstacle: nothing has been seen there), and the mask itself when nothing is left.
+    pub fn clear_unknown_obstacles(&self, map: &mut GridMap) {
+        if let Some(mask) = map.obstacles.as_mut() {
+            for (blocked, &known) in mask.iter_mut().zip(&self.known) {
+                *blocked &= known;
+            }
+            if !mask.iter().any(|&b| b) {
+                map.obstacles = None;
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,5 +318,37 @@ mod tests {
             GridMap::new([0.0, 0.0], 1.0, 1 << 20, 1 << 20, vec![], None),
             Err(MapError::TooLarge { .. })
         ));
+    }
+
+    #[test]
+    fn knowledge_checks_its_mask_and_prior_and_clears_unknown_obstacles() {
+        let mut map = GridMap::new(
+            [0.0, 0.0],
+            1.0,
+            3,
+            1,
+            vec![0.0; 3],
+            Some(vec![true, true, false]),
+        )
+        .expect("map");
+        assert!(matches!(
+            MapKnowledge::new(&map, vec![true; 2], 0.5),
+            Err(MapError::LengthMismatch {
+                what: "known_mask",
+                expected: 3,
+                actual: 2
+            })
+        ));
+        for prior in [0.0, -0.1, 1.5, f64::NAN] {
+            let err = MapKnowledge::new(&map, vec![true; 3], prior).expect_err("bad prior");
+            assert!(err.to_string().contains("unknown_traversability"), "{err}");
+        }
+        let knowledge = MapKnowledge::new(&map, vec![true, false, false], 0.5).expect("valid");
+        assert_eq!(knowledge.known_count(), 1);
+        knowledge.clear_unknown_obstacles(&mut map);
+        assert_eq!(map.obstacles, Some(vec![true, false, false]));
+        let unseen = MapKnowledge::new(&map, vec![false; 3], 1.0).expect("valid");
+        unseen.clear_unknown_obstacles(&mut map);
+        assert_eq!(map.obstacles, None);
     }
 }

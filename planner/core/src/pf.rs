@@ -16,10 +16,11 @@ use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::feedback::integrate;
 pub use crate::feedback::{FeedbackField, IntegrationOutcome, IntegrationSettings};
+use crate::feedback_grid::{FeedbackGrid, FieldInputs, FieldUnavailable};
 use crate::generators::{Generators, SparseColumns};
 use crate::graph::endpoints;
 use crate::grid::{GoalRegion, PlanningGrid};
-use crate::lp::{self, LpProblem};
+use crate::lp::{self, LpProblem, LpSolution, LpStatus, SolverUsed};
 pub use crate::lp::{LpReport, LpSettings};
 use crate::map::Point;
 
@@ -179,6 +180,9 @@ pub struct PfSolution {
     pub cost_to_go: Vec<f64>,
     /// Target flags per active function.
     pub targets: Vec<bool>,
+    /// The greedy law of the optimal cost-to-go on the planning grid (speed = `u_max`), or why
+    /// there is none (see [`crate::feedback_grid`]).
+    pub feedback_grid: Result<FeedbackGrid, FieldUnavailable>,
 }
 
 /// Active functions that can reach the target through the generators' flows (reverse BFS over
@@ -386,7 +390,27 @@ pub fn solve(
         });
     }
     let prepared = prepare(gens, grid, start, goal, opts.start_density)?;
-    let solution = lp::solve(&prepared.problem(gens, opts.u_max), &opts.lp)?;
+    let problem = prepared.problem(gens, opts.u_max);
+    let solution = lp::solve(&problem, &opts.lp)?;
+    let field_started = Instant::now();
+    let feedback_grid = optimal_values(&problem, &solution, opts).map(|value| {
+        FeedbackGrid::from_values(&FieldInputs {
+            generators: &gens.generators,
+            grid,
+            goal: *goal,
+            goal_cells: &prepared.goal_cells,
+            cost: &prepared.cost,
+            mass: &gens.mass,
+            value: &value,
+            u_max: opts.u_max,
+            speed: opts.u_max,
+        })
+    });
+    debug!(
+        time_s = field_started.elapsed().as_secs_f64(),
+        available = feedback_grid.is_ok(),
+        "feedback grid extracted"
+    );
     let weighted_length = solution.report.objective / (1.0 + 1.0 / opts.u_max);
     let g = &gens.generators;
     let field = FeedbackField::new(
@@ -420,7 +444,46 @@ pub fn solve(
         start_coefficients: prepared.start,
         cost_to_go: solution.potential,
         targets: prepared.target,
+        feedback_grid,
     })
+}
+
+/// V* per active function for the feedback grid (see [`crate::feedback_grid`] for which
+/// solver's potential is V* where).
+fn optimal_values(
+    problem: &LpProblem<'_>,
+    solution: &LpSolution,
+    opts: &PfOptions,
+) -> Result<Vec<f64>, FieldUnavailable> {
+    if solution.report.status == LpStatus::Trivial {
+        // No flow, so no dual: the cost-to-go of the same SSP from the exact solver (its start
+        // density plays no part in V*).
+        return match crate::ssp::solve(problem, crate::deadline::Deadline::NONE) {
+            Ok(Some(exact)) => Ok(exact.potential),
+            Ok(None) | Err(_) => Err(FieldUnavailable::NotMarkov),
+        };
+    }
+    match solution.report.solver {
+        SolverUsed::Dijkstra | SolverUsed::PolicyIteration => Ok(solution.potential.clone()),
+        SolverUsed::Clarabel | SolverUsed::None => {
+            if opts.start_density != StartDensity::UniformFree {
+                return Err(FieldUnavailable::DualNotCostToGo);
+            }
+            // Uniform start: positive density on every state that can reach the goal, so the
+            // dual is pinned to V* there; every other non-target state cannot reach it.
+            Ok((0..problem.target.len())
+                .map(|i| {
+                    if problem.target[i] {
+                        0.0
+                    } else if problem.start[i] > 0.0 {
+                        solution.potential[i]
+                    } else {
+                        f64::INFINITY
+                    }
+                })
+                .collect())
+        }
+    }
 }
 
 fn dist(a: Point, b: Point) -> f64 {

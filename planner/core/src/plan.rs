@@ -13,6 +13,7 @@ use tracing::info;
 
 use crate::deadline::Deadline;
 use crate::error::PlanError;
+use crate::feedback_grid::{FeedbackGrid, FieldUnavailable};
 use crate::graph::{astar_path, dijkstra_path, Connectivity};
 use crate::grid::{GoalRegion, PlanningGrid};
 use crate::lp::LpSolver;
@@ -146,6 +147,10 @@ pub struct Plan {
     pub trajectory_time_s: f64,
     /// Whether the P-F generators came from a cache (always false for graph methods).
     pub generators_cached: bool,
+    /// The optimal feedback law on the planning grid (P-F; speed = the request's `speed`), or
+    /// why there is none (graph methods; Clarabel with a point start). Computed with every P-F
+    /// plan at O(cells × directions).
+    pub feedback_field: Result<FeedbackGrid, FieldUnavailable>,
 }
 
 /// Where the P-F generators of a plan come from: `(generators, taken from a cache)` for a grid,
@@ -189,6 +194,9 @@ impl PreparedMap<'_> {
         check_endpoints(self.map, start, start_yaw, goal)?;
         let started = Instant::now();
         let mut generators_cached = false;
+        let mut feedback_field = Err(FieldUnavailable::NotPf {
+            method: method.name(),
+        });
         let (path, planner_cost, expanded, lp) = match method {
             Method::Dijkstra | Method::AStar => {
                 let found = if method == Method::Dijkstra {
@@ -229,6 +237,10 @@ impl PreparedMap<'_> {
                 }
                 let mut lp = solution.lp;
                 lp.generator_time_s = generator_time_s;
+                feedback_field = solution.feedback_grid.map(|mut grid| {
+                    grid.set_speed(options.speed);
+                    grid
+                });
                 (solution.path, solution.weighted_length, None, Some(lp))
             }
         };
@@ -256,6 +268,7 @@ impl PreparedMap<'_> {
             solve_time_s,
             trajectory_time_s,
             generators_cached,
+            feedback_field,
         })
     }
 }

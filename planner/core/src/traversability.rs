@@ -27,7 +27,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{MapError, PlanError};
-use crate::map::{GridMap, Point};
+use crate::map::{GridMap, MapKnowledge, Point};
 
 /// Weights and references of the traversability model (see the module docs for the formula).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -148,9 +148,35 @@ pub struct TraversabilityField {
 impl TraversabilityField {
     /// Evaluates the model on every cell of `map`.
     pub fn from_map(map: &GridMap, params: &TraversabilityParams) -> Result<Self, PlanError> {
+        Self::from_partial_map(map, None, params)
+    }
+
+    /// Evaluates the model on a map of which only some cells were observed (`knowledge`; `None`:
+    /// every cell). An unknown cell gets the prior p (`unknown_traversability`, raised to
+    /// `p_floor` if below); its height and obstacle flag are ignored. h_max (unless given),
+    /// slopes and roughness are taken over known cells only, so the unseen part of the map
+    /// neither rescales nor roughens the seen part. The footprint filter is unchanged: it
+    /// spreads the largest p within its radius, unknown cells included.
+    pub fn from_partial_map(
+        map: &GridMap,
+        knowledge: Option<&MapKnowledge>,
+        params: &TraversabilityParams,
+    ) -> Result<Self, PlanError> {
         map.validate()?;
         params.validate()?;
-        if let Some(i) = map.heights.iter().position(|&h| h < 0.0) {
+        let known = knowledge.map(MapKnowledge::known);
+        if let Some(mask) = known {
+            if mask.len() != map.len() {
+                return Err(MapError::LengthMismatch {
+                    what: "known_mask",
+                    expected: map.len(),
+                    actual: mask.len(),
+                }
+                .into());
+            }
+        }
+        let is_known = |i: usize| known.map_or(true, |m| m[i]);
+        if let Some(i) = (0..map.len()).find(|&i| is_known(i) && map.heights[i] < 0.0) {
             return Err(MapError::NegativeHeight {
                 ix: i % map.width,
                 iy: i / map.width,
@@ -158,25 +184,37 @@ impl TraversabilityField {
             }
             .into());
         }
-        let observed_max = map.heights.iter().copied().fold(0.0_f64, f64::max);
+        let observed_max = (0..map.len())
+            .filter(|&i| is_known(i))
+            .map(|i| map.heights[i])
+            .fold(0.0_f64, f64::max);
         let h_max = params.h_max.unwrap_or(observed_max);
         let weight_sum = params.height_weight + params.slope_weight + params.roughness_weight;
         let mut values = Vec::with_capacity(map.len());
         for iy in 0..map.height {
             for ix in 0..map.width {
-                let h = map.heights[map.index(ix, iy)];
+                let index = map.index(ix, iy);
+                if let Some(knowledge) = knowledge.filter(|k| !k.is_known(index)) {
+                    values.push(
+                        knowledge
+                            .unknown_traversability()
+                            .clamp(params.p_floor, 1.0),
+                    );
+                    continue;
+                }
+                let h = map.heights[index];
                 let height_term = if h_max > 0.0 {
                     (h / h_max).min(1.0)
                 } else {
                     0.0
                 };
                 let slope_term = if params.slope_weight > 0.0 {
-                    (slope_deg(map, ix, iy) / params.slope_ref_deg).min(1.0)
+                    (slope_deg_over(map, known, ix, iy) / params.slope_ref_deg).min(1.0)
                 } else {
                     0.0
                 };
                 let rough_term = if params.roughness_weight > 0.0 {
-                    (roughness(map, ix, iy) / params.roughness_ref_m).min(1.0)
+                    (roughness_over(map, known, ix, iy) / params.roughness_ref_m).min(1.0)
                 } else {
                     0.0
                 };
@@ -187,6 +225,13 @@ impl TraversabilityField {
                 values.push(p.clamp(params.p_floor, 1.0));
             }
         }
+        // Obstacle flags of unknown cells mean nothing (nothing was seen there).
+        let obstacles: Option<Vec<bool>> = map.obstacles.as_ref().map(|mask| {
+            mask.iter()
+                .enumerate()
+                .map(|(i, &blocked)| blocked && is_known(i))
+                .collect()
+        });
         let values = if params.footprint_radius_m > 0.0 {
             let radius_cells = params.footprint_radius_m / map.resolution;
             if radius_cells > MAX_FOOTPRINT_CELLS as f64 {
@@ -203,7 +248,7 @@ impl TraversabilityField {
             // p = 1 within the footprint, so paths keep r off pit rims where there is room
             // (the obstacle constraint itself is unchanged).
             let mut worst = values.clone();
-            if let Some(mask) = &map.obstacles {
+            if let Some(mask) = &obstacles {
                 for (p, &blocked) in worst.iter_mut().zip(mask) {
                     if blocked {
                         *p = 1.0;
@@ -212,7 +257,7 @@ impl TraversabilityField {
             }
             let dilated = disc_max_filter(&worst, map.width, map.height, radius_cells);
             // Obstacle cells keep their own p (they are never entered anyway).
-            match &map.obstacles {
+            match &obstacles {
                 Some(mask) => dilated
                     .iter()
                     .zip(mask)
@@ -309,6 +354,13 @@ fn disc_max_filter(values: &[f64], width: usize, height: usize, radius_cells: f6
 
 /// Terrain inclination at a cell centre in degrees (central differences, one-sided at the edge).
 pub fn slope_deg(map: &GridMap, ix: usize, iy: usize) -> f64 {
+    slope_deg_over(map, None, ix, iy)
+}
+
+/// [`slope_deg`] from known cells only (`known`: row-major mask, `None` = all known): an unknown
+/// neighbour is replaced by the cell itself, so the difference turns one-sided.
+fn slope_deg_over(map: &GridMap, known: Option<&[bool]>, ix: usize, iy: usize) -> f64 {
+    let usable = |x: usize, y: usize| known.map_or(true, |m| m[map.index(x, y)]);
     let h = |x: usize, y: usize| map.heights[map.index(x, y)];
     let derivative = |lo: usize, hi: usize, hl: f64, hh: f64| {
         if hi > lo {
@@ -317,8 +369,22 @@ pub fn slope_deg(map: &GridMap, ix: usize, iy: usize) -> f64 {
             0.0
         }
     };
-    let (xl, xh) = (ix.saturating_sub(1), (ix + 1).min(map.width - 1));
-    let (yl, yh) = (iy.saturating_sub(1), (iy + 1).min(map.height - 1));
+    let pick = |candidate: usize, own: usize, is_x: bool| {
+        let ok = if is_x {
+            usable(candidate, iy)
+        } else {
+            usable(ix, candidate)
+        };
+        if ok {
+            candidate
+        } else {
+            own
+        }
+    };
+    let xl = pick(ix.saturating_sub(1), ix, true);
+    let xh = pick((ix + 1).min(map.width - 1), ix, true);
+    let yl = pick(iy.saturating_sub(1), iy, false);
+    let yh = pick((iy + 1).min(map.height - 1), iy, false);
     let dx = derivative(xl, xh, h(xl, iy), h(xh, iy));
     let dy = derivative(yl, yh, h(ix, yl), h(ix, yh));
     dx.hypot(dy).atan().to_degrees()
@@ -326,13 +392,21 @@ pub fn slope_deg(map: &GridMap, ix: usize, iy: usize) -> f64 {
 
 /// RMS deviation of the heights of the 3×3 neighbourhood (clipped at the edge) from their mean, metres.
 pub fn roughness(map: &GridMap, ix: usize, iy: usize) -> f64 {
+    roughness_over(map, None, ix, iy)
+}
+
+/// [`roughness`] over the known cells of the neighbourhood only (the cell itself is known).
+fn roughness_over(map: &GridMap, known: Option<&[bool]>, ix: usize, iy: usize) -> f64 {
     let mut samples = Vec::with_capacity(9);
     for y in iy.saturating_sub(1)..=(iy + 1).min(map.height - 1) {
         for x in ix.saturating_sub(1)..=(ix + 1).min(map.width - 1) {
-            samples.push(map.heights[map.index(x, y)]);
+            let index = map.index(x, y);
+            if known.map_or(true, |m| m[index]) {
+                samples.push(map.heights[index]);
+            }
         }
     }
-    let n = samples.len() as f64;
+    let n = samples.len().max(1) as f64;
     let mean = samples.iter().sum::<f64>() / n;
     (samples.iter().map(|h| (h - mean).powi(2)).sum::<f64>() / n).sqrt()
 }
@@ -486,5 +560,62 @@ mod tests {
                 assert_eq!(f.cell_value_at(c), f.values[map.index(ix, iy)]);
             }
         }
+    }
+
+    #[test]
+    fn unknown_cells_get_the_prior_and_do_not_shape_the_known_ones() {
+        // 4 x 1: heights 1, 2, 100 (unknown, a wrong guess), 0.5 (unknown, flagged obstacle).
+        let map = GridMap::new(
+            [0.0, 0.0],
+            1.0,
+            4,
+            1,
+            vec![1.0, 2.0, 100.0, 0.5],
+            Some(vec![false, false, false, true]),
+        )
+        .expect("map");
+        let knowledge =
+            MapKnowledge::new(&map, vec![true, true, false, false], 0.3).expect("knowledge");
+        let params = TraversabilityParams {
+            height_weight: 1.0,
+            slope_weight: 1.0,
+            slope_ref_deg: 45.0,
+            ..Default::default()
+        };
+        let f =
+            TraversabilityField::from_partial_map(&map, Some(&knowledge), &params).expect("field");
+        // h_max = 2 (known cells only); the slope of cell 1 is one-sided towards cell 0
+        // (45°, term 1), not towards the unknown 100 m.
+        assert!(
+            (f.values[0] - (0.5 + 1.0) / 2.0).abs() < 1e-12,
+            "{:?}",
+            f.values
+        );
+        assert!(
+            (f.values[1] - (1.0 + 1.0) / 2.0).abs() < 1e-12,
+            "{:?}",
+            f.values
+        );
+        assert_eq!(&f.values[2..], &[0.3, 0.3]);
+        // A negative height in an unknown cell is no error (it is not a measurement).
+        let mut negative = map.clone();
+        negative.heights[2] = -3.0;
+        assert!(
+            TraversabilityField::from_partial_map(&negative, Some(&knowledge), &params).is_ok()
+        );
+        // The footprint ignores the unknown cell's obstacle flag (no p = 1 spread from it).
+        let footprint = TraversabilityParams {
+            footprint_radius_m: 1.0,
+            h_max: Some(10.0),
+            ..Default::default()
+        };
+        let f = TraversabilityField::from_partial_map(&map, Some(&knowledge), &footprint)
+            .expect("field");
+        assert!(f.values.iter().all(|&p| p < 1.0), "{:?}", f.values);
+        // Without knowledge the same call is from_map.
+        assert_eq!(
+            TraversabilityField::from_partial_map(&map, None, &params).expect("field"),
+            TraversabilityField::from_map(&map, &params).expect("field")
+        );
     }
 }

@@ -8,7 +8,7 @@ use lcm_types::pfnav::{PlanOptions, PlanReply, PlanRequest, TerrainMap};
 use pf_planner::basis::BasisKind;
 use pf_planner::grid::GoalRegion;
 use pf_planner::lp::LpSolver;
-use pf_planner::map::{GridMap, Point};
+use pf_planner::map::{GridMap, MapKnowledge, Point};
 use pf_planner::pf::StartDensity;
 use pf_planner::plan::Method;
 use pf_planner::trajectory::{MAX_SAMPLES, MAX_SPEED};
@@ -77,10 +77,44 @@ pub fn check_map_size(
     Ok(())
 }
 
-/// The wire form of a planner map (the inverse of [`map_from_message`]), `header.seq = seq`.
-/// Sizes that do not fit the wire's `int32_t` saturate (such a map is refused on receipt).
+/// p of unknown cells when `terrain_map_t.unknown_traversability` is 0.
+pub const DEFAULT_UNKNOWN_TRAVERSABILITY: f64 = 0.5;
+
+/// A map as received: the terrain and, for a partially observed one, which cells were seen
+/// (obstacle flags of unknown cells already dropped: an unseen cell is never an obstacle).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReceivedMap {
+    pub map: GridMap,
+    /// `None`: every cell known (`num_known_cells` = 0).
+    pub knowledge: Option<MapKnowledge>,
+}
+
+impl ReceivedMap {
+    /// A fully known map.
+    pub fn known(map: GridMap) -> Self {
+        Self {
+            map,
+            knowledge: None,
+        }
+    }
+}
+
+/// The wire form of a fully known planner map (the inverse of [`map_from_message`]),
+/// `header.seq = seq`.
 pub fn map_to_message(map: &GridMap, seq: i64) -> TerrainMap {
+    partial_map_to_message(map, None, seq)
+}
+
+/// The wire form of a planner map with its knowledge (`None`: every cell known),
+/// `header.seq = seq`. Sizes that do not fit the wire's `int32_t` saturate (such a map is
+/// refused on receipt).
+pub fn partial_map_to_message(
+    map: &GridMap,
+    knowledge: Option<&MapKnowledge>,
+    seq: i64,
+) -> TerrainMap {
     let obstacles = map.obstacles.clone().unwrap_or_default();
+    let known = knowledge.map_or_else(Vec::new, |k| k.known().to_vec());
     let int = |n: usize| i32::try_from(n).unwrap_or(i32::MAX);
     TerrainMap {
         header: lcm_types::pfnav::Header {
@@ -97,11 +131,16 @@ pub fn map_to_message(map: &GridMap, seq: i64) -> TerrainMap {
         heights: map.heights.clone(),
         num_obstacle_cells: int(obstacles.len()),
         obstacle_mask: obstacles,
+        num_known_cells: int(known.len()),
+        known_mask: known,
+        unknown_traversability: knowledge.map_or(0.0, MapKnowledge::unknown_traversability),
     }
 }
 
-/// Turns a decoded `terrain_map_t` into a validated [`GridMap`].
-pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<GridMap, Rejection> {
+/// Turns a decoded `terrain_map_t` into a validated map: sizes, frame, heights, obstacle mask,
+/// known mask (0 or width × height entries) and `unknown_traversability` (0 = default, else
+/// finite in (0, 1]).
+pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<ReceivedMap, Rejection> {
     check_map_size(msg.width, msg.height, msg.num_cells, max_cells)?;
     check_frame(&msg.header.frame_id, "map").map_err(Rejection::invalid_map)?;
     let cells = msg.heights.len();
@@ -114,10 +153,25 @@ pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<GridMap, R
             )))
         }
     };
+    let known_entries = msg.known_mask.len();
+    if known_entries != 0 && known_entries != cells {
+        return Err(Rejection::invalid_map(format!(
+            "known_mask has {known_entries} entries, expected 0 (every cell known) or width x height = {cells}"
+        )));
+    }
+    let prior = match msg.unknown_traversability {
+        0.0 => DEFAULT_UNKNOWN_TRAVERSABILITY,
+        p if p.is_finite() && p > 0.0 && p <= 1.0 => p,
+        p => {
+            return Err(Rejection::invalid_map(format!(
+                "unknown_traversability must be 0 (default {DEFAULT_UNKNOWN_TRAVERSABILITY}) or finite in (0, 1], got {p}"
+            )))
+        }
+    };
     let width = usize::try_from(msg.width).map_err(|_| Rejection::invalid_map("negative width"))?;
     let height =
         usize::try_from(msg.height).map_err(|_| Rejection::invalid_map("negative height"))?;
-    GridMap::new(
+    let mut map = GridMap::new(
         [msg.origin_x, msg.origin_y],
         msg.resolution,
         width,
@@ -125,7 +179,16 @@ pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<GridMap, R
         msg.heights.clone(),
         obstacles,
     )
-    .map_err(|e| Rejection::invalid_map(e.to_string()))
+    .map_err(|e| Rejection::invalid_map(e.to_string()))?;
+    let knowledge = if known_entries == 0 {
+        None
+    } else {
+        let knowledge = MapKnowledge::new(&map, msg.known_mask.clone(), prior)
+            .map_err(|e| Rejection::invalid_map(e.to_string()))?;
+        knowledge.clear_unknown_obstacles(&mut map);
+        Some(knowledge)
+    };
+    Ok(ReceivedMap { map, knowledge })
 }
 
 /// Defaults the service applies to `plan_options_t` fields left at 0.
@@ -282,7 +345,7 @@ pub struct ValidatedRequest {
     /// The method code as sent (echoed in the reply).
     pub method_code: i8,
     pub method: Method,
-    pub map: Arc<GridMap>,
+    pub map: Arc<ReceivedMap>,
     /// `header.seq` of the map planned on.
     pub map_seq: i64,
     pub start: Point,
@@ -294,7 +357,7 @@ pub struct ValidatedRequest {
 /// Where a request's map comes from when it is not inline.
 pub trait MapSource {
     /// The stored map with `header.seq == seq`, or the latest one for `seq == -1`, with its seq.
-    fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<GridMap>)>;
+    fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<ReceivedMap>)>;
 }
 
 /// Checks a decoded request field by field and resolves its map.
@@ -358,7 +421,7 @@ pub fn validate_request(
             )))
         }
     };
-    let options = resolve_options(&msg.options, &map, defaults)?;
+    let options = resolve_options(&msg.options, &map.map, defaults)?;
     // Every path from start to goal is at least the straight line minus the goal radius long: a
     // reference sampled that finely would exceed the sample cap whatever the planner finds, so
     // the request is refused before any work.
@@ -394,7 +457,7 @@ mod tests {
 
     struct NoMaps;
     impl MapSource for NoMaps {
-        fn map_by_seq(&self, _: i64) -> Option<(i64, Arc<GridMap>)> {
+        fn map_by_seq(&self, _: i64) -> Option<(i64, Arc<ReceivedMap>)> {
             None
         }
     }
@@ -416,6 +479,7 @@ mod tests {
             heights: (0..n).map(|i| i as f64 * 0.01).collect(),
             num_obstacle_cells: 0,
             obstacle_mask: Vec::new(),
+            ..TerrainMap::default()
         }
     }
 
@@ -440,8 +504,9 @@ mod tests {
         assert_eq!(v.request_id, 9);
         assert_eq!(v.method, Method::Dijkstra);
         assert_eq!(v.map_seq, 3);
-        assert_eq!((v.map.width, v.map.height), (4, 3));
-        assert_eq!(v.map.origin, [-1.0, 2.0]);
+        assert_eq!((v.map.map.width, v.map.map.height), (4, 3));
+        assert_eq!(v.map.map.origin, [-1.0, 2.0]);
+        assert_eq!(v.map.knowledge, None);
         assert_eq!(v.options.grid_size, 4);
         assert_eq!(v.options.directions, 8);
         assert_eq!(v.options.speed, 0.5);
@@ -528,6 +593,24 @@ mod tests {
             ),
             (
                 Box::new(|r| {
+                    r.inline_map[0].num_known_cells = 5;
+                    r.inline_map[0].known_mask = vec![true; 5];
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "known_mask has 5 entries",
+            ),
+            (
+                Box::new(|r| r.inline_map[0].unknown_traversability = 1.5),
+                PlanReply::STATUS_INVALID_MAP,
+                "unknown_traversability",
+            ),
+            (
+                Box::new(|r| r.inline_map[0].unknown_traversability = f64::NAN),
+                PlanReply::STATUS_INVALID_MAP,
+                "unknown_traversability",
+            ),
+            (
+                Box::new(|r| {
                     r.num_inline_maps = 0;
                     r.inline_map.clear();
                     r.map_seq = -1;
@@ -547,5 +630,36 @@ mod tests {
                 rejection.reason
             );
         }
+    }
+
+    #[test]
+    fn a_partially_known_map_keeps_its_mask_and_drops_unknown_obstacles() {
+        let mut msg = map_msg(4, 3);
+        msg.num_obstacle_cells = 12;
+        msg.obstacle_mask = vec![false; 12];
+        msg.obstacle_mask[1] = true; // known obstacle
+        msg.obstacle_mask[2] = true; // unknown: dropped
+        msg.num_known_cells = 12;
+        msg.known_mask = (0..12).map(|i| i != 2 && i != 7).collect();
+        let received = map_from_message(&msg, 100).expect("valid");
+        let knowledge = received.knowledge.as_ref().expect("partial");
+        assert_eq!(knowledge.known_count(), 10);
+        assert_eq!(
+            knowledge.unknown_traversability(),
+            DEFAULT_UNKNOWN_TRAVERSABILITY
+        );
+        let obstacles = received.map.obstacles.as_ref().expect("one obstacle left");
+        assert_eq!(obstacles.iter().filter(|&&b| b).count(), 1);
+        assert!(obstacles[1]);
+        // An explicit prior is kept, and the message form round-trips.
+        msg.unknown_traversability = 0.8;
+        let received = map_from_message(&msg, 100).expect("valid");
+        let knowledge = received.knowledge.as_ref().expect("partial");
+        assert_eq!(knowledge.unknown_traversability(), 0.8);
+        let back = partial_map_to_message(&received.map, Some(knowledge), 3);
+        assert_eq!(map_from_message(&back, 100).expect("valid"), received);
+        // No mask: every cell known, whatever the prior field says (0 = default).
+        let full = map_from_message(&map_msg(4, 3), 100).expect("valid");
+        assert_eq!(full.knowledge, None);
     }
 }

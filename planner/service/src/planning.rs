@@ -9,15 +9,18 @@ use std::hash::{Hash, Hasher};
 use std::sync::Arc;
 use std::time::Instant;
 
-use lcm_types::pfnav::{PlanMetrics, PlanReply, TrajectorySample};
+use lcm_types::pfnav::{FeedbackField, Header, PlanMetrics, PlanReply, TrajectorySample};
 use pf_planner::basis::BasisKind;
 use pf_planner::deadline::Deadline;
 use pf_planner::error::PlanError;
+use pf_planner::feedback_grid::FeedbackGrid;
 use pf_planner::grid::{GoalRegion, PlanningGrid};
 use pf_planner::lp::{LpStatus, SolverUsed};
 use pf_planner::pf::PfGenerators;
 use pf_planner::plan::{Plan, PlannerOptions, PreparedMap};
 use pf_planner::traversability::{TraversabilityField, TraversabilityParams};
+
+use tracing::warn;
 
 use crate::cache::BuildCache;
 use crate::convert::{Rejection, ResolvedOptions, ValidatedRequest};
@@ -121,6 +124,35 @@ pub struct PlanOutcome {
     pub metrics: PlanMetrics,
     /// Whether the P-F generators came from the cache.
     pub cache_hit: bool,
+    /// The feedback law of a P-F plan (header, request_id and map_seq are the caller's to fill
+    /// in); `None` for graph methods and for the Clarabel point-start case (see
+    /// `pf_planner::feedback_grid`).
+    pub feedback_field: Option<FeedbackField>,
+}
+
+/// The wire form of a feedback grid (header, request_id and map_seq left for the caller).
+/// Grids are at most 512² cells, far inside `int32_t`.
+pub fn feedback_field_message(grid: &FeedbackGrid) -> FeedbackField {
+    let floats = |values: &[f64]| values.iter().map(|&v| v as f32).collect::<Vec<f32>>();
+    let int = |n: usize| i32::try_from(n).unwrap_or(i32::MAX);
+    FeedbackField {
+        header: Header::default(),
+        request_id: 0,
+        map_seq: -1,
+        origin_x: grid.origin[0],
+        origin_y: grid.origin[1],
+        resolution: grid.resolution,
+        width: int(grid.width),
+        height: int(grid.height),
+        num_cells: int(grid.len()),
+        dir_x: floats(&grid.dir_x),
+        dir_y: floats(&grid.dir_y),
+        speed: floats(&grid.speed),
+        cost_to_go: floats(&grid.cost_to_go),
+        goal_x: grid.goal.center[0],
+        goal_y: grid.goal.center[1],
+        goal_radius: grid.goal.radius,
+    }
 }
 
 /// Reply status and reason for a planner error.
@@ -204,12 +236,15 @@ pub fn plan(
     traversability: &TraversabilityParams,
 ) -> Result<PlanOutcome, Rejection> {
     let started = Instant::now();
-    let map = &*request.map;
+    let map = &request.map.map;
     let options = planner_options(&request.options, traversability);
     // max_solve_time bounds the P-F computation from the moment a worker takes the request:
     // traversability and grid, generators (unless cached), then the LP, checked inside both.
     let deadline = Deadline::after(started, options.max_solve_time);
-    let field = TraversabilityField::from_map(map, traversability)?;
+    // Unknown cells cost the map's prior; the blocked cells, and so the cached generators,
+    // depend only on the known obstacles: a map update that reveals heights re-solves only.
+    let field =
+        TraversabilityField::from_partial_map(map, request.map.knowledge.as_ref(), traversability)?;
     let grid = PlanningGrid::from_field(map, &field, options.grid_size)?;
     let prepared = PreparedMap {
         map,
@@ -243,10 +278,20 @@ pub fn plan(
             yaw_rate: s.yaw_rate,
         })
         .collect();
+    let feedback_field = match &plan.feedback_field {
+        Ok(grid) => Some(feedback_field_message(grid)),
+        Err(reason) => {
+            if request.method == pf_planner::plan::Method::Pf {
+                warn!(request_id = request.request_id, %reason, "P-F plan without a feedback field");
+            }
+            None
+        }
+    };
     Ok(PlanOutcome {
         metrics: plan_metrics(&plan, &request.goal),
         samples,
         cache_hit: plan.generators_cached,
+        feedback_field,
     })
 }
 

@@ -136,6 +136,7 @@ mod tests {
             heights: vec![0.0; cells],
             num_obstacle_cells: 0,
             obstacle_mask: Vec::new(),
+            ..TerrainMap::default()
         }
     }
 
@@ -154,7 +155,9 @@ mod tests {
         );
         assert_eq!(claim.claimed_cells(), 15);
         // Truncated right after num_cells: still readable; one byte earlier: not.
-        let header_end = bytes.len() - 15 * 8 - 4;
+        // After num_cells: the heights, num_obstacle_cells, num_known_cells and
+        // unknown_traversability (both masks empty).
+        let header_end = bytes.len() - 15 * 8 - 4 - 4 - 8;
         assert!(peek_map(&bytes[..header_end]).is_some());
         assert!(peek_map(&bytes[..header_end - 1]).is_none());
     }

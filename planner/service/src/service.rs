@@ -10,23 +10,26 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use anyhow::Context;
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use lcm_transport::Lcm;
-use lcm_types::pfnav::{Header, PlanMetrics, PlanReply, PlanRequest, ServiceStatus, TerrainMap};
+use lcm_types::pfnav::{
+    FeedbackField, Header, PlanMetrics, PlanReply, PlanRequest, ServiceStatus, TerrainMap,
+};
 use lcm_types::{DecodeLimits, Message};
-use pf_planner::map::GridMap;
 use pf_planner::traversability::TraversabilityParams;
 use tracing::{debug, error, info, warn};
 
-use crate::convert::{self, MapSource, OptionDefaults, Rejection, ValidatedRequest};
+use crate::convert::{self, MapSource, OptionDefaults, ReceivedMap, Rejection, ValidatedRequest};
 use crate::planning::{self, GeneratorCache, PlanOutcome};
 use crate::preflight;
 
 /// Channel names of one service instance: `<prefix>MAP`, `<prefix>PLAN_REQUEST`,
-/// `<prefix>PLAN_REPLY`, `<prefix>SERVICE_STATUS`.
+/// `<prefix>PLAN_REPLY`, `<prefix>FEEDBACK_FIELD`, `<prefix>SERVICE_STATUS`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Channels {
     pub map: String,
     pub request: String,
     pub reply: String,
+    /// `feedback_field_t` of every successful P-F plan, sent just before its reply.
+    pub feedback_field: String,
     pub status: String,
 }
 
@@ -48,13 +51,23 @@ impl Channels {
             map: format!("{prefix}MAP"),
             request: format!("{prefix}PLAN_REQUEST"),
             reply: format!("{prefix}PLAN_REPLY"),
+            feedback_field: format!("{prefix}FEEDBACK_FIELD"),
             status: format!("{prefix}SERVICE_STATUS"),
         };
-        let longest = channels.status.len();
+        let longest = [
+            &channels.map,
+            &channels.request,
+            &channels.reply,
+            &channels.feedback_field,
+            &channels.status,
+        ]
+        .into_iter()
+        .max_by_key(|name| name.len())
+        .unwrap_or(&channels.status);
         anyhow::ensure!(
-            longest <= lcm_transport::MAX_CHANNEL_LEN,
-            "channel prefix {prefix:?} is too long: {:?} has {longest} bytes, LCM allows {}",
-            channels.status,
+            longest.len() <= lcm_transport::MAX_CHANNEL_LEN,
+            "channel prefix {prefix:?} is too long: {longest:?} has {} bytes, LCM allows {}",
+            longest.len(),
             lcm_transport::MAX_CHANNEL_LEN
         );
         Ok(channels)
@@ -173,9 +186,28 @@ pub struct ServiceReport {
 #[derive(Debug)]
 struct MapStore {
     capacity: usize,
-    maps: Mutex<VecDeque<(i64, Arc<GridMap>)>>,
+    held: Mutex<HeldMaps>,
     /// The most recent rejections (seq, reason), newest first, at most [`REJECTIONS_KEPT`].
     rejected: Mutex<VecDeque<(i64, String)>>,
+}
+
+#[derive(Debug, Default)]
+struct HeldMaps {
+    /// Newest (highest seq) first.
+    maps: VecDeque<(i64, Arc<ReceivedMap>)>,
+    /// Highest seq ever accepted: the map updates are ordered by it.
+    highest_seq: Option<i64>,
+}
+
+/// What became of a valid map published on the map channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum MapUpdate {
+    /// A new map under a new, highest seq.
+    Stored,
+    /// The identical map under a seq already held (a client republishing after loss).
+    Republished,
+    /// An older seq, or an accepted seq with other content: refused with this reason.
+    Stale(String),
 }
 
 /// Rejected maps whose reason is remembered.
@@ -187,19 +219,35 @@ impl MapStore {
     fn new(capacity: usize) -> Self {
         Self {
             capacity,
-            maps: Mutex::new(VecDeque::new()),
+            held: Mutex::new(HeldMaps::default()),
             rejected: Mutex::new(VecDeque::new()),
         }
     }
 
-    fn insert(&self, seq: i64, map: Arc<GridMap>) {
-        let mut maps = self.maps.lock().unwrap_or_else(PoisonError::into_inner);
-        maps.retain(|(s, _)| *s != seq);
-        maps.push_front((seq, map));
-        maps.truncate(self.capacity.max(1));
-        drop(maps);
+    /// Accepts `map` under `seq` when seq is above every accepted one, or when it repeats a
+    /// held map exactly; anything else is a stale update (maps are revealed as the robot walks,
+    /// so an older or rewritten map must not replace what planning already saw).
+    fn update(&self, seq: i64, map: ReceivedMap) -> MapUpdate {
+        let mut held = self.held.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(highest) = held.highest_seq.filter(|&h| seq <= h) {
+            let same = held.maps.iter().any(|(s, m)| *s == seq && **m == map);
+            return if same {
+                MapUpdate::Republished
+            } else if seq < highest {
+                MapUpdate::Stale(format!("stale map update: seq {seq} < latest {highest}"))
+            } else {
+                MapUpdate::Stale(format!(
+                    "stale map update: seq {seq} was already accepted with different content (publish changes under a higher seq)"
+                ))
+            };
+        }
+        held.highest_seq = Some(seq);
+        held.maps.push_front((seq, Arc::new(map)));
+        held.maps.truncate(self.capacity.max(1));
+        drop(held);
         let mut rejected = self.rejected.lock().unwrap_or_else(PoisonError::into_inner);
         rejected.retain(|(s, _)| *s != seq);
+        MapUpdate::Stored
     }
 
     fn reject(&self, seq: i64, reason: &str) {
@@ -252,12 +300,12 @@ impl MapStore {
 }
 
 impl MapSource for MapStore {
-    fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<GridMap>)> {
-        let maps = self.maps.lock().unwrap_or_else(PoisonError::into_inner);
+    fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<ReceivedMap>)> {
+        let held = self.held.lock().unwrap_or_else(PoisonError::into_inner);
         if seq == -1 {
-            maps.front().cloned()
+            held.maps.front().cloned()
         } else {
-            maps.iter().find(|(s, _)| *s == seq).cloned()
+            held.maps.iter().find(|(s, _)| *s == seq).cloned()
         }
     }
 }
@@ -295,8 +343,34 @@ fn header(seq: i64) -> Header {
 }
 
 impl Shared {
-    fn publish_reply(&self, mut reply: PlanReply) {
-        reply.header = header(self.stats.reply_seq.fetch_add(1, Ordering::SeqCst));
+    fn publish_reply(&self, reply: PlanReply) {
+        self.publish_reply_after_field(reply, None);
+    }
+
+    /// Publishes `field` (if any) on the feedback-field channel, then `reply`: a client that
+    /// has the reply already holds the field of the same request. Both carry the same
+    /// `header.seq` (the reply counter).
+    fn publish_reply_after_field(&self, mut reply: PlanReply, field: Option<FeedbackField>) {
+        let seq = self.stats.reply_seq.fetch_add(1, Ordering::SeqCst);
+        if let Some(mut field) = field {
+            field.header = header(seq);
+            field.request_id = reply.request_id;
+            field.map_seq = reply.map_seq;
+            match field.encode() {
+                Ok(bytes) => {
+                    if let Err(e) = self
+                        .lcm
+                        .publish(&self.config.channels.feedback_field, &bytes)
+                    {
+                        error!(request_id = reply.request_id, error = %e, "could not publish the feedback field");
+                    }
+                }
+                Err(e) => {
+                    error!(request_id = reply.request_id, error = %e, "could not encode the feedback field")
+                }
+            }
+        }
+        reply.header = header(seq);
         if reply.status == PlanReply::STATUS_OK {
             self.stats.requests_served.fetch_add(1, Ordering::SeqCst);
         } else {
@@ -421,10 +495,23 @@ impl Shared {
             });
         match map {
             Ok((seq, map)) => {
-                self.stats.maps_received.fetch_add(1, Ordering::SeqCst);
-                self.stats.latest_map_seq.store(seq, Ordering::SeqCst);
-                info!(seq, width = map.width, height = map.height, "map stored");
-                self.maps.insert(seq, Arc::new(map));
+                let (width, height) = (map.map.width, map.map.height);
+                let known = map.knowledge.as_ref().map(|k| k.known_count());
+                match self.maps.update(seq, map) {
+                    MapUpdate::Stored => {
+                        self.stats.maps_received.fetch_add(1, Ordering::SeqCst);
+                        self.stats.latest_map_seq.store(seq, Ordering::SeqCst);
+                        info!(seq, width, height, ?known, "map stored");
+                    }
+                    MapUpdate::Republished => {
+                        self.stats.maps_received.fetch_add(1, Ordering::SeqCst);
+                        debug!(seq, "map republished unchanged");
+                    }
+                    MapUpdate::Stale(reason) => {
+                        warn!(seq, %reason, "map rejected");
+                        self.maps.reject(seq, &reason);
+                    }
+                }
             }
             Err(rejection) => {
                 self.stats.malformed.fetch_add(1, Ordering::Relaxed);
@@ -574,6 +661,7 @@ impl Shared {
                     samples,
                     mut metrics,
                     cache_hit,
+                    feedback_field,
                 }) => {
                     metrics.solve_time = solve_time;
                     info!(
@@ -586,7 +674,7 @@ impl Shared {
                         waited_s = (started - job.received).as_secs_f64(),
                         "planned"
                     );
-                    self.publish_reply(PlanReply {
+                    let reply = PlanReply {
                         request_id: request.request_id,
                         status: PlanReply::STATUS_OK,
                         error: String::new(),
@@ -596,7 +684,8 @@ impl Shared {
                         samples,
                         metrics,
                         ..PlanReply::default()
-                    });
+                    };
+                    self.publish_reply_after_field(reply, feedback_field);
                 }
                 Err(rejection) => {
                     info!(request_id = request.request_id, reason = %rejection.reason, "planning failed");
@@ -648,6 +737,7 @@ pub fn run(
         map = %channels.map,
         request = %channels.request,
         reply = %channels.reply,
+        feedback_field = %channels.feedback_field,
         status = %channels.status,
         workers = shared.config.workers,
         queue = shared.config.queue_capacity,

@@ -12,7 +12,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use lcm_transport::Lcm;
-use lcm_types::pfnav::{PlanReply, PlanRequest, ServiceStatus, TerrainMap};
+use lcm_types::pfnav::{FeedbackField, PlanReply, PlanRequest, ServiceStatus, TerrainMap};
 use lcm_types::Message;
 use pf_planner::map::GridMap;
 use pf_planner_service::{ServiceConfig, ServiceReport};
@@ -29,6 +29,8 @@ pub struct TestService {
     thread: Option<JoinHandle<anyhow::Result<ServiceReport>>>,
     pub replies: Receiver<PlanReply>,
     pub statuses: Receiver<ServiceStatus>,
+    /// `feedback_field_t` messages, in the order the service sent them.
+    pub fields: Receiver<FeedbackField>,
 }
 
 impl TestService {
@@ -69,6 +71,15 @@ impl TestService {
             })
             .unwrap();
         std::mem::forget(status_sub);
+        let (field_tx, fields) = mpsc::channel();
+        let field_sub = lcm
+            .subscribe(&config.channels.feedback_field, move |_, bytes| {
+                let field = FeedbackField::decode(bytes).expect("valid feedback field");
+                let _ = field_tx.send(field);
+            })
+            .unwrap();
+        field_sub.set_queue_capacity(1_000_000).unwrap();
+        std::mem::forget(field_sub);
         let shutdown = Arc::new(AtomicBool::new(false));
         let thread = {
             let (config, shutdown) = (config.clone(), Arc::clone(&shutdown));
@@ -90,6 +101,7 @@ impl TestService {
             thread: Some(thread),
             replies,
             statuses,
+            fields,
         }
     }
 
