@@ -8,7 +8,9 @@
 //! of the cell's basis function. Where several actions tie (relative 1e-9) their unit vectors
 //! are averaged and renormalised: on open ground an 8-direction lattice has two equally short
 //! routes to most goals (axial and diagonal steps in any order), and picking one of them per
-//! cell would zig-zag, while their mean points straight at the goal's side.
+//! cell would zig-zag, while their mean points straight at the goal's side. Only lattice
+//! neighbours are averaged (one angular run around the best action): where two separate routes
+//! tie, on a watershed, their mean would point between them, at an obstacle.
 //!
 //! The cost-to-go is in the planner's cost convention, ∫p ds to the goal: V*ᵢ is per unit
 //! coefficient in LP units (c·∫p ds, c = 1 + 1/u_max), and a unit mass in function i has
@@ -186,7 +188,7 @@ impl FeedbackGrid {
                     actions.push((q, gens.directions[k].vector));
                 }
             }
-            if let Some(direction) = tied_direction(&actions) {
+            if let Some(direction) = tied_direction(&actions, gens.directions.len()) {
                 let cell_speed = if direction == [0.0, 0.0] {
                     0.0
                 } else {
@@ -272,20 +274,43 @@ impl FeedbackGrid {
     }
 }
 
-/// The mean unit vector of the actions within [`TIE_TOLERANCE`] of the best Q-value; when the
-/// tied directions cancel (a cell exactly between two equally good routes around an obstacle)
-/// the best action's own direction. `None` without actions.
-fn tied_direction(actions: &[(f64, [f64; 2])]) -> Option<[f64; 2]> {
+/// The direction of the optimal actions (`(Q-value, unit vector)` each) on a lattice of
+/// `lattice_directions` equally spaced directions. The actions within [`TIE_TOLERANCE`] of the
+/// best Q-value are optimal; the ones that form one angular run with the best action (each
+/// one lattice step from the next: axial and diagonal on 8, or two axial on 4) are averaged.
+/// That straightens open ground, where the run is an axial and a diagonal step, while on a
+/// watershed, where two separate routes tie (north and south around an obstacle), the mean of
+/// their first moves would point between them, at no optimal move at all: there the best
+/// action's run is taken alone. `None` without actions.
+fn tied_direction(actions: &[(f64, [f64; 2])], lattice_directions: usize) -> Option<[f64; 2]> {
     let (best_q, best_dir) = actions.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0))?;
     let slack = TIE_TOLERANCE * best_q.abs();
-    let mut sum = [0.0, 0.0];
-    for &(q, d) in actions {
-        if q <= best_q + slack {
-            sum[0] += d[0];
-            sum[1] += d[1];
+    let tied: Vec<[f64; 2]> = actions
+        .iter()
+        .filter(|&&(q, _)| q <= best_q + slack)
+        .map(|&(_, d)| d)
+        .collect();
+    // Unit vectors one lattice step apart have this dot product (cos 45° or cos 90°).
+    let step_cos = (std::f64::consts::TAU / lattice_directions.max(1) as f64).cos();
+    let adjacent = |a: [f64; 2], b: [f64; 2]| (a[0] * b[0] + a[1] * b[1] - step_cos).abs() < 1e-9;
+    let mut in_run = vec![false; tied.len()];
+    let mut run = vec![best_dir];
+    let mut grown = true;
+    while grown {
+        grown = false;
+        for (k, &d) in tied.iter().enumerate() {
+            if !in_run[k] && d != best_dir && run.iter().any(|&r| adjacent(r, d)) {
+                in_run[k] = true;
+                run.push(d);
+                grown = true;
+            }
         }
     }
+    let sum = run
+        .iter()
+        .fold([0.0, 0.0], |s, d| [s[0] + d[0], s[1] + d[1]]);
     let norm = sum[0].hypot(sum[1]);
+    // A run round the whole circle (a cell in a symmetric ring of routes) cancels out.
     Some(if norm > 1e-6 {
         [sum[0] / norm, sum[1] / norm]
     } else {

@@ -1,11 +1,13 @@
 //! PNG of a map with every method's path: terrain colour map (height), hard obstacles, start,
-//! goal region, one coloured polyline per method, a legend and the metrics of each path.
+//! goal region, one coloured polyline per method, a legend and the metrics of each path; and a
+//! PNG of a P-F feedback law (cost-to-go bands and direction arrows).
 
 use std::path::Path;
 
 use plotters::prelude::*;
 
 use crate::error::PlanError;
+use crate::feedback_grid::FeedbackGrid;
 use crate::grid::GoalRegion;
 use crate::map::{GridMap, Point};
 use crate::metrics::PathMetrics;
@@ -201,6 +203,163 @@ pub fn plot_plans(
             .draw_text(note, &style, (20, y))
             .map_err(|e| plot_error(out, e))?;
     }
+    root.present().map_err(|e| plot_error(out, e))?;
+    Ok(())
+}
+
+/// Filled bands of the cost-to-go plot (contour levels between 0 and the largest finite value).
+const COST_BANDS: usize = 12;
+
+/// Arrows along the longer side of the feedback-field plot: enough to see the law's shape,
+/// few enough that each arrow is readable.
+const ARROWS_ALONG_LONGER_SIDE: usize = 32;
+
+/// Colour of band `k` of [`COST_BANDS`]: dark blue at the goal to pale yellow far away.
+fn band_colour(k: usize) -> RGBColor {
+    let t = k as f64 / (COST_BANDS - 1) as f64;
+    let mix = |a: f64, b: f64| (a + t * (b - a)).round() as u8;
+    RGBColor(mix(40.0, 250.0), mix(60.0, 235.0), mix(150.0, 160.0))
+}
+
+/// PNG of a feedback law: filled contour bands of the cost-to-go (∫p ds to the goal), cells that
+/// cannot reach the goal (obstacles) dark, the direction field as arrows on a subsampled lattice,
+/// the goal disc, the start and (optionally) the planned path.
+pub fn plot_feedback_field(
+    out: &Path,
+    title: &str,
+    field: &FeedbackGrid,
+    start: Point,
+    path: Option<&[Point]>,
+) -> Result<(), PlanError> {
+    let (width, height) = (900u32, 860u32);
+    let root = BitMapBackend::new(out, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| plot_error(out, e))?;
+    let res = field.resolution;
+    let lo = field.origin;
+    let hi = [
+        lo[0] + field.width as f64 * res,
+        lo[1] + field.height as f64 * res,
+    ];
+    let max_cost = field
+        .cost_to_go
+        .iter()
+        .copied()
+        .filter(|c| c.is_finite() && *c >= 0.0)
+        .fold(0.0f64, f64::max)
+        .max(1e-12);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "{title}: feedback law (colour: ∫p ds to the goal, 0–{max_cost:.3} in {COST_BANDS} bands; dark: unreachable)"
+            ),
+            ("sans-serif", 16),
+        )
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
+        .map_err(|e| plot_error(out, e))?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("x [m]")
+        .y_desc("y [m]")
+        .draw()
+        .map_err(|e| plot_error(out, e))?;
+    chart
+        .draw_series((0..field.len()).map(|i| {
+            let (ix, iy) = (i % field.width, i / field.width);
+            let x0 = lo[0] + ix as f64 * res;
+            let y0 = lo[1] + iy as f64 * res;
+            let cost = field.cost_to_go[i];
+            let colour = if cost < 0.0 || !cost.is_finite() {
+                RGBColor(25, 25, 25)
+            } else {
+                let band = ((cost / max_cost) * COST_BANDS as f64).floor() as usize;
+                band_colour(band.min(COST_BANDS - 1))
+            };
+            Rectangle::new([(x0, y0), (x0 + res, y0 + res)], colour.filled())
+        }))
+        .map_err(|e| plot_error(out, e))?;
+    let stride = field
+        .width
+        .max(field.height)
+        .div_ceil(ARROWS_ALONG_LONGER_SIDE)
+        .max(1);
+    let arrow = 0.8 * stride as f64 * res;
+    let mut arrows = Vec::new();
+    for iy in (stride / 2..field.height).step_by(stride) {
+        for ix in (stride / 2..field.width).step_by(stride) {
+            let i = field.index(ix, iy);
+            let d = [field.dir_x[i], field.dir_y[i]];
+            if d == [0.0, 0.0] {
+                continue;
+            }
+            let c = field.cell_center(ix, iy);
+            let tail = (c[0] - 0.5 * arrow * d[0], c[1] - 0.5 * arrow * d[1]);
+            let head = (c[0] + 0.5 * arrow * d[0], c[1] + 0.5 * arrow * d[1]);
+            // Two barbs at ±150° from the direction, a third of the shaft long.
+            let barb = |angle: f64| {
+                let (s, co) = angle.sin_cos();
+                let b = [d[0] * co - d[1] * s, d[0] * s + d[1] * co];
+                (head.0 + arrow / 3.0 * b[0], head.1 + arrow / 3.0 * b[1])
+            };
+            let turn = 150f64.to_radians();
+            arrows.push(vec![tail, head, barb(turn)]);
+            arrows.push(vec![head, barb(-turn)]);
+        }
+    }
+    chart
+        .draw_series(
+            arrows
+                .into_iter()
+                .map(|points| PathElement::new(points, BLACK.stroke_width(1))),
+        )
+        .map_err(|e| plot_error(out, e))?;
+    let goal = field.goal;
+    let goal_outline: Vec<(f64, f64)> = (0..=64)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 64.0;
+            let r = goal.radius.max(0.5 * res);
+            (goal.center[0] + r * a.cos(), goal.center[1] + r * a.sin())
+        })
+        .collect();
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            goal_outline,
+            BLUE.stroke_width(3),
+        )))
+        .map_err(|e| plot_error(out, e))?
+        .label("goal")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.stroke_width(2)));
+    if let Some(points) = path {
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                points.iter().map(|q| (q[0], q[1])).collect::<Vec<_>>(),
+                PATH_COLOURS[0].stroke_width(3),
+            )))
+            .map_err(|e| plot_error(out, e))?
+            .label("P-F path")
+            .legend(|(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], PATH_COLOURS[0].stroke_width(3))
+            });
+    }
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (start[0], start[1]),
+            7,
+            GREEN.filled(),
+        )))
+        .map_err(|e| plot_error(out, e))?
+        .label("start")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, GREEN.filled()));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| plot_error(out, e))?;
     root.present().map_err(|e| plot_error(out, e))?;
     Ok(())
 }

@@ -22,7 +22,7 @@ use pf_planner::map::Point;
 use pf_planner::metrics::evaluate_path;
 use pf_planner::pf::BasisKind;
 use pf_planner::plan::{Method, Plan, Planner, PlannerOptions};
-use pf_planner::plot::{plot_plans, PlotPath};
+use pf_planner::plot::{plot_feedback_field, plot_plans, PlotPath};
 use pf_planner::report::{markdown_table, ReportRow, RowData};
 use pf_planner::scenarios::{self, SCENARIO_NAMES};
 use pf_planner::traversability::TraversabilityField;
@@ -206,6 +206,14 @@ struct PlanArgs {
     /// Output directory.
     #[arg(long, default_value = ".")]
     out: PathBuf,
+    /// Write the P-F plan's feedback law as a numpy .npz: dir_x, dir_y, speed, cost_to_go
+    /// (float64, shape (height, width), [iy, ix]; cost_to_go = ∫p ds to the goal, -1 where it
+    /// cannot be reached), origin (2,), resolution (), goal (3,) = centre x, y, radius.
+    #[arg(long, value_name = "FILE.npz")]
+    field_out: Option<PathBuf>,
+    /// Draw the P-F plan's feedback law: arrows over cost-to-go bands, obstacles dark.
+    #[arg(long, value_name = "FILE.png")]
+    field_plot: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -360,6 +368,10 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
         MethodArg::Dijkstra => vec![Method::Dijkstra],
         MethodArg::All => Method::ALL.to_vec(),
     };
+    let wants_field = args.field_out.is_some() || args.field_plot.is_some();
+    if wants_field && !methods.contains(&Method::Pf) {
+        bail!("--field-out and --field-plot need a P-F plan (--method pf or all)");
+    }
     fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut planner = Planner::new(
         scenario.map.clone(),
@@ -383,6 +395,26 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
             Ok(plan) => {
                 let stem = args.out.join(format!("{}_{}", scenario.name, method));
                 write_plan(&stem, &scenario.name, &plan)?;
+                if method == Method::Pf && wants_field {
+                    let field = plan
+                        .feedback_field
+                        .as_ref()
+                        .map_err(|reason| anyhow::anyhow!("no feedback field: {reason}"))?;
+                    if let Some(path) = &args.field_out {
+                        field.write_npz(path)?;
+                        println!("feedback field -> {}", path.display());
+                    }
+                    if let Some(path) = &args.field_plot {
+                        plot_feedback_field(
+                            path,
+                            &scenario.name,
+                            field,
+                            scenario.start,
+                            Some(&plan.path),
+                        )?;
+                        println!("feedback field plot -> {}", path.display());
+                    }
+                }
                 let m = plan.metrics;
                 println!(
                     "{:<9} ∫p ds {:.4}  length {:.2} m  in obstacles {:.3} m  time {:.3} s  -> {}.json/.csv",

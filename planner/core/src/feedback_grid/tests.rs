@@ -482,3 +482,72 @@ fn plans_carry_the_field_at_the_requested_speed_and_graph_plans_do_not() {
         Err(FieldUnavailable::NotPf { method: "dijkstra" })
     );
 }
+
+#[test]
+fn on_a_watershed_the_direction_follows_one_route_not_their_mean() {
+    // A symmetric map: a block in the middle, the goal straight behind it. Cells on the axis
+    // in front of the block have two equally good routes (north and south around it); the mean
+    // of their first moves would point at the block, which is no optimal move. Every cell's
+    // direction must be an optimal move, or the mean of two adjacent optimal moves: each
+    // lattice move within 22.5° of it is tight in the Bellman equation (p = 0.5, 1 m cells).
+    let (w, h) = (13, 11);
+    let block = |ix: usize, iy: usize| (5..=7).contains(&ix) && (3..=7).contains(&iy);
+    let blocked: Vec<bool> = (0..w * h).map(|c| block(c % w, c / w)).collect();
+    let grid =
+        PlanningGrid::from_parts([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], blocked).expect("grid");
+    let goal = GoalRegion {
+        center: grid.cell_center(11, 5),
+        radius: 0.0,
+    };
+    let (sol, _) = solve(
+        &grid,
+        grid.cell_center(1, 5),
+        &goal,
+        8,
+        StartDensity::UniformFree,
+        LpSolver::Exact,
+    );
+    let field = sol.feedback_grid.expect("field");
+    let moves: [(i64, i64); 8] = [
+        (1, 0),
+        (1, 1),
+        (0, 1),
+        (-1, 1),
+        (-1, 0),
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+    ];
+    for iy in 0..h {
+        for ix in 0..w {
+            let cell = field.index(ix, iy);
+            if field.cost_to_go[cell] <= 0.0 {
+                continue;
+            }
+            let d = [field.dir_x[cell], field.dir_y[cell]];
+            let near: Vec<(i64, i64)> = moves
+                .iter()
+                .copied()
+                .filter(|&(sx, sy)| {
+                    let len = ((sx * sx + sy * sy) as f64).sqrt();
+                    (d[0] * sx as f64 + d[1] * sy as f64) / len
+                        >= (22.5f64.to_radians()).cos() - 1e-9
+                })
+                .collect();
+            assert!(!near.is_empty() && near.len() <= 2, "({ix}, {iy}): {d:?}");
+            for (sx, sy) in near {
+                let (nx, ny) = (ix as i64 + sx, iy as i64 + sy);
+                assert!(nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64);
+                let next = field.index(nx as usize, ny as usize);
+                let step = 0.5 * ((sx * sx + sy * sy) as f64).sqrt();
+                assert!(
+                    field.cost_to_go[next] >= 0.0
+                        && (field.cost_to_go[next] + step - field.cost_to_go[cell]).abs() < 1e-9,
+                    "({ix}, {iy}): direction {d:?} includes the move to ({nx}, {ny}), which is not optimal ({} + {step} vs {})",
+                    field.cost_to_go[next],
+                    field.cost_to_go[cell]
+                );
+            }
+        }
+    }
+}
