@@ -24,6 +24,7 @@ if str(REPO / "build" / "lcm_python") not in sys.path:
 
 import pfnav
 from pfnav import (
+    feedback_field_t,
     header_t,
     plan_metrics_t,
     plan_options_t,
@@ -103,7 +104,9 @@ def header(seq: int) -> header_t:
     return h
 
 
-def terrain_map(width: int, height: int, with_obstacles: bool) -> terrain_map_t:
+def terrain_map(
+    width: int, height: int, with_obstacles: bool, with_known: bool = False
+) -> terrain_map_t:
     m = terrain_map_t()
     m.header = header(4)
     m.origin_x, m.origin_y, m.resolution = -3.2, 1.6, 0.1
@@ -117,7 +120,28 @@ def terrain_map(width: int, height: int, with_obstacles: bool) -> terrain_map_t:
     ]
     m.num_obstacle_cells = m.num_cells if with_obstacles else 0
     m.obstacle_mask = [(i % 7) == 3 for i in range(m.num_obstacle_cells)]
+    # Partially known: the mask and the prior p of the unknown cells (0 = the service default).
+    m.num_known_cells = m.num_cells if with_known else 0
+    m.known_mask = [(i % 5) != 1 for i in range(m.num_known_cells)]
+    m.unknown_traversability = 0.35 if with_known else 0.0
     return m
+
+
+def feedback_field(width: int, height: int) -> feedback_field_t:
+    f = feedback_field_t()
+    f.header = header(21)
+    f.request_id = 2**40 + 5
+    f.map_seq = 4
+    f.origin_x, f.origin_y, f.resolution = -3.2, 1.6, 0.125
+    f.width, f.height = width, height
+    f.num_cells = width * height
+    # float32 arrays: values exact in float32, so the JSON forms compare equal.
+    f.dir_x = [(-1.0, 0.0, 0.5, 1.0)[i % 4] for i in range(f.num_cells)]
+    f.dir_y = [(0.0, -0.75, 0.25, 1.0)[i % 4] for i in range(f.num_cells)]
+    f.speed = [0.5 if i % 3 else 0.0 for i in range(f.num_cells)]
+    f.cost_to_go = [-1.0 if i % 7 == 0 else 0.0625 * i for i in range(f.num_cells)]
+    f.goal_x, f.goal_y, f.goal_radius = -2.6, 2.0, 0.15
+    return f
 
 
 def sample_messages() -> list[Any]:
@@ -209,6 +233,8 @@ def sample_messages() -> list[Any]:
         state,
         terrain_map(16, 9, False),
         terrain_map(3, 3, True),
+        terrain_map(6, 4, True, with_known=True),
+        feedback_field(5, 3),
         request,
         by_seq,
         reply,
@@ -232,6 +258,7 @@ def test_fingerprints_agree_for_every_type() -> None:
         for name in (
             "header_t",
             "terrain_map_t",
+            "feedback_field_t",
             "plan_options_t",
             "plan_request_t",
             "trajectory_sample_t",
@@ -272,9 +299,10 @@ def test_rust_rejects_corrupt_payloads_with_a_reason() -> None:
     payload = terrain_map(4, 4, True).encode()
     with pytest.raises(RuntimeError, match="truncated"):
         run_rust("decode", payload[:20])
-    # Cut inside the obstacle mask: the declared length no longer fits the bytes left.
+    # Cut inside the obstacle mask (followed by num_known_cells and unknown_traversability,
+    # 12 bytes): the declared length no longer fits the bytes left.
     with pytest.raises(RuntimeError, match="obstacle_mask: 16 elements cannot fit"):
-        run_rust("decode", payload[:-3])
+        run_rust("decode", payload[: -(12 + 3)])
     with pytest.raises(RuntimeError, match="fingerprint"):
         run_rust("decode", b"\x00" * 8 + payload[8:])
     # num_cells claims 2^31-1 heights: refused before allocation, with the field named.

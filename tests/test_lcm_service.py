@@ -30,7 +30,13 @@ _GENERATED = REPO_ROOT / "build" / "lcm_python"
 if _GENERATED.is_dir() and str(_GENERATED) not in sys.path:
     sys.path.insert(0, str(_GENERATED))
 
-from pfnav import plan_reply_t, plan_request_t, service_status_t, terrain_map_t
+from pfnav import (
+    feedback_field_t,
+    plan_reply_t,
+    plan_request_t,
+    service_status_t,
+    terrain_map_t,
+)
 
 VENV_BIN = Path(sys.executable).parent
 
@@ -75,15 +81,24 @@ class Client:
     lc: Any = None
     replies: dict[int, list[Any]] = field(default_factory=dict)
     statuses: list[Any] = field(default_factory=list)
+    # Feedback fields by request id, and whether each had arrived when its reply did.
+    fields: dict[int, Any] = field(default_factory=dict)
+    field_before_reply: dict[int, bool] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.lc = lcm.LCM(self.url)
         self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply)
         self.lc.subscribe(self.prefix + "SERVICE_STATUS", self._on_status)
+        self.lc.subscribe(self.prefix + "FEEDBACK_FIELD", self._on_field)
 
     def _on_reply(self, _channel: str, data: bytes) -> None:
         reply = plan_reply_t.decode(data)
+        self.field_before_reply[reply.request_id] = reply.request_id in self.fields
         self.replies.setdefault(reply.request_id, []).append(reply)
+
+    def _on_field(self, _channel: str, data: bytes) -> None:
+        msg = feedback_field_t.decode(data)
+        self.fields[msg.request_id] = msg
 
     def _on_status(self, _channel: str, data: bytes) -> None:
         self.statuses.append(service_status_t.decode(data))
@@ -168,6 +183,15 @@ def flat_map(n: int, seq: int = 1, walls: list[tuple[int, int]] | None = None) -
             mask[iy * n + ix] = True
         msg.num_obstacle_cells = n * n
         msg.obstacle_mask = mask
+    return msg
+
+
+def partial_map(n: int, seq: int, known_columns: int, prior: float) -> Any:
+    """`flat_map(n)` of which only the first `known_columns` columns were observed."""
+    msg = flat_map(n, seq=seq)
+    msg.num_known_cells = n * n
+    msg.known_mask = [i % n < known_columns for i in range(n * n)]
+    msg.unknown_traversability = prior
     return msg
 
 
@@ -276,6 +300,54 @@ def test_python_client_gets_the_c_shape_plan(
         assert replies[method].metrics.cost == pytest.approx(library["cost_integral"], rel=1e-9), name
         assert replies[method].metrics.length == pytest.approx(library["length"], rel=1e-9), name
     service.stop()
+
+
+def test_a_walking_robot_gets_fields_and_stale_maps_are_refused(
+    session: tuple[Client, Service],
+) -> None:
+    """The online loop over udpm: a P-F plan's feedback field arrives before its reply; map
+    updates reveal columns under increasing seqs and reuse the generators; an older seq is
+    refused as stale, with the reason given to a request that names it."""
+    client, _ = session
+    n = 16
+    client.publish("MAP", partial_map(n, seq=3, known_columns=6, prior=0.8))
+    assert client.pump(lambda: client.statuses[-1].maps_received >= 1, 10.0)
+    first = client.request(
+        request(1, plan_request_t.METHOD_PF, (0.4, 0.4), (3.5, 3.5), map_seq=3)
+    )
+    assert first.status == plan_reply_t.STATUS_OK, first.error
+    assert client.field_before_reply[1], "the field is published before the reply"
+    f = client.fields[1]
+    assert (f.request_id, f.map_seq, f.header.seq) == (1, 3, first.header.seq)
+    assert (f.width, f.height, f.num_cells, f.resolution) == (n, n, n * n, 0.25)
+    assert (f.goal_x, f.goal_y, f.goal_radius) == (3.5, 3.5, 0.3)
+    dirs = np.hypot(np.array(f.dir_x), np.array(f.dir_y)).reshape(n, n)
+    cost = np.array(f.cost_to_go).reshape(n, n)
+    # [iy, ix]: the goal cell costs 0; every other cell has a unit direction and a positive cost.
+    assert cost[14, 14] == 0.0
+    moving = cost > 0
+    assert moving.sum() > n * n - 5
+    assert np.allclose(dirs[moving], 1.0, atol=1e-6)
+    assert np.allclose(np.array(f.speed).reshape(n, n)[moving], 0.5)
+    # Unknown columns cost the prior 0.8 per metre; the known flat ground costs 1 (h/h_max).
+    assert cost[14, 15] == pytest.approx(0.8 * 0.25, rel=1e-6)
+
+    client.publish("MAP", partial_map(n, seq=4, known_columns=12, prior=0.8))
+    client.publish("MAP", partial_map(n, seq=2, known_columns=16, prior=0.8))
+    second = client.request(
+        request(2, plan_request_t.METHOD_PF, (0.4, 0.4), (3.5, 3.5), map_seq=4)
+    )
+    assert second.status == plan_reply_t.STATUS_OK, second.error
+    assert second.metrics.cache_hit, "same blocked cells: the generators are reused"
+    stale = client.request(
+        request(3, plan_request_t.METHOD_DIJKSTRA, (0.4, 0.4), (3.5, 3.5), map_seq=2)
+    )
+    assert stale.status == plan_reply_t.STATUS_INVALID_MAP
+    assert "stale map update: seq 2 < latest 4" in stale.error
+    graph = client.request(
+        request(4, plan_request_t.METHOD_DIJKSTRA, (0.4, 0.4), (3.5, 3.5), map_seq=4)
+    )
+    assert graph.status == plan_reply_t.STATUS_OK and 4 not in client.fields
 
 
 def test_every_invalid_request_gets_a_status_and_a_reason(
