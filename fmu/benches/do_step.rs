@@ -81,13 +81,7 @@ fn bench(c: &mut Criterion) {
     let exe = std::env::current_exe().expect("bench executable");
     let library = shared_library_next_to(&exe).expect("cdylib next to the bench executable");
     let fmu = Path::new(env!("CARGO_TARGET_TMPDIR")).join("QuadController-bench.fmu");
-    write_fmu(
-        &BundleInputs {
-            shared_library: library,
-        },
-        &fmu,
-    )
-    .expect("bundle");
+    write_fmu(&BundleInputs::linux64(library), &fmu).expect("bundle");
     let import: Fmi2Import = fmi::import::from_path(&fmu).expect("import");
     let mut instance: InstanceCS = import
         .instantiate_cs("bench", false, false)

@@ -4,16 +4,20 @@
 //! cargo run --release -p quad-controller-fmu --bin bundle-fmu            # -> <repo>/target/fmu/QuadController.fmu
 //! cargo run --release -p quad-controller-fmu --bin bundle-fmu -- --out /tmp/x.fmu
 //! ```
-//! Options: `--out PATH` (archive), `--lib PATH` (cdylib; default: next to this executable, so
-//! `CARGO_TARGET_DIR` and the profile are respected). The robot is the compiled-in
+//! Options: `--out PATH` (archive), `--lib PATH` (the linux64 cdylib; default: next to this
+//! executable, so `CARGO_TARGET_DIR` and the profile are respected), `--binary PLATFORM=PATH`
+//! (repeatable: `linux64`, `win64`, `darwin64`; e.g. `--binary win64=…/quad_controller_fmu.dll`,
+//! stored as `binaries/win64/QuadController.dll`). The robot is the compiled-in
 //! `robot/quadruped.urdf` (the variable table's ranges and start values come from it).
 //! `PFNAV_FMU_OUT` overrides the default output path.
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Parser;
-use quad_controller_fmu::bundle::{repo_root, shared_library_next_to, write_fmu, BundleInputs};
+use quad_controller_fmu::bundle::{
+    repo_root, shared_library_next_to, write_fmu, BundleInputs, Platform,
+};
 use quad_controller_fmu::MODEL_IDENTIFIER;
 
 /// Bundle the controller FMU (modelDescription.xml, the cdylib, the URDF and the default
@@ -28,11 +32,29 @@ struct Args {
     /// CARGO_TARGET_DIR and the profile are respected].
     #[arg(long)]
     lib: Option<PathBuf>,
+    /// A binary for one FMI platform, PLATFORM=PATH with PLATFORM linux64, win64 or darwin64
+    /// (repeatable; linux64 here replaces --lib).
+    #[arg(long, value_name = "PLATFORM=PATH", value_parser = parse_binary)]
+    binary: Vec<(Platform, PathBuf)>,
+}
+
+fn parse_binary(text: &str) -> Result<(Platform, PathBuf), String> {
+    let (platform, path) = text
+        .split_once('=')
+        .ok_or_else(|| format!("expected PLATFORM=PATH, got {text:?}"))?;
+    if path.is_empty() {
+        return Err(format!("no path after {platform}="));
+    }
+    Ok((platform.parse()?, PathBuf::from(path)))
 }
 
 fn main() -> Result<()> {
     tracing_subscriber::fmt().with_target(false).init();
-    let Args { out, lib } = Args::parse();
+    let Args {
+        out,
+        lib,
+        mut binary,
+    } = Args::parse();
     let out = out
         .or_else(|| std::env::var_os("PFNAV_FMU_OUT").map(PathBuf::from))
         .unwrap_or_else(|| {
@@ -41,30 +63,35 @@ fn main() -> Result<()> {
                 .join("fmu")
                 .join(format!("{MODEL_IDENTIFIER}.fmu"))
         });
-    let shared_library = match lib {
-        Some(lib) => lib,
-        None => {
-            let exe = std::env::current_exe().context("locating this executable")?;
-            shared_library_next_to(&exe).with_context(|| {
-                format!(
-                    "no libquad_controller_fmu.so next to {}; build it with `cargo build -p quad-controller-fmu` or pass --lib",
-                    exe.display()
-                )
-            })?
-        }
-    };
-    write_fmu(
-        &BundleInputs {
-            shared_library: shared_library.clone(),
-        },
-        &out,
-    )
-    .with_context(|| format!("bundling {}", out.display()))?;
-    tracing::info!(
-        "wrote {} (binary {})",
-        out.display(),
-        shared_library.display()
-    );
+    let linux64_given = binary.iter().any(|(p, _)| *p == Platform::Linux64);
+    if linux64_given && lib.is_some() {
+        bail!("--lib and --binary linux64=… both name the linux64 binary: give one");
+    }
+    if !linux64_given {
+        let shared_library = match lib {
+            Some(lib) => lib,
+            None => {
+                let exe = std::env::current_exe().context("locating this executable")?;
+                shared_library_next_to(&exe).with_context(|| {
+                    format!(
+                        "no libquad_controller_fmu.so next to {}; build it with `cargo build -p quad-controller-fmu` or pass --lib",
+                        exe.display()
+                    )
+                })?
+            }
+        };
+        binary.insert(0, (Platform::Linux64, shared_library));
+    }
+    let inputs = BundleInputs { binaries: binary };
+    write_fmu(&inputs, &out).with_context(|| format!("bundling {}", out.display()))?;
+    for (platform, path) in &inputs.binaries {
+        tracing::info!(
+            "{}: {} ({})",
+            out.display(),
+            platform.member(),
+            path.display()
+        );
+    }
     println!("{}", out.display());
     Ok(())
 }

@@ -79,9 +79,7 @@ pub fn fmu_path() -> &'static Path {
     FMU.get_or_init(|| {
         let out = Path::new(env!("CARGO_TARGET_TMPDIR"))
             .join(format!("QuadController-{}.fmu", std::process::id()));
-        let inputs = BundleInputs {
-            shared_library: shared_library(),
-        };
+        let inputs = BundleInputs::linux64(shared_library());
         write_fmu(&inputs, &out).expect("bundling the test FMU");
         out
     })
