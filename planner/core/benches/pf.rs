@@ -9,16 +9,22 @@
 
 use std::cell::RefCell;
 use std::hint::black_box;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use criterion::Criterion;
 use pf_planner::basis::BasisKind;
+use pf_planner::deadline::Deadline;
+use pf_planner::error::PlanError;
 use pf_planner::graph::{distances_to_targets, Connectivity};
 use pf_planner::grid::PlanningGrid;
 use pf_planner::io::MapScenario;
 use pf_planner::lp::{self, LpSettings, LpSolver};
+use pf_planner::map::MapKnowledge;
 use pf_planner::pf::{self, prepare, PfGenerators, PfOptions, StartDensity};
+use pf_planner::plan::{Method, PlannerOptions, PreparedMap};
 use pf_planner::scenarios;
+use pf_planner::traversability::TraversabilityField;
 
 const U_MAX: f64 = 1.0;
 
@@ -224,7 +230,61 @@ fn replan_rows(c: &mut Criterion, rec: &Recorder, scenario: &MapScenario) -> Vec
     let new_start = rec.measure(c, "replan 128²: new start, cached generators", || {
         black_box(pf::solve(&gens, &grid, moved, &scenario.goal, &opts).expect("plan"));
     });
+    // The walking robot's replan: the map with only its left half observed (the rest at the
+    // prior p = 0.5), through the whole pipeline (PreparedMap::plan: LP, feedback grid,
+    // integrated path, metrics, re-timed reference) on the cached generators.
+    let map = &scenario.map;
+    let known = (0..map.len())
+        .map(|c| c % map.width < map.width / 2)
+        .collect();
+    let knowledge = MapKnowledge::new(map, known, 0.5).expect("knowledge");
+    let field =
+        TraversabilityField::from_partial_map(map, Some(&knowledge), &scenario.traversability)
+            .expect("field");
+    let revealed = PlanningGrid::from_field(map, &field, 128).expect("grid");
+    assert!(
+        gens.matches(&revealed),
+        "revealing heights keeps the generators"
+    );
+    let cached = Arc::new(gens.clone());
+    let prepared = PreparedMap {
+        map,
+        field: &field,
+        grid: &revealed,
+    };
+    let options = PlannerOptions {
+        grid_size: 128,
+        u_max: U_MAX,
+        start_density: StartDensity::UniformFree,
+        traversability: scenario.traversability,
+        ..PlannerOptions::default()
+    };
+    let revealed_plan = rec.measure(
+        c,
+        "replan 128²: revealed map, PreparedMap::plan with the feedback field",
+        || {
+            let plan = prepared
+                .plan(
+                    scenario.start,
+                    scenario.start_yaw,
+                    &scenario.goal,
+                    Method::Pf,
+                    &options,
+                    Deadline::NONE,
+                    &mut |_, _, _, _| Ok::<_, PlanError>((Arc::clone(&cached), true)),
+                )
+                .expect("plan");
+            assert!(plan.feedback_field.is_ok());
+            black_box(plan);
+        },
+    );
     vec![
+        Row {
+            case: "replan 128², revealed map: PreparedMap::plan incl. feedback field (cached generators)".into(),
+            pipeline: Some(revealed_plan),
+            target: "≤ 100 ms round trip",
+            ..Row::default()
+        },
         Row {
             case: "replan 128², new p (cached generators)".into(),
             pipeline: Some(new_p),

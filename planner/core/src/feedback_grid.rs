@@ -51,6 +51,9 @@ pub const TIE_TOLERANCE: f64 = 1e-9;
 /// Transition mass at or below this is no transition (the SSP solver's threshold).
 const TRANSITION_EPS: f64 = 1e-12;
 
+/// Most actions of one state: one per control direction (4 or 8).
+const MAX_ACTIONS: usize = 8;
+
 /// Why a plan carries no feedback field.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum FieldUnavailable {
@@ -138,15 +141,51 @@ impl FeedbackGrid {
         for &cell in inputs.goal_cells {
             is_goal_cell[cell] = true;
         }
-        let value_of = |j: usize| {
-            if is_goal_cell[basis.cell(j)] {
-                0.0
-            } else {
-                inputs.value[j]
+        // V per active function with the target at 0, read once per transition below.
+        let value_of: Vec<f64> = (0..basis.len())
+            .map(|j| {
+                if is_goal_cell[basis.cell(j)] {
+                    0.0
+                } else {
+                    inputs.value[j]
+                }
+            })
+            .collect();
+        // Q-values of every (state, direction), infinite where the direction is no action
+        // (a wall, a flux that only stays) or leads where the goal cannot be reached. Filled
+        // one generator at a time: each matrix is then read as one sequential stream, which
+        // is what keeps this pass at the cost of reading the generators once.
+        let k_count = gens.directions.len();
+        let n = basis.len();
+        let mut q_values = vec![f64::INFINITY; n * k_count];
+        for (k, l) in gens.generators.iter().enumerate() {
+            let step = gens.directions[k].step;
+            for i in 0..n {
+                let v = value_of[i];
+                if !v.is_finite() || is_goal_cell[basis.cell(i)] {
+                    continue;
+                }
+                let mut stay = 1.0;
+                let mut expected = 0.0;
+                let mut moves = false;
+                for (j, entry) in l.column(i) {
+                    if j == i {
+                        stay += step * entry;
+                    } else if step * entry > TRANSITION_EPS {
+                        moves = true;
+                        expected += step * entry * value_of[j];
+                    }
+                }
+                if !moves {
+                    continue;
+                }
+                if stay > TRANSITION_EPS {
+                    expected += stay * v;
+                }
+                q_values[i * k_count + k] = c * inputs.cost[i] * step + expected;
             }
-        };
-        // Q-value and direction per action of the current state, reused across cells.
-        let mut actions: Vec<(f64, [f64; 2])> = Vec::with_capacity(gens.directions.len());
+        }
+        let mut actions: Vec<(f64, [f64; 2])> = Vec::with_capacity(k_count);
         for (cell, &in_goal) in is_goal_cell.iter().enumerate() {
             if in_goal {
                 field.cost_to_go[cell] = 0.0;
@@ -161,29 +200,7 @@ impl FeedbackGrid {
             }
             field.cost_to_go[cell] = v / (c * inputs.mass[i]);
             actions.clear();
-            for (k, l) in gens.generators.iter().enumerate() {
-                let step = gens.directions[k].step;
-                let mut stay = 1.0;
-                let mut expected = 0.0;
-                let mut moves = false;
-                let mut any = false;
-                for (j, entry) in l.column(i) {
-                    any = true;
-                    if j == i {
-                        stay += step * entry;
-                    } else if step * entry > TRANSITION_EPS {
-                        moves = true;
-                        expected += step * entry * value_of(j);
-                    }
-                }
-                // A wall, or a flux that only stays: no action (as in the SSP model).
-                if !any || !moves {
-                    continue;
-                }
-                if stay > TRANSITION_EPS {
-                    expected += stay * v;
-                }
-                let q = c * inputs.cost[i] * step + expected;
+            for (k, &q) in q_values[i * k_count..(i + 1) * k_count].iter().enumerate() {
                 if q.is_finite() {
                     actions.push((q, gens.directions[k].vector));
                 }
@@ -285,30 +302,40 @@ impl FeedbackGrid {
 fn tied_direction(actions: &[(f64, [f64; 2])], lattice_directions: usize) -> Option<[f64; 2]> {
     let (best_q, best_dir) = actions.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0))?;
     let slack = TIE_TOLERANCE * best_q.abs();
-    let tied: Vec<[f64; 2]> = actions
-        .iter()
-        .filter(|&&(q, _)| q <= best_q + slack)
-        .map(|&(_, d)| d)
-        .collect();
+    // At most MAX_ACTIONS directions (4 or 8): fixed arrays keep this per-cell step free of
+    // heap allocations (it runs for every cell of every plan).
+    let mut tied = [[0.0; 2]; MAX_ACTIONS];
+    let mut tied_count = 0;
+    for &(q, d) in actions.iter().take(MAX_ACTIONS) {
+        if q <= best_q + slack {
+            tied[tied_count] = d;
+            tied_count += 1;
+        }
+    }
+    let tied = &tied[..tied_count];
     // Unit vectors one lattice step apart have this dot product (cos 45° or cos 90°).
     let step_cos = (std::f64::consts::TAU / lattice_directions.max(1) as f64).cos();
     let adjacent = |a: [f64; 2], b: [f64; 2]| (a[0] * b[0] + a[1] * b[1] - step_cos).abs() < 1e-9;
-    let mut in_run = vec![false; tied.len()];
-    let mut run = vec![best_dir];
+    let mut in_run = [false; MAX_ACTIONS];
+    let mut sum = best_dir;
+    for (k, &d) in tied.iter().enumerate() {
+        in_run[k] = d == best_dir;
+    }
     let mut grown = true;
     while grown {
         grown = false;
-        for (k, &d) in tied.iter().enumerate() {
-            if !in_run[k] && d != best_dir && run.iter().any(|&r| adjacent(r, d)) {
+        for k in 0..tied.len() {
+            if in_run[k] {
+                continue;
+            }
+            let joins = (0..tied.len()).any(|r| in_run[r] && adjacent(tied[r], tied[k]));
+            if joins {
                 in_run[k] = true;
-                run.push(d);
+                sum = [sum[0] + tied[k][0], sum[1] + tied[k][1]];
                 grown = true;
             }
         }
     }
-    let sum = run
-        .iter()
-        .fold([0.0, 0.0], |s, d| [s[0] + d[0], s[1] + d[1]]);
     let norm = sum[0].hypot(sum[1]);
     // A run round the whole circle (a cell in a symmetric ring of routes) cancels out.
     Some(if norm > 1e-6 {
