@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::PlanError;
 use crate::map::{GridMap, Point};
-use crate::traversability::{TraversabilityField, TraversabilityParams};
+use crate::traversability::{block_steep_cells, TraversabilityField, TraversabilityParams};
 
 /// Largest accepted number of planning cells along one side (keeps requests from allocating without limit).
 pub const MAX_GRID_SIDE: usize = 1024;
@@ -64,8 +64,9 @@ impl PlanningGrid {
         params: &TraversabilityParams,
         cells_along_longer_side: usize,
     ) -> Result<Self, PlanError> {
-        let field = TraversabilityField::from_map(map, params)?;
-        Self::from_field(map, &field, cells_along_longer_side)
+        let map = block_steep_cells(map, None, params);
+        let field = TraversabilityField::from_map(&map, params)?;
+        Self::from_field(&map, &field, cells_along_longer_side)
     }
 
     /// As [`Self::from_map`] with a traversability field that was already evaluated on `map`.

@@ -22,7 +22,7 @@ use crate::metrics::{evaluate_path, PathMetrics};
 use crate::pf::{self, BasisKind, LpReport, LpSettings, PfGenerators, PfOptions, StartDensity};
 pub use crate::trajectory::TrajectorySample;
 use crate::trajectory::{build_trajectory, TrajectoryOptions};
-use crate::traversability::{TraversabilityField, TraversabilityParams};
+use crate::traversability::{block_steep_cells, TraversabilityField, TraversabilityParams};
 
 /// Planning method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -290,6 +290,7 @@ impl Planner {
         traversability: TraversabilityParams,
         grid_size: usize,
     ) -> Result<Self, PlanError> {
+        let map = block_steep_cells(&map, None, &traversability).into_owned();
         let field = TraversabilityField::from_map(&map, &traversability)?;
         let grid = PlanningGrid::from_field(&map, &field, grid_size)?;
         Ok(Self {

@@ -23,6 +23,14 @@
 //! then keeps about r away from it instead of putting the uphill feet on the flank. Hard
 //! obstacle cells count as p = 1 within the footprint (a foot in a pit is the worst case), so
 //! paths also keep r off pit rims where there is room; the obstacle constraint is unchanged.
+//!
+//! **Walkable slope** (`max_slope_deg`, default none = the paper's model): p is a cost, and a
+//! cost alone never forbids anything — a ridge whose flanks no legged robot can climb is merely
+//! expensive, and with part of the map unknown (priced at the prior p) crossing it can look
+//! cheaper than going around. With a limit set, [`block_steep_cells`] turns every known cell
+//! steeper than it into a hard obstacle before planning.
+
+use std::borrow::Cow;
 
 use serde::{Deserialize, Serialize};
 
@@ -50,6 +58,9 @@ pub struct TraversabilityParams {
     /// Radius of the robot's footprint, metres: p of a cell is the largest p within this radius
     /// (0 = the paper's point robot).
     pub footprint_radius_m: f64,
+    /// Steepest walkable slope, degrees: known cells steeper than this are hard obstacles
+    /// (`None`: no limit, the paper's model).
+    pub max_slope_deg: Option<f64>,
 }
 
 /// Largest footprint radius in cells; bounds the filter's cost (cells × (2R + 1)).
@@ -66,6 +77,7 @@ impl Default for TraversabilityParams {
             p_floor: 0.05,
             h_max: None,
             footprint_radius_m: 0.0,
+            max_slope_deg: None,
         }
     }
 }
@@ -116,6 +128,14 @@ impl TraversabilityParams {
                 "traversability.footprint_radius_m",
                 format!("must be finite and >= 0, got {}", self.footprint_radius_m),
             );
+        }
+        if let Some(limit) = self.max_slope_deg {
+            if !(limit.is_finite() && limit > 0.0 && limit < 90.0) {
+                return bad(
+                    "traversability.max_slope_deg",
+                    format!("must lie in (0, 90), got {limit}"),
+                );
+            }
         }
         if let Some(h) = self.h_max {
             if !(h.is_finite() && h > 0.0) {
@@ -350,6 +370,39 @@ fn disc_max_filter(values: &[f64], width: usize, height: usize, radius_cells: f6
         }
     }
     out
+}
+
+/// The map the planners plan on: with `params.max_slope_deg`, every known cell steeper than the
+/// limit is added to the hard obstacles (unknown cells are never blocked: nothing was seen there).
+/// Without a limit, or when no cell is too steep, the map itself.
+pub fn block_steep_cells<'a>(
+    map: &'a GridMap,
+    knowledge: Option<&MapKnowledge>,
+    params: &TraversabilityParams,
+) -> Cow<'a, GridMap> {
+    let Some(limit) = params.max_slope_deg else {
+        return Cow::Borrowed(map);
+    };
+    let known = knowledge.map(MapKnowledge::known);
+    let is_known = |i: usize| known.map_or(true, |m| m[i]);
+    let steep: Vec<usize> = (0..map.len())
+        .filter(|&i| {
+            is_known(i)
+                && !map.obstacles.as_ref().is_some_and(|mask| mask[i])
+                && slope_deg_over(map, known, i % map.width, i / map.width) > limit
+        })
+        .collect();
+    if steep.is_empty() {
+        return Cow::Borrowed(map);
+    }
+    let mut blocked = map.clone();
+    let mask = blocked
+        .obstacles
+        .get_or_insert_with(|| vec![false; map.len()]);
+    for i in steep {
+        mask[i] = true;
+    }
+    Cow::Owned(blocked)
 }
 
 /// Terrain inclination at a cell centre in degrees (central differences, one-sided at the edge).
@@ -617,5 +670,56 @@ mod tests {
             TraversabilityField::from_partial_map(&map, None, &params).expect("field"),
             TraversabilityField::from_map(&map, &params).expect("field")
         );
+    }
+
+    #[test]
+    fn cells_steeper_than_the_walkable_limit_become_obstacles() {
+        // Flat on the left (ix 0..2), a 45° wall from ix 2 to 4 (heights 0, 0, 0, 1, 2).
+        let heights = (0..20).map(|i| [0.0, 0.0, 0.0, 1.0, 2.0][i % 5]).collect();
+        let map = GridMap::new([0.0, 0.0], 1.0, 5, 4, heights, None).expect("map");
+        let unlimited = TraversabilityParams::default();
+        assert!(matches!(
+            block_steep_cells(&map, None, &unlimited),
+            Cow::Borrowed(_)
+        ));
+        let limited = TraversabilityParams {
+            max_slope_deg: Some(30.0),
+            ..Default::default()
+        };
+        let blocked = block_steep_cells(&map, None, &limited);
+        let mask = blocked.obstacles.as_ref().expect("steep cells blocked");
+        for iy in 0..4 {
+            // ix 0, 1: flat (0°); ix 2: one-sided 26.6°, walkable; ix 3, 4: 45°.
+            let row: Vec<bool> = (0..5).map(|ix| mask[iy * 5 + ix]).collect();
+            assert_eq!(row, [false, false, false, true, true], "row {iy}");
+        }
+        // A limit above the steepest slope changes nothing.
+        let loose = TraversabilityParams {
+            max_slope_deg: Some(60.0),
+            ..Default::default()
+        };
+        assert!(matches!(
+            block_steep_cells(&map, None, &loose),
+            Cow::Borrowed(_)
+        ));
+        // Unknown cells are never blocked; their heights do not make known neighbours steep.
+        let known: Vec<bool> = (0..20).map(|i| i % 5 < 3).collect();
+        let knowledge = MapKnowledge::new(&map, known, 0.5).expect("knowledge");
+        assert!(matches!(
+            block_steep_cells(&map, Some(&knowledge), &limited),
+            Cow::Borrowed(_)
+        ));
+    }
+
+    #[test]
+    fn walkable_slope_limit_must_be_an_angle_between_0_and_90() {
+        for bad in [0.0, 90.0, -5.0, f64::NAN, f64::INFINITY] {
+            let params = TraversabilityParams {
+                max_slope_deg: Some(bad),
+                ..Default::default()
+            };
+            let err = params.validate().expect_err("refused");
+            assert!(err.to_string().contains("max_slope_deg"), "{err}");
+        }
     }
 }

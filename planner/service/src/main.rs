@@ -54,6 +54,10 @@ struct Args {
     /// it, so paths keep that far from steep ground (0 = the paper's point robot).
     #[arg(long, default_value_t = 0.0)]
     footprint_radius: f64,
+    /// Steepest walkable slope in degrees: known cells steeper than this are hard obstacles
+    /// (unset: no limit, the paper's cost-only model).
+    #[arg(long)]
+    max_slope_deg: Option<f64>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -87,6 +91,11 @@ fn main() -> anyhow::Result<()> {
     config.status_period = Duration::from_secs_f64(args.status_period);
     config.defaults.max_solve_time = args.max_solve_time;
     config.traversability.footprint_radius_m = args.footprint_radius;
+    config.traversability.max_slope_deg = args.max_slope_deg;
+    config
+        .traversability
+        .validate()
+        .context("--max-slope-deg / --footprint-radius")?;
 
     let url = args.lcm_url.unwrap_or_else(lcm_transport::default_url);
     let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);

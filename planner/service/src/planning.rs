@@ -18,7 +18,7 @@ use pf_planner::grid::{GoalRegion, PlanningGrid};
 use pf_planner::lp::{LpStatus, SolverUsed};
 use pf_planner::pf::PfGenerators;
 use pf_planner::plan::{Plan, PlannerOptions, PreparedMap};
-use pf_planner::traversability::{TraversabilityField, TraversabilityParams};
+use pf_planner::traversability::{block_steep_cells, TraversabilityField, TraversabilityParams};
 
 use tracing::warn;
 
@@ -236,7 +236,11 @@ pub fn plan(
     traversability: &TraversabilityParams,
 ) -> Result<PlanOutcome, Rejection> {
     let started = Instant::now();
-    let map = &request.map.map;
+    let map = &*block_steep_cells(
+        &request.map.map,
+        request.map.knowledge.as_ref(),
+        traversability,
+    );
     let options = planner_options(&request.options, traversability);
     // max_solve_time bounds the P-F computation from the moment a worker takes the request:
     // traversability and grid, generators (unless cached), then the LP, checked inside both.

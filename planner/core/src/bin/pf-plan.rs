@@ -25,7 +25,7 @@ use pf_planner::plan::{Method, Plan, Planner, PlannerOptions};
 use pf_planner::plot::{plot_feedback_field, plot_plans, PlotPath};
 use pf_planner::report::{markdown_table, ReportRow, RowData};
 use pf_planner::scenarios::{self, SCENARIO_NAMES};
-use pf_planner::traversability::TraversabilityField;
+use pf_planner::traversability::{block_steep_cells, TraversabilityField};
 
 #[derive(Parser)]
 #[command(
@@ -113,6 +113,10 @@ struct MapArgs {
     /// map's `traversability.footprint_radius_m`; 0 = the paper's point robot).
     #[arg(long, allow_negative_numbers = true)]
     footprint_radius: Option<f64>,
+    /// Steepest walkable slope, degrees: steeper cells become hard obstacles (overrides the
+    /// map's `traversability.max_slope_deg`; unset there = no limit).
+    #[arg(long, allow_negative_numbers = true)]
+    max_slope_deg: Option<f64>,
 }
 
 impl MapArgs {
@@ -126,12 +130,21 @@ impl MapArgs {
         if let Some(radius) = self.footprint_radius {
             scenario.traversability.footprint_radius_m = radius;
         }
+        if let Some(limit) = self.max_slope_deg {
+            scenario.traversability.max_slope_deg = Some(limit);
+        }
+        scenario
+            .traversability
+            .validate()
+            .context("--footprint-radius / --max-slope-deg")?;
         Ok(scenario)
     }
 
     /// The scenario and the traversability field the planners plan and measure with.
     fn field(&self) -> Result<(MapScenario, TraversabilityField)> {
-        let scenario = self.load()?;
+        let mut scenario = self.load()?;
+        scenario.map =
+            block_steep_cells(&scenario.map, None, &scenario.traversability).into_owned();
         let field = TraversabilityField::from_map(&scenario.map, &scenario.traversability)
             .context("evaluating the traversability model")?;
         Ok((scenario, field))
