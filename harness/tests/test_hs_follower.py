@@ -306,12 +306,12 @@ def test_slows_down_near_the_goal_and_stops_inside() -> None:
     reached_at = None
     for step in range(10000):
         cmd = follower.command(x, y, yaw, dt)
-        distance_to_edge = math.hypot(x - goal[0], y - goal[1]) - goal[2]
+        distance_to_edge = math.hypot(x - goal[0], y - goal[1]) - (1.0 - limits.goal_stop_depth) * goal[2]
         speed = math.hypot(cmd.vx, cmd.vy)
         if 0.0 < distance_to_edge < limits.slow_radius:
             # Proportional slow-down (the acceleration limit lags it by at most a step's worth).
             assert speed <= max(0.5 * distance_to_edge / limits.slow_radius, limits.min_approach_speed) + limits.max_accel * dt + 1e-9
-            assert cmd.status == STATUS_OK and not cmd.reached
+            assert not cmd.reached
         if distance_to_edge > limits.slow_radius + 0.5 and step > 500:
             # Full speed (interpolating neighbouring radial directions shortens the vector a little).
             assert speed == pytest.approx(0.5, rel=1e-2)
@@ -325,8 +325,9 @@ def test_slows_down_near_the_goal_and_stops_inside() -> None:
     assert cmd.cost_to_go == 0.0
     assert (cmd.vx, cmd.vy, cmd.yaw_rate) == (0.0, 0.0, 0.0)
     assert cmd.reached and cmd.status == STATUS_GOAL
-    # Stopped just inside the edge, not overshooting through the disc.
-    assert goal[2] - 0.02 < math.hypot(x - goal[0], y - goal[1]) <= goal[2]
+    # Stopped at the stop depth inside the disc, not overshooting through it.
+    stop_radius = (1.0 - limits.goal_stop_depth) * goal[2]
+    assert stop_radius - 0.02 < math.hypot(x - goal[0], y - goal[1]) <= stop_radius
 
 
 def test_turns_first_when_facing_away() -> None:
@@ -407,3 +408,16 @@ def test_rejects_bad_limits_and_steps() -> None:
     bad = FeedbackField(ORIGIN, -1.0, field.dir_x, field.dir_y, field.speed, field.cost_to_go, field.goal)
     with pytest.raises(PlannerError, match="resolution"):
         FieldFollower(field).swap_field(bad)
+
+
+def test_the_goal_latch_holds_through_sway_and_releases_outside_the_disc() -> None:
+    goal = (ORIGIN[0] + 6.0, ORIGIN[1] + 3.0, 0.4)
+    follower = FieldFollower(radial_field((24, 32), goal, speed=0.5))
+    gx, gy, r = goal
+    assert not follower.command(gx - 0.3, gy, 0.0, 0.001).reached  # inside the disc, short of the stop depth
+    assert follower.command(gx - 0.1, gy, 0.0, 0.001).reached
+    # Sway back towards the edge: still at the goal, no new walk.
+    swayed = follower.command(gx - 0.35, gy, 0.0, 0.001)
+    assert swayed.reached and (swayed.vx, swayed.vy) == (0.0, 0.0)
+    # Pushed out of the disc: the walk resumes.
+    assert not follower.command(gx - r - 0.05, gy, 0.0, 0.001).reached

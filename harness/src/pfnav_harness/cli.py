@@ -26,6 +26,10 @@ if TYPE_CHECKING:
 
 
 SHORT_DURATION = 8.0
+# Online runs plan with this walkable-slope limit unless --max-slope-deg says otherwise: the robot
+# stands and trots on ≤ 20° (issue 19's slope work targets 30°); a ridge flank of 45° and more
+# is not walkable however cheap the cost model makes it.
+ONLINE_MAX_SLOPE_DEG = 30.0
 
 
 def in_private_network_namespace() -> bool:
@@ -64,6 +68,14 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         type=float,
         default=ROBOT_FOOTPRINT_RADIUS,
         help=f"footprint radius the started service plans with, m (default {ROBOT_FOOTPRINT_RADIUS}; 0 = the paper's point robot)",
+    )
+    p.add_argument(
+        "--max-slope-deg",
+        type=float,
+        default=None,
+        help=f"steepest walkable slope the started service plans with, degrees: steeper cells are obstacles "
+        f"(default: none offline, as in the paper; {ONLINE_MAX_SLOPE_DEG:g} online, where unseen ground is priced at the prior "
+        "and a ridge's cost alone would not keep the robot off it)",
     )
     p.add_argument("--plan-timeout", type=float, default=300.0, help="seconds to wait for each plan reply (default 300)")
     p.add_argument("--max-solve-time", type=float, default=240.0, help="solver time limit asked of the service, s (default 240)")
@@ -125,6 +137,8 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
         raise HarnessError(f"--duration must be positive, got {duration}")
     if not (math.isfinite(args.footprint_radius) and args.footprint_radius >= 0.0):
         raise HarnessError(f"--footprint-radius must be finite and >= 0, got {args.footprint_radius}")
+    if args.max_slope_deg is not None and not (0.0 < args.max_slope_deg < 90.0):
+        raise HarnessError(f"--max-slope-deg must lie in (0, 90) degrees, got {args.max_slope_deg}")
     follow = args.follow or ("feedback" if args.online else "trajectory")
     return CoSimConfig(comm_step=args.comm_step, max_duration=duration, fall=FallThresholds(), follow=follow, pushes=_pushes(args))
 
@@ -177,10 +191,17 @@ def _client(args: argparse.Namespace, out: Path) -> PlannerClient:
         service_log=out / "logs" / "pf-planner-service.log",
         startup_timeout=args.service_timeout,
         footprint_radius=args.footprint_radius,
+        max_slope_deg=_max_slope_deg(args),
     )
     if args.connect:
         client.wait_for_service(timeout=args.service_timeout)
     return client
+
+
+def _max_slope_deg(args: argparse.Namespace) -> float | None:
+    if args.max_slope_deg is not None:
+        return float(args.max_slope_deg)
+    return ONLINE_MAX_SLOPE_DEG if args.online else None
 
 
 def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods: Sequence[str], out: Path) -> dict[str, dict[str, PlanAnswer]]:
@@ -246,6 +267,9 @@ def execute(args: argparse.Namespace) -> int:
         # ∫p ds on the field the started service plans with (a running service's is unknown).
         for scenario in scenarios.values():
             scenario.traversability["footprint_radius_m"] = args.footprint_radius
+            max_slope = _max_slope_deg(args)
+            if max_slope is not None:
+                scenario.traversability["max_slope_deg"] = max_slope
     _check_lcm_url(args.lcm_url, args.allow_host_network)
     answers = {} if online_config is not None else _plan_all(args, scenarios, methods, out)
     plan_time = time.perf_counter() - started

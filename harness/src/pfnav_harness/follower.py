@@ -49,6 +49,9 @@ class FollowerLimits:
     slow_radius: float = 1.0
     # Floor of that slow-down: proportional alone would approach the edge without ever crossing it.
     min_approach_speed: float = 0.05
+    # How deep into the goal disc (fraction of its radius) the robot walks before it stops: stopping
+    # right at the edge leaves a standing robot's sway drifting in and out of the goal.
+    goal_stop_depth: float = 0.5
     # Proportional gain of the heading tracker (1/s) before the rate and acceleration limits.
     heading_gain: float = 3.0
     # Full speed below this heading error, `turning_speed_fraction` of it above the next one, linear between.
@@ -70,6 +73,8 @@ class FollowerLimits:
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"follower limit {name} must be a positive number, got {value}")
+        if not (0.0 <= self.goal_stop_depth < 1.0):
+            raise ValueError(f"follower: goal_stop_depth must lie in [0, 1), got {self.goal_stop_depth}")
         if not (self.slow_radius >= 0.0 and self.min_approach_speed >= 0.0 and 0.0 <= self.turning_speed_fraction <= 1.0):
             raise ValueError("follower: slow_radius and min_approach_speed must be >= 0, turning_speed_fraction in [0, 1]")
         if not (0.0 <= self.full_speed_heading_error < self.turn_first_heading_error <= math.pi):
@@ -108,6 +113,7 @@ class FieldFollower:
         self.limits = limits or FollowerLimits()
         self.limits.validate()
         self._started = False
+        self._at_goal = False
         self._vx = 0.0
         self._vy = 0.0
         self._yaw = 0.0  # unwrapped, so the heading tracker never sees a 2π jump
@@ -128,6 +134,7 @@ class FieldFollower:
     def reset(self) -> None:
         """Forgets the commanded state: the next call starts from the measured heading at rest."""
         self._started = False
+        self._at_goal = False
 
     def command(self, x: float, y: float, yaw: float, dt: float) -> FollowerCommand:
         """The command for the robot at (x, y) heading `yaw`, `dt` seconds after the previous call."""
@@ -139,8 +146,16 @@ class FieldFollower:
             self._vx = self._vy = self._yaw_rate = 0.0
             self._yaw = yaw
 
-        distance_to_goal = math.hypot(x - self._goal_x, y - self._goal_y) - self._goal_radius
-        reached = distance_to_goal <= 0.0
+        # Reached once the robot is `goal_stop_depth` into the disc; it stays reached until it
+        # leaves the disc (a latch, so sway at the stop point does not restart the walk).
+        centre_distance = math.hypot(x - self._goal_x, y - self._goal_y)
+        stop_radius = (1.0 - lim.goal_stop_depth) * self._goal_radius
+        if self._at_goal and centre_distance > self._goal_radius:
+            self._at_goal = False
+        elif centre_distance <= stop_radius:
+            self._at_goal = True
+        reached = self._at_goal
+        distance_to_goal = centre_distance - stop_radius
         speed = 0.0
         ux = uy = 0.0
         cost_to_go = math.nan

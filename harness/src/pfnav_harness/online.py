@@ -124,15 +124,29 @@ class OnlineNavigator:
         pending = self._pending
         if pending is not None and t >= pending.t_publish + self.config.apply_delay - 1e-9:
             self._pending = None
-            answer = self.client.await_answer(pending.request_id, self.config.answer_timeout)
-            if answer is None:
-                pending.outcome = f"no answer within {self.config.answer_timeout:.0f} s; kept the last plan"
-            elif self._accept(pending, answer, t):
+            answer = self._collect(pending)
+            if answer is not None and self._accept(pending, answer, t):
                 answer_now = answer
         if t >= self._next_update - 1e-9 and self._pending is None:
             self._next_update += self.config.update_period
-            self._send_update(t, x, y, yaw)
+            goal = self.scenario.goal
+            # Inside the goal region there is nothing left to plan.
+            if math.hypot(x - goal.center[0], y - goal.center[1]) > goal.radius:
+                self._send_update(t, x, y, yaw)
         return answer_now
+
+    def _collect(self, pending: Replan) -> PlanAnswer | None:
+        """The answer to `pending`, or None with the reason in its outcome."""
+        try:
+            answer = self.client.await_answer(pending.request_id, self.config.answer_timeout)
+        except PlannerError as err:
+            # A malformed answer (e.g. a one-sample plan from a start inside the goal) is one
+            # failed replan, not the end of the walk.
+            pending.outcome = f"unusable answer: {err}; kept the last plan"
+            return None
+        if answer is None:
+            pending.outcome = f"no answer within {self.config.answer_timeout:.0f} s; kept the last plan"
+        return answer
 
     def _publish_belief(self) -> int:
         b = self.belief
@@ -211,10 +225,10 @@ class OnlineNavigator:
         if pending is None:
             return
         self._pending = None
-        answer = self.client.await_answer(pending.request_id, self.config.answer_timeout)
+        answer = self._collect(pending)
         if answer is not None:
             pending.service_latency = answer.reply_utime * 1e-6 - pending._published_wall
-        pending.outcome = "run ended before its apply time"
+            pending.outcome = "run ended before its apply time"
 
 
 def latency_summary(replans: Sequence[Replan]) -> dict[str, float | int]:

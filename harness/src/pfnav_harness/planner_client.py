@@ -216,9 +216,12 @@ class PlannerClient:
         service_log: Path | None = None,
         startup_timeout: float = 10.0,
         footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
+        max_slope_deg: float | None = None,
     ) -> None:
+        """`footprint_radius` and `max_slope_deg` (None: no limit) configure a started service's cost model."""
         self._pfnav = _import_types()
         self.footprint_radius = footprint_radius
+        self.max_slope_deg = max_slope_deg
         lcm = _import_lcm()
         self.lcm_url = lcm_url
         self.prefix = channel_prefix
@@ -287,6 +290,8 @@ class PlannerClient:
     # --- service process ----------------------------------------------------------------------
     def _start_service(self, binary: Path, timeout: float) -> None:
         args = [str(binary), "--lcm-url", self.lcm_url, "--channel-prefix", self.prefix, f"--footprint-radius={self.footprint_radius!r}"]
+        if self.max_slope_deg is not None:
+            args.append(f"--max-slope-deg={self.max_slope_deg!r}")
         if self._service_log_path is not None:
             self._service_log_path.parent.mkdir(parents=True, exist_ok=True)
             self._service_log = open(self._service_log_path, "wb")  # noqa: SIM115 (closed in close())
