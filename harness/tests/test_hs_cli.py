@@ -95,3 +95,21 @@ def test_bad_arguments(fake_tools: dict[str, str], tmp_path: Path) -> None:
     assert_clean_failure(proc, 1, "--duration must be positive")
     proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--footprint-radius=-0.1", cwd=tmp_path)
     assert_clean_failure(proc, 1, "--footprint-radius must be finite and >= 0")
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (("--max-slope-deg", "95"), 1, "--max-slope-deg must lie in (0, 90)"),
+        (("--online", "--bad-map-updates", "nan,garbage"), 1, "unknown bad map update kind(s) garbage"),
+        (("--online", "--sensor-range", "0"), 1, "sensor range must be a positive number"),
+        (("--online", "--unknown-traversability", "1.5"), 1, "traversability of unknown cells must lie in (0, 1]"),
+        (("--online", "--replan-budget", "0.7"), 1, "latency budget must lie in [0, update period"),
+        (("--follow", "feedback", "--method", "astar"), 1, "feedback mode follows the P-F feedback field"),
+        (("--push", "60@north:1+0.2"), 2, "push '60@north:1+0.2'"),
+        (("--random-pushes", "2", "--push-window", "3"), 1, "--push-window must be two numbers"),
+    ],
+)
+def test_bad_online_and_push_arguments(fake_tools: dict[str, str], tmp_path: Path, args: tuple[str, ...], code: int, message: str) -> None:
+    proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--out", str(tmp_path / "out"), *args, cwd=tmp_path)
+    assert_clean_failure(proc, code, message)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -121,7 +122,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(run)
     demo = sub.add_parser("demo", help="all scenarios × {P-F, A*}; writes OUT/report.md with PNGs")
     demo.add_argument("--scenario", action="append", default=None, help="only this scenario (repeatable; default: every scenario of `pf-plan scenario list`)")
-    demo.add_argument("--methods", default="pf,astar", help="comma-separated methods (default pf,astar)")
+    demo.add_argument("--methods", default=None, help="comma-separated methods (default pf,astar; online: pf)")
     _add_common(demo)
     return parser
 
@@ -167,7 +168,6 @@ def _online_config(args: argparse.Namespace) -> OnlineConfig:
         sensor=SensorConfig(range_m=args.sensor_range, unknown_traversability=args.unknown_traversability),
         update_period=args.update_period,
         apply_delay=args.replan_budget,
-        method=args.method if args.command == "run" else "pf",
         options=_request_options(args),
         bad_updates=tuple(k.strip() for k in args.bad_map_updates.split(",") if k.strip()),
     )
@@ -242,7 +242,7 @@ def execute(args: argparse.Namespace) -> int:
         names = [args.scenario]
         methods = [args.method]
     else:
-        methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+        methods = [m.strip() for m in (args.methods or ("pf" if args.online else "pf,astar")).split(",") if m.strip()]
         unknown = [m for m in methods if m not in METHODS]
         if unknown or not methods:
             raise HarnessError(f"unknown method(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(METHODS)}")
@@ -291,7 +291,7 @@ def execute(args: argparse.Namespace) -> int:
                         urdf,
                         out / "cache",
                         config,
-                        online_config,
+                        dataclasses.replace(online_config, method=method),
                         args.plan_timeout,
                         args.retries,
                         log_file,
