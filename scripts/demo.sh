@@ -4,7 +4,10 @@
 #     -> out/planner/report.md with one PNG per scenario;
 #  2. the co-simulation: pf-planner-service on LCM (private network namespace), P-F and A* plans,
 #     the controller FMU (fmpy) walking a DART quadruped over the terrain
-#     -> out/report.md with tables and plots.
+#     -> out/report.md with tables and plots;
+#  3. online navigation: the three scenarios and `surprise`, the robot sensing the terrain as it
+#     walks, map updates and replans over LCM at 2 Hz, the P-F feedback field followed from the
+#     robot's own position -> out/online/report.md.
 # Extra arguments go to `pfnav-demo demo` (e.g. --scenario c_shape, --short, --duration 10,
 # --lcm-log, --comm-step 0.002; see `.venv/bin/pfnav-demo demo --help`).
 set -euo pipefail
@@ -14,6 +17,9 @@ start=$SECONDS
 bash scripts/setup.sh
 target/release/pf-plan demo --out out/planner
 bash scripts/netns.sh .venv/bin/pfnav-demo demo --out out "$@"
+bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online \
+    --scenario mountain_pass --scenario pits --scenario c_shape --scenario surprise "$@"
 echo "planner report: $ROOT/out/planner/report.md"
 echo "co-simulation report: $ROOT/out/report.md"
+echo "online navigation report: $ROOT/out/online/report.md"
 echo "whole demo: $((SECONDS - start)) s"
