@@ -144,7 +144,7 @@ def test_bad_updates_are_published_in_order_after_the_first_regular_one() -> Non
     nan_map, shape_map, stale_map = client.raw
     assert any(np.isnan(h) for h in nan_map.heights)
     assert (shape_map.width, shape_map.height) == (SHAPE[1] // 2, SHAPE[0] // 2)
-    assert stale_map.header.seq < max(r.map_seq for r in navigator.replans[:4])
+    assert stale_map.header.seq < navigator.replans[0].map_seq
 
 
 @pytest.mark.parametrize(

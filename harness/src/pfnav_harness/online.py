@@ -29,6 +29,8 @@ from .sensing import BeliefMap, SensorConfig
 # Kinds of deliberately bad map updates (robustness checks): non-finite heights, a map of another
 # shape, and a sequence number older than the last accepted map.
 BAD_UPDATE_KINDS = ("nan", "shape", "stale")
+# How many sequence numbers before the navigator's first map the "stale" update is stamped.
+STALE_SEQ_AGE = 1000
 
 
 @dataclass(frozen=True)
@@ -95,12 +97,14 @@ class OnlineNavigator:
         self._next_update = 0.0
         self._current_field: FeedbackField | None = None
         self._last_good_seq = -1
+        self._first_seq = -1
         self._bad_updates = list(config.bad_updates)
 
     def start(self, x: float, y: float, yaw: float, timeout: float, retries: int) -> PlanAnswer:
         """Senses at the start pose and plans on that knowledge (blocking): the first plan."""
         changed = self.belief.observe(x, y)
         seq = self._publish_belief()
+        self._first_seq = seq
         published = time.time()
         answer = self.client.request_answer(
             StartPose(x, y, yaw),
@@ -172,8 +176,8 @@ class OnlineNavigator:
         terrain = b.terrain()
         known = b.known_mask()
         if kind == "stale":
-            # An older sequence number with other content: a delayed, superseded map.
-            seq = self._last_good_seq - 1
+            # A map stamped before anything this robot has sent: a delayed, superseded update.
+            seq = self._first_seq - STALE_SEQ_AGE
             message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.config.unknown_traversability)
             message.heights = [h + 0.01 for h in message.heights]
             self.client.publish_raw_map(message)
@@ -196,6 +200,9 @@ class OnlineNavigator:
         replan.service_latency = answer.reply_utime * 1e-6 - replan._published_wall
         if not answer.ok or answer.plan is None:
             replan.outcome = f"status {answer.status}: {answer.error}; kept the last plan"
+            return False
+        if replan.map_seq < self._last_good_seq:
+            replan.outcome = f"planned on map seq {replan.map_seq}, older than the plan in use (seq {self._last_good_seq}); kept the last plan"
             return False
         if self.config.method == "pf":
             if answer.field is None:
