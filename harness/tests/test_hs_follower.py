@@ -412,12 +412,13 @@ def test_rejects_bad_limits_and_steps() -> None:
 
 def test_the_goal_latch_holds_through_sway_and_releases_outside_the_disc() -> None:
     goal = (ORIGIN[0] + 6.0, ORIGIN[1] + 3.0, 0.4)
-    follower = FieldFollower(radial_field((24, 32), goal, speed=0.5))
+    limits = FollowerLimits(goal_stop_depth=0.5)
+    follower = FieldFollower(radial_field((24, 32), goal, speed=0.5), limits)
     gx, gy, r = goal
     assert not follower.command(gx - 0.3, gy, 0.0, 0.001).reached  # inside the disc, short of the stop depth
     assert follower.command(gx - 0.1, gy, 0.0, 0.001).reached
-    # Sway back towards the edge: still at the goal, no new walk.
-    swayed = follower.command(gx - 0.35, gy, 0.0, 0.001)
+    # Sway back across the edge: still at the goal, no new walk.
+    swayed = follower.command(gx - r - 0.1, gy, 0.0, 0.001)
     assert swayed.reached and (swayed.vx, swayed.vy) == (0.0, 0.0)
-    # Pushed out of the disc: the walk resumes.
-    assert not follower.command(gx - r - 0.05, gy, 0.0, 0.001).reached
+    # Pushed well out of the disc: the walk resumes.
+    assert not follower.command(gx - r - limits.goal_release_margin - 0.05, gy, 0.0, 0.001).reached

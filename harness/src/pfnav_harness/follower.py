@@ -49,9 +49,11 @@ class FollowerLimits:
     slow_radius: float = 1.0
     # Floor of that slow-down: proportional alone would approach the edge without ever crossing it.
     min_approach_speed: float = 0.05
-    # How deep into the goal disc (fraction of its radius) the robot walks before it stops: stopping
-    # right at the edge leaves a standing robot's sway drifting in and out of the goal.
-    goal_stop_depth: float = 0.5
+    # How deep into the goal disc (fraction of its radius) the robot walks before it stops.
+    goal_stop_depth: float = 0.0
+    # Once stopped at the goal the robot counts as there until it is this far outside the disc, so
+    # a standing robot's sway across the edge does not restart the walk.
+    goal_release_margin: float = 0.2
     # Proportional gain of the heading tracker (1/s) before the rate and acceleration limits.
     heading_gain: float = 3.0
     # Full speed below this heading error, `turning_speed_fraction` of it above the next one, linear between.
@@ -73,8 +75,8 @@ class FollowerLimits:
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"follower limit {name} must be a positive number, got {value}")
-        if not (0.0 <= self.goal_stop_depth < 1.0):
-            raise ValueError(f"follower: goal_stop_depth must lie in [0, 1), got {self.goal_stop_depth}")
+        if not (0.0 <= self.goal_stop_depth < 1.0 and self.goal_release_margin >= 0.0):
+            raise ValueError("follower: goal_stop_depth must lie in [0, 1) and goal_release_margin be >= 0")
         if not (self.slow_radius >= 0.0 and self.min_approach_speed >= 0.0 and 0.0 <= self.turning_speed_fraction <= 1.0):
             raise ValueError("follower: slow_radius and min_approach_speed must be >= 0, turning_speed_fraction in [0, 1]")
         if not (0.0 <= self.full_speed_heading_error < self.turn_first_heading_error <= math.pi):
@@ -146,11 +148,11 @@ class FieldFollower:
             self._vx = self._vy = self._yaw_rate = 0.0
             self._yaw = yaw
 
-        # Reached once the robot is `goal_stop_depth` into the disc; it stays reached until it
-        # leaves the disc (a latch, so sway at the stop point does not restart the walk).
+        # Reached once the robot is `goal_stop_depth` into the disc; it stays reached until it is
+        # `goal_release_margin` outside (a latch, so sway at the stop point does not restart the walk).
         centre_distance = math.hypot(x - self._goal_x, y - self._goal_y)
         stop_radius = (1.0 - lim.goal_stop_depth) * self._goal_radius
-        if self._at_goal and centre_distance > self._goal_radius:
+        if self._at_goal and centre_distance > self._goal_radius + lim.goal_release_margin:
             self._at_goal = False
         elif centre_distance <= stop_radius:
             self._at_goal = True

@@ -305,7 +305,7 @@ class OnlineMetrics:
     latency_max: float | None
     # Simulated seconds the simulation allowed for a replan (a latency above it would have been late).
     latency_budget: float
-    # Map updates per simulated second.
+    # Map updates per simulated second while updates went out (they stop at the goal).
     update_rate: float
     # ∫p ds on the true map of the walked path and of the full-knowledge plan.
     executed_cost: float
@@ -350,7 +350,8 @@ def compute_online_metrics(log: dict[str, Any], replans: Any, field: Traversabil
     executed_cost, _ = path_cost(field, pos[:, 0], pos[:, 1])
     full_cost, _ = path_cost(field, full_plan.x, full_plan.y)
     deviation = distance_to_polyline(pos[::10, 0], pos[::10, 1], np.asarray(log["plan_x"]), np.asarray(log["plan_y"]))
-    walk_time = float(t[walking][-1] - t[walking][0]) if np.any(walking) else 0.0
+    published = sorted(r.t_publish for r in replans if r.kind != "start")
+    update_span = published[-1] - published[0] + float(config.update_period) if published else 0.0
     pushes = 0
     if "push_force" in log:
         active = np.any(log["push_force"] != 0.0, axis=1)
@@ -364,7 +365,7 @@ def compute_online_metrics(log: dict[str, Any], replans: Any, field: Traversabil
         latency_p99=summary.get("latency_p99"),
         latency_max=summary.get("latency_max"),
         latency_budget=float(config.apply_delay),
-        update_rate=summary["map_updates"] / walk_time if walk_time > 0 else 0.0,
+        update_rate=len(published) / update_span if update_span > 0 else 0.0,
         executed_cost=executed_cost,
         full_knowledge_cost=full_cost,
         max_deviation=float(np.max(deviation)) if len(deviation) else 0.0,
