@@ -12,10 +12,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from .metrics import OnlineMetrics, RunMetrics
-from .scenario import Scenario
+from .scenario import Scenario, Terrain
 from .world import LEGS
 
 METHOD_COLOURS = {"pf": "tab:red", "astar": "tab:blue", "dijkstra": "tab:green", "pf-feedback": "tab:purple", "pf-online": "tab:orange"}
@@ -45,9 +47,8 @@ def _fmt(value: float | None, digits: int = 3) -> str:
     return f"{value:.{digits}f}"
 
 
-def plot_paths(scenario: Scenario, runs: Sequence[RunRecord], path: Path) -> None:
-    """Terrain colour map with obstacles, start, goal, and each method's planned and executed path."""
-    terrain = scenario.terrain
+def _terrain_axes(terrain: Terrain) -> tuple[Figure, Axes]:
+    """A figure of the terrain's heights (colour bar) with its obstacle cells shaded."""
     (x0, y0), (x1, y1) = terrain.bounds()
     fig, ax = plt.subplots(figsize=(7.5, 6.5))
     im = ax.imshow(terrain.heights, origin="lower", extent=(x0, x1, y0, y1), cmap="terrain", interpolation="nearest")
@@ -55,6 +56,14 @@ def plot_paths(scenario: Scenario, runs: Sequence[RunRecord], path: Path) -> Non
     if terrain.obstacles is not None and terrain.obstacles.any():
         mask = np.ma.masked_where(~terrain.obstacles, np.ones_like(terrain.heights))
         ax.imshow(mask, origin="lower", extent=(x0, x1, y0, y1), cmap="Greys", vmin=0, vmax=1.2, alpha=0.8, interpolation="nearest")
+    return fig, ax
+
+
+def plot_paths(scenario: Scenario, runs: Sequence[RunRecord], path: Path) -> None:
+    """Terrain colour map with obstacles, start, goal, and each method's planned and executed path."""
+    terrain = scenario.terrain
+    fig, ax = _terrain_axes(terrain)
+    (x0, y0), (x1, y1) = terrain.bounds()
     for run in runs:
         m = run.metrics
         colour = METHOD_COLOURS.get(m.method, "k")
@@ -227,13 +236,8 @@ def plot_replans(scenario: Scenario, run: RunRecord, path: Path) -> None:
     """The walked path over the terrain, each replan's path overlaid (early light, late dark), unseen cells hatched."""
     terrain = scenario.terrain
     log = run.log
+    fig, ax = _terrain_axes(terrain)
     (x0, y0), (x1, y1) = terrain.bounds()
-    fig, ax = plt.subplots(figsize=(7.5, 6.5))
-    im = ax.imshow(terrain.heights, origin="lower", extent=(x0, x1, y0, y1), cmap="terrain", interpolation="nearest")
-    fig.colorbar(im, ax=ax, label="terrain height [m]", shrink=0.8)
-    if terrain.obstacles is not None and terrain.obstacles.any():
-        mask = np.ma.masked_where(~terrain.obstacles, np.ones_like(terrain.heights))
-        ax.imshow(mask, origin="lower", extent=(x0, x1, y0, y1), cmap="Greys", vmin=0, vmax=1.2, alpha=0.8, interpolation="nearest")
     if "known_final" in log:
         unseen = np.ma.masked_where(np.asarray(log["known_final"], dtype=bool), np.ones_like(terrain.heights))
         ax.imshow(unseen, origin="lower", extent=(x0, x1, y0, y1), cmap="Greys", vmin=0, vmax=3, alpha=0.35, interpolation="nearest")
