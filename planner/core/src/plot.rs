@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::error::PlanError;
@@ -54,6 +55,60 @@ fn terrain_colour(fraction: f64) -> RGBColor {
     let t = if f1 > f0 { (f - f0) / (f1 - f0) } else { 0.0 };
     let mix = |k: usize| (c0[k] + t * (c1[k] - c0[k])).round() as u8;
     RGBColor(mix(0), mix(1), mix(2))
+}
+
+/// A chart over map coordinates (metres).
+type MapChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The goal disc's outline (at least half a cell wide, so a point goal stays visible).
+fn draw_goal<'a, 'b: 'a>(
+    chart: &mut MapChart<'a, 'b>,
+    goal: &GoalRegion,
+    res: f64,
+    out: &Path,
+) -> Result<(), PlanError> {
+    let goal_outline: Vec<(f64, f64)> = (0..=64)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 64.0;
+            let r = goal.radius.max(0.5 * res);
+            (goal.center[0] + r * a.cos(), goal.center[1] + r * a.sin())
+        })
+        .collect();
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            goal_outline,
+            BLUE.stroke_width(3),
+        )))
+        .map_err(|e| plot_error(out, e))?
+        .label("goal")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.stroke_width(2)));
+    Ok(())
+}
+
+/// The start marker, then the legend of everything drawn so far.
+fn draw_start_and_legend<'a, 'b: 'a>(
+    chart: &mut MapChart<'a, 'b>,
+    start: Point,
+    out: &Path,
+) -> Result<(), PlanError> {
+    chart
+        .draw_series(std::iter::once(Circle::new(
+            (start[0], start[1]),
+            7,
+            GREEN.filled(),
+        )))
+        .map_err(|e| plot_error(out, e))?
+        .label("start")
+        .legend(|(x, y)| Circle::new((x + 10, y), 5, GREEN.filled()));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| plot_error(out, e))?;
+    Ok(())
 }
 
 fn plot_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
@@ -119,21 +174,7 @@ pub fn plot_plans(
             Rectangle::new([(x0, y0), (x0 + res, y0 + res)], colour.filled())
         }))
         .map_err(|e| plot_error(out, e))?;
-    let goal_outline: Vec<(f64, f64)> = (0..=64)
-        .map(|k| {
-            let a = std::f64::consts::TAU * k as f64 / 64.0;
-            let r = goal.radius.max(0.5 * res);
-            (goal.center[0] + r * a.cos(), goal.center[1] + r * a.sin())
-        })
-        .collect();
-    chart
-        .draw_series(std::iter::once(PathElement::new(
-            goal_outline,
-            BLUE.stroke_width(3),
-        )))
-        .map_err(|e| plot_error(out, e))?
-        .label("goal")
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.stroke_width(2)));
+    draw_goal(&mut chart, goal, res, out)?;
     for (k, p) in paths.iter().enumerate() {
         let colour = PATH_COLOURS[k % PATH_COLOURS.len()];
         chart
@@ -147,22 +188,7 @@ pub fn plot_plans(
                 PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(3))
             });
     }
-    chart
-        .draw_series(std::iter::once(Circle::new(
-            (start[0], start[1]),
-            7,
-            GREEN.filled(),
-        )))
-        .map_err(|e| plot_error(out, e))?
-        .label("start")
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, GREEN.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(|e| plot_error(out, e))?;
+    draw_start_and_legend(&mut chart, start, out)?;
     let style = ("monospace", 15).into_font().color(&BLACK);
     let mut y = 8;
     lower
@@ -316,22 +342,7 @@ pub fn plot_feedback_field(
                 .map(|points| PathElement::new(points, BLACK.stroke_width(1))),
         )
         .map_err(|e| plot_error(out, e))?;
-    let goal = field.goal;
-    let goal_outline: Vec<(f64, f64)> = (0..=64)
-        .map(|k| {
-            let a = std::f64::consts::TAU * k as f64 / 64.0;
-            let r = goal.radius.max(0.5 * res);
-            (goal.center[0] + r * a.cos(), goal.center[1] + r * a.sin())
-        })
-        .collect();
-    chart
-        .draw_series(std::iter::once(PathElement::new(
-            goal_outline,
-            BLUE.stroke_width(3),
-        )))
-        .map_err(|e| plot_error(out, e))?
-        .label("goal")
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, BLUE.stroke_width(2)));
+    draw_goal(&mut chart, &field.goal, res, out)?;
     if let Some(points) = path {
         chart
             .draw_series(std::iter::once(PathElement::new(
@@ -344,22 +355,7 @@ pub fn plot_feedback_field(
                 PathElement::new(vec![(x, y), (x + 20, y)], PATH_COLOURS[0].stroke_width(3))
             });
     }
-    chart
-        .draw_series(std::iter::once(Circle::new(
-            (start[0], start[1]),
-            7,
-            GREEN.filled(),
-        )))
-        .map_err(|e| plot_error(out, e))?
-        .label("start")
-        .legend(|(x, y)| Circle::new((x + 10, y), 5, GREEN.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(|e| plot_error(out, e))?;
+    draw_start_and_legend(&mut chart, start, out)?;
     root.present().map_err(|e| plot_error(out, e))?;
     Ok(())
 }
