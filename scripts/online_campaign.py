@@ -6,7 +6,8 @@
    optimum;
 2. pushes: sideways pushes (default 60 N for 0.2 s) at a seeded random walk time, SEEDS seeds ×
    the paper's scenarios, feedback mode on the full-knowledge plan, no replanning: goal, falls,
-   largest deviation from the plan's path.
+   and how far the push displaced the robot (largest distance to the unpushed run at equal
+   times; the co-simulation is deterministic, so the difference is the push's doing).
 
 Each run is one `pfnav-demo run` (its own report and metrics.json under OUT); the tables are printed
 and written to OUT/summary.md. Runs inside the private network namespace (the planner speaks LCM):
@@ -69,15 +70,29 @@ def online_rows(results: dict[str, dict[str, Any]]) -> list[str]:
     return rows
 
 
-def push_rows(results: dict[tuple[str, int], tuple[float, dict[str, Any]]]) -> list[str]:
-    rows = ["| scenario | seed | push at [s] | goal | fell | max deviation from plan [m] | time to goal [s] |", "|---|---|---|---|---|---|---|"]
+def displacement(pushed: Path, baseline: Path) -> float | None:
+    """Largest horizontal distance between the pushed and the unpushed run at equal times."""
+    try:
+        a = np.load(next(pushed.glob("logs/*.npz")))
+        b = np.load(next(baseline.glob("logs/*.npz")))
+    except (StopIteration, OSError, ValueError):
+        return None
+    n = min(len(a["t"]), len(b["t"]))
+    return float(np.max(np.hypot(*(a["base_pos"][:n, :2] - b["base_pos"][:n, :2]).T)))
+
+
+def push_rows(results: dict[tuple[str, int], tuple[float | None, dict[str, Any]]]) -> list[str]:
+    rows = [
+        "| scenario | seed | push at [s] | goal | fell | displaced by the push [m] | max deviation from plan [m] | time to goal [s] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for (name, seed), (at, m) in results.items():
         if "error" in m:
-            rows.append(f"| {name} | {seed} | {at:.2f} | error: {m['error']} | | | |")
+            rows.append(f"| {name} | {seed} | {fmt(at)} | error: {m['error']} | | | | |")
             continue
         rows.append(
-            f"| {name} | {seed} | {at:.2f} | {'yes' if m['goal_reached'] else 'no'} | {'yes' if m['fell'] else 'no'} | "
-            f"{m['max_path_deviation']:.2f} | {fmt(m['time_to_goal'], 1)} |"
+            f"| {name} | {seed if seed else 'no push'} | {fmt(at)} | {'yes' if m['goal_reached'] else 'no'} | {'yes' if m['fell'] else 'no'} | "
+            f"{fmt(m.get('displacement'))} | {m['max_path_deviation']:.2f} | {fmt(m['time_to_goal'], 1)} |"
         )
     return rows
 
@@ -110,13 +125,19 @@ def main() -> int:
             lines.append(f"- {name}: {reason}")
     lines.append("")
 
-    pushes: dict[tuple[str, int], tuple[float, dict[str, Any]]] = {}
+    pushes: dict[tuple[str, int], tuple[float | None, dict[str, Any]]] = {}
     for name in push_scenarios:
+        baseline = args.out / f"push_{name}_0"
+        print(f"push {name}: unpushed baseline ...", file=sys.stderr, flush=True)
+        pushes[(name, 0)] = (None, run(baseline, ["--scenario", name, "--follow", "feedback"]))
         for seed in range(1, args.seeds + 1):
             at = float(np.round(np.random.default_rng(seed).uniform(first, last), 3))
             print(f"push {name} seed {seed} at {at:.2f} s ...", file=sys.stderr, flush=True)
             spec = f"{args.push}:{at}+{args.push_duration}"
-            pushes[(name, seed)] = (at, run(args.out / f"push_{name}_{seed}", ["--scenario", name, "--follow", "feedback", "--push", spec]))
+            folder = args.out / f"push_{name}_{seed}"
+            metrics = run(folder, ["--scenario", name, "--follow", "feedback", "--push", spec])
+            metrics["displacement"] = displacement(folder, baseline)
+            pushes[(name, seed)] = (at, metrics)
     if pushes:
         lines += [f"## Pushes ({args.push} N for {args.push_duration} s, feedback mode, no replanning)", "", *push_rows(pushes), ""]
 
