@@ -80,8 +80,9 @@ class CoSimConfig:
     # the planner's feedback field at the robot's current position.
     follow: str = "trajectory"
     # Feedback mode has no plan clock: the walk may take this many times the plan's duration
-    # (plus 10 s) before the run ends without reaching the goal.
-    feedback_time_factor: float = 2.0
+    # (plus 10 s) before the run ends without reaching the goal (online, the first plan is made
+    # knowing little and detours can triple the walk).
+    feedback_time_factor: float = 3.0
     # Force impulses on the trunk (walk-clock times).
     pushes: PushSchedule | None = None
 

@@ -360,7 +360,7 @@ def compute_online_metrics(log: dict[str, Any], replans: Any, field: Traversabil
     return OnlineMetrics(
         map_updates=int(summary["map_updates"]),
         replans_in_use=int(summary["replans_in_use"]),
-        rejected=[f"{r.kind} update seq {r.map_seq}: {r.outcome}" for r in replans if not r.in_use and r.outcome != "pending"],
+        rejected=[f"{r.kind} update seq {r.map_seq}: {r.outcome}" for r in replans if r.rejected],
         latency_p50=summary.get("latency_p50"),
         latency_p99=summary.get("latency_p99"),
         latency_max=summary.get("latency_max"),

@@ -29,6 +29,9 @@ from .sensing import BeliefMap, SensorConfig
 # Kinds of deliberately bad map updates (robustness checks): non-finite heights, a map of another
 # shape, and a sequence number older than the last accepted map.
 BAD_UPDATE_KINDS = ("nan", "shape", "stale")
+OUTCOME_IN_USE = "in use"
+OUTCOME_PENDING = "pending"
+OUTCOME_RUN_ENDED = "run ended before its apply time"
 # How many sequence numbers before the navigator's first map the "stale" update is stamped.
 STALE_SEQ_AGE = 1000
 
@@ -69,7 +72,7 @@ class Replan:
     kind: str = "update"
     t_apply: float | None = None
     # "in use", or why the answer was not used.
-    outcome: str = "pending"
+    outcome: str = OUTCOME_PENDING
     # Wall seconds from the map going out to the reply being sent by the service, and to the
     # answer being decoded here (the latter includes waiting for the simulation to ask).
     service_latency: float | None = None
@@ -80,7 +83,12 @@ class Replan:
 
     @property
     def in_use(self) -> bool:
-        return self.outcome == "in use"
+        return self.outcome == OUTCOME_IN_USE
+
+    @property
+    def rejected(self) -> bool:
+        """An answer that came (or failed to come) and was not put in use."""
+        return self.outcome not in (OUTCOME_IN_USE, OUTCOME_PENDING, OUTCOME_RUN_ENDED)
 
 
 class OnlineNavigator:
@@ -219,7 +227,7 @@ class OnlineNavigator:
             self._current_field = answer.field
         plan = answer.plan
         replan.t_apply = t
-        replan.outcome = "in use"
+        replan.outcome = OUTCOME_IN_USE
         replan.path_x = plan.x.copy()
         replan.path_y = plan.y.copy()
         replan.planner_cost = plan.metrics.get("cost")
@@ -235,7 +243,7 @@ class OnlineNavigator:
         answer = self._collect(pending)
         if answer is not None:
             pending.service_latency = answer.reply_utime * 1e-6 - pending._published_wall
-            pending.outcome = "run ended before its apply time"
+            pending.outcome = OUTCOME_RUN_ENDED
 
 
 def latency_summary(replans: Sequence[Replan]) -> dict[str, float | int]:
@@ -243,7 +251,7 @@ def latency_summary(replans: Sequence[Replan]) -> dict[str, float | int]:
     regular = [r for r in replans if r.kind in ("update", "start")]
     latencies = np.array([r.service_latency for r in regular if r.service_latency is not None and r.kind == "update"])
     used = [r for r in replans if r.in_use and r.kind == "update"]
-    rejected = [r for r in replans if not r.in_use and r.outcome != "pending"]
+    rejected = [r for r in replans if r.rejected]
     summary: dict[str, float | int] = {
         "map_updates": len([r for r in replans if r.kind != "start"]),
         "replans_in_use": len(used),
