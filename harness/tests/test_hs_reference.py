@@ -74,3 +74,26 @@ def test_heading_smoothing_keeps_positions_and_removes_zig_zag(ramp_scenario: Sc
     # The mean direction of the zig-zag is 22.5°; smoothed headings stay within a few degrees of it.
     assert np.max(np.abs(smooth.rows[middle, YAW] - math.pi / 8)) < math.radians(5.0)
     assert np.max(np.abs(raw.rows[middle, YAW] - math.pi / 8)) == pytest.approx(math.pi / 8)
+
+
+def test_a_replanned_trajectory_continues_from_where_it_was_planned(ramp_scenario: Scenario) -> None:
+    """Trajectory mode online: the new plan starts at the pose of its map update and is sampled from then on."""
+    from pfnav_harness.reference_source import TrajectorySource
+
+    t = np.linspace(0.0, 4.0, 41)
+    first = make_plan(t, 0.2 + 0.4 * t, np.full_like(t, 1.0), np.zeros_like(t))
+    source = TrajectorySource(first, ramp_scenario.terrain, 0.3, 0.0)
+    state = np.zeros(37)
+    before, after = np.zeros(10), np.zeros(10)
+    planned_at, applied_at = 1.0, 1.2
+    source.sample(applied_at, state, True, before)
+    # Replanned at t = 1 s from the pose the first plan had then, bending towards y = 1.4 at the same speed.
+    second = make_plan(t, 0.6 + 0.4 * t * np.cos(0.3), 1.0 + 0.4 * t * np.sin(0.3), np.full_like(t, 0.3))
+    source.replace(second, planned_at)
+    source.sample(applied_at, state, True, after)
+    # No jump at the swap beyond what the bend accumulates in the 0.2 s latency (0.08 m at 0.3 rad).
+    jump = math.hypot(after[X] - before[X], after[Y] - before[Y])
+    assert jump == pytest.approx(math.hypot(0.08 * math.cos(0.3) - 0.08, 0.08 * math.sin(0.3)), abs=1e-9)
+    source.sample(planned_at + 2.0, state, True, after)
+    assert after[X] == pytest.approx(0.6 + 0.8 * math.cos(0.3), abs=1e-9)
+    assert after[Y] == pytest.approx(1.0 + 0.8 * math.sin(0.3), abs=1e-9)
