@@ -29,6 +29,27 @@ fn solve(
     (sol, gens)
 }
 
+/// The exact solver's field (8 directions, uniform start density) for a point goal at a cell centre.
+fn exact_field(
+    grid: &PlanningGrid,
+    start: Point,
+    goal_cell: (usize, usize),
+) -> (GoalRegion, FeedbackGrid) {
+    let goal = GoalRegion {
+        center: grid.cell_center(goal_cell.0, goal_cell.1),
+        radius: 0.0,
+    };
+    let (sol, _) = solve(
+        grid,
+        start,
+        &goal,
+        8,
+        StartDensity::UniformFree,
+        LpSolver::Exact,
+    );
+    (goal, sol.feedback_grid.expect("field"))
+}
+
 /// Random terrain with ~12 % blocked cells (the optimality tests' kind).
 fn random_grid(rng: &mut ChaCha8Rng) -> PlanningGrid {
     let width = rng.random_range(10..=18);
@@ -189,19 +210,7 @@ fn a_uniform_map_gives_straight_directions_not_a_zig_zag() {
         PlanningGrid::from_parts([0.0, 0.0], 0.5, n, n, vec![0.4; n * n], vec![false; n * n])
             .expect("grid");
     let (gx, gy) = (10usize, 10usize);
-    let goal = GoalRegion {
-        center: grid.cell_center(gx, gy),
-        radius: 0.0,
-    };
-    let (sol, _) = solve(
-        &grid,
-        grid.cell_center(0, 3),
-        &goal,
-        8,
-        StartDensity::UniformFree,
-        LpSolver::Exact,
-    );
-    let field = sol.feedback_grid.expect("field");
+    let (goal, field) = exact_field(&grid, grid.cell_center(0, 3), (gx, gy));
     let s = std::f64::consts::FRAC_1_SQRT_2;
     // The mean of the axial and the diagonal step (both optimal off the axes and diagonals).
     let between = {
@@ -247,19 +256,7 @@ fn obstacles_and_cut_off_cells_read_unreachable() {
     let blocked: Vec<bool> = (0..w * h).map(|c| c % w == 3).collect();
     let grid =
         PlanningGrid::from_parts([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], blocked).expect("grid");
-    let goal = GoalRegion {
-        center: grid.cell_center(0, 2),
-        radius: 0.0,
-    };
-    let (sol, _) = solve(
-        &grid,
-        grid.cell_center(2, 4),
-        &goal,
-        8,
-        StartDensity::UniformFree,
-        LpSolver::Exact,
-    );
-    let field = sol.feedback_grid.expect("field");
+    let (goal, field) = exact_field(&grid, grid.cell_center(2, 4), (0, 2));
     for iy in 0..h {
         for ix in 0..w {
             let cell = field.index(ix, iy);
@@ -495,19 +492,7 @@ fn on_a_watershed_the_direction_follows_one_route_not_their_mean() {
     let blocked: Vec<bool> = (0..w * h).map(|c| block(c % w, c / w)).collect();
     let grid =
         PlanningGrid::from_parts([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], blocked).expect("grid");
-    let goal = GoalRegion {
-        center: grid.cell_center(11, 5),
-        radius: 0.0,
-    };
-    let (sol, _) = solve(
-        &grid,
-        grid.cell_center(1, 5),
-        &goal,
-        8,
-        StartDensity::UniformFree,
-        LpSolver::Exact,
-    );
-    let field = sol.feedback_grid.expect("field");
+    let (goal, field) = exact_field(&grid, grid.cell_center(1, 5), (11, 5));
     let moves: [(i64, i64); 8] = [
         (1, 0),
         (1, 1),
