@@ -30,11 +30,7 @@ fn solve(
 }
 
 /// The exact solver's field (8 directions, uniform start density) for a point goal at a cell centre.
-fn exact_field(
-    grid: &PlanningGrid,
-    start: Point,
-    goal_cell: (usize, usize),
-) -> (GoalRegion, FeedbackGrid) {
+fn exact_field(grid: &PlanningGrid, start: Point, goal_cell: (usize, usize)) -> FeedbackGrid {
     let goal = GoalRegion {
         center: grid.cell_center(goal_cell.0, goal_cell.1),
         radius: 0.0,
@@ -47,7 +43,7 @@ fn exact_field(
         StartDensity::UniformFree,
         LpSolver::Exact,
     );
-    (goal, sol.feedback_grid.expect("field"))
+    sol.feedback_grid.expect("field")
 }
 
 /// Random terrain with ~12 % blocked cells (the optimality tests' kind).
@@ -210,7 +206,7 @@ fn a_uniform_map_gives_straight_directions_not_a_zig_zag() {
         PlanningGrid::from_parts([0.0, 0.0], 0.5, n, n, vec![0.4; n * n], vec![false; n * n])
             .expect("grid");
     let (gx, gy) = (10usize, 10usize);
-    let (goal, field) = exact_field(&grid, grid.cell_center(0, 3), (gx, gy));
+    let field = exact_field(&grid, grid.cell_center(0, 3), (gx, gy));
     let s = std::f64::consts::FRAC_1_SQRT_2;
     // The mean of the axial and the diagonal step (both optimal off the axes and diagonals).
     let between = {
@@ -256,7 +252,7 @@ fn obstacles_and_cut_off_cells_read_unreachable() {
     let blocked: Vec<bool> = (0..w * h).map(|c| c % w == 3).collect();
     let grid =
         PlanningGrid::from_parts([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], blocked).expect("grid");
-    let (goal, field) = exact_field(&grid, grid.cell_center(2, 4), (0, 2));
+    let field = exact_field(&grid, grid.cell_center(2, 4), (0, 2));
     for iy in 0..h {
         for ix in 0..w {
             let cell = field.index(ix, iy);
@@ -492,7 +488,7 @@ fn on_a_watershed_the_direction_follows_one_route_not_their_mean() {
     let blocked: Vec<bool> = (0..w * h).map(|c| block(c % w, c / w)).collect();
     let grid =
         PlanningGrid::from_parts([0.0, 0.0], 1.0, w, h, vec![0.5; w * h], blocked).expect("grid");
-    let (goal, field) = exact_field(&grid, grid.cell_center(1, 5), (11, 5));
+    let field = exact_field(&grid, grid.cell_center(1, 5), (11, 5));
     let moves: [(i64, i64); 8] = [
         (1, 0),
         (1, 1),
