@@ -227,9 +227,14 @@ def _plan_all(args: argparse.Namespace, scenarios: dict[str, Scenario], methods:
 
 def _summary_line(rec: RunRecord) -> str:
     m = rec.metrics
+    if str(rec.log.get("follow", "trajectory")) == "feedback":
+        # The reference is the robot's own position: the distance from the plan's path says more.
+        tracking = f"path dev={m.max_path_deviation:.2f} m"
+    else:
+        tracking = f"rms={m.rms_error:.3f} m max={m.max_error:.3f} m"
     return (
         f"{m.scenario:14s} {m.method:6s} goal={'yes' if m.goal_reached else 'no ':3s} fell={'yes' if m.fell else 'no ':3s} "
-        f"rms={m.rms_error:.3f} m max={m.max_error:.3f} m final={m.final_distance_to_goal:.2f} m "
+        f"{tracking} final={m.final_distance_to_goal:.2f} m "
         f"t_goal={'–' if m.time_to_goal is None else f'{m.time_to_goal:.1f} s'} "
         f"wall/sim={rec.timing_per_sim_second['total']:.3f}"
     )
