@@ -21,7 +21,7 @@ log "cargo test (private network namespace)"
 bash scripts/netns.sh cargo test --workspace --offline --quiet
 
 log "ruff"
-.venv/bin/ruff check harness tests scripts
+.venv/bin/ruff check harness tests scripts examples
 
 log "pytest (private network namespace)"
 # Exit code 5 means "no tests collected": only acceptable while no Python tests exist yet.
