@@ -6,7 +6,7 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*"; }
+log() { printf '\033[1;34m[setup %4ds]\033[0m %s\n' "$SECONDS" "$*"; }
 
 # libclang-dev: bindgen in the fmi crate (the FMU importer used by the Rust FMU tests).
 # cmake, make: OSQP's C sources (osqp-sys), the MPC benchmark's comparison solver and test cross-check.

@@ -5,8 +5,9 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-log() { printf '\033[1;32m[test]\033[0m %s\n' "$*"; }
 start=$SECONDS
+# Each line carries the seconds since the start, so a slow phase shows in the CI log.
+log() { printf '\033[1;32m[test %4ds]\033[0m %s\n' "$((SECONDS - start))" "$*"; }
 
 bash scripts/setup.sh
 
