@@ -27,7 +27,7 @@ from .pushes import PushSchedule
 from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, X, Y
 from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
 from .scenario import Scenario
-from .world import NUM_JOINTS, QuadrupedWorld, quaternion_to_rpy
+from .world import NUM_JOINTS, Payload, QuadrupedWorld, quaternion_to_rpy
 
 Progress = Callable[[float], None]
 # FMU reference input ← column of a reference row. ref.z is the height of the local terrain plane
@@ -85,6 +85,8 @@ class CoSimConfig:
     feedback_time_factor: float = 3.0
     # Force impulses on the trunk (walk-clock times).
     pushes: PushSchedule | None = None
+    # Mass added to the trunk (the controller is not told).
+    payload: Payload | None = None
 
     def validate(self) -> None:
         if not (self.physics_dt > 0 and math.isfinite(self.physics_dt)):
@@ -162,7 +164,7 @@ class CoSimulation:
             self.source = FieldSource(field, scenario.terrain, c.plane_radius, c.physics_dt, start_yaw)
         else:
             self.source = TrajectorySource(plan, scenario.terrain, c.plane_radius, c.heading_smoothing)
-        self.world = QuadrupedWorld(scenario.terrain, urdf, cache_dir, self.config.physics_dt, self.config.friction)
+        self.world = QuadrupedWorld(scenario.terrain, urdf, cache_dir, self.config.physics_dt, self.config.friction, payload=self.config.payload)
         start_yaw = float(plan.yaw[0]) if len(plan.yaw) else scenario.start_yaw
         self.world.place(float(plan.x[0]), float(plan.y[0]), start_yaw)
         if controller is not None:

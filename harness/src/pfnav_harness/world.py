@@ -31,6 +31,50 @@ NUM_JOINTS = 12
 DEFAULT_STANCE = np.tile(np.array([0.0, 0.8, -1.6]), 4)
 
 
+@dataclass(frozen=True)
+class Payload:
+    """Mass added to (or, negative, taken from) the trunk, as a point mass at `offset`.
+
+    `mass_fraction` is relative to the trunk link's own mass (0.2 = 20 % heavier); `offset` (m) is
+    in the trunk's body frame (x forward, y left, z up) from the trunk's centre of mass. The trunk
+    stays one rigid body: its mass, centre of mass and inertia become those of trunk + payload, so
+    the controller, which assumes the nominal trunk, sees a model error, as with a real load.
+    """
+
+    mass_fraction: float = 0.0
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.mass_fraction) and self.mass_fraction > -1.0):
+            raise SimulationError(f"payload mass fraction must be finite and > -1 (the trunk keeps some mass), got {self.mass_fraction}")
+        if len(self.offset) != 3 or not all(math.isfinite(v) for v in self.offset):
+            raise SimulationError(f"payload offset must be 3 finite coordinates (m), got {self.offset}")
+        object.__setattr__(self, "offset", tuple(float(v) for v in self.offset))
+
+
+def add_payload(body: dart.dynamics.BodyNode, payload: Payload) -> None:
+    """Makes `body` the rigid union of itself and the payload's point mass (parallel-axis theorem)."""
+    inertia = body.getInertia()
+    mass = float(inertia.getMass())
+    com = np.asarray(inertia.getLocalCOM(), dtype=np.float64)
+    moment = np.asarray(inertia.getMoment(), dtype=np.float64)
+    extra = payload.mass_fraction * mass
+    total = mass + extra
+    point = com + np.asarray(payload.offset)
+    new_com = (mass * com + extra * point) / total
+
+    def shifted(m: float, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+
+    new_moment = moment + shifted(mass, com - new_com) + shifted(extra, point - new_com)
+    if np.linalg.eigvalsh(new_moment).min() <= 0.0:
+        raise SimulationError(
+            f"payload {payload.mass_fraction:+.0%} at offset {payload.offset} m leaves the trunk without a positive inertia: "
+            "take less mass away, or closer to the centre of mass"
+        )
+    body.setInertia(dart.dynamics.Inertia(total, new_com, new_moment))
+
+
 @dataclass
 class RobotState:
     """Base and joint state in the conventions of the FMU inputs (world frame, quaternion w,x,y,z)."""
@@ -144,6 +188,7 @@ class QuadrupedWorld:
         time_step: float = 0.001,
         friction: float = 0.8,
         enforce_joint_limits: bool = True,
+        payload: Payload | None = None,
     ) -> None:
         if not (time_step > 0.0 and math.isfinite(time_step)):
             raise SimulationError(f"physics time step must be positive, got {time_step}")
@@ -176,6 +221,9 @@ class QuadrupedWorld:
                 raise SimulationError(f"{urdf}: missing foot link '{name}'")
             self.feet.append(foot)
         self.foot_radius = self._foot_radius()
+        self.trunk_mass = float(self.base.getMass())
+        if payload is not None:
+            add_payload(self.base, payload)
         _set_friction(robot, friction)
         self.world.addSkeleton(robot)
         self.effort_limits = np.array([robot.getJoint(n).getForceUpperLimit(0) for n in JOINT_NAMES])
