@@ -15,10 +15,12 @@ from typing import TYPE_CHECKING
 
 from . import paths
 from .errors import HarnessError
+from .fmu_runner import ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
 from .scenario import paper_scenario_names
 
 if TYPE_CHECKING:
+    from .body_sensors import BodySensorConfig
     from .cosim import CoSimConfig
     from .online import OnlineConfig
     from .pushes import PushSchedule
@@ -107,6 +109,16 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--push-magnitude", type=float, default=60.0, help="force of --random-pushes, N (default 60)")
     p.add_argument("--push-duration", type=float, default=0.2, help="duration of --random-pushes, s (default 0.2)")
     p.add_argument("--push-window", default="2,10", help="walk-clock window A,B of the random push start times, s (default 2,10)")
+    p.add_argument(
+        "--estimator",
+        choices=ESTIMATOR_MODES,
+        default="groundTruth",
+        help="what the controller runs on: groundTruth (the simulated body's exact state; default) or kalman (its own estimate "
+        "from a simulated IMU, joint encoders and optional position fixes; needs an FMU with the estimator)",
+    )
+    p.add_argument("--fix-rate", type=float, default=0.0, help="kalman: absolute position fixes per second (default 0 = none)")
+    p.add_argument("--fix-noise", type=float, default=0.02, help="kalman: standard deviation of each fix coordinate, m (default 0.02)")
+    p.add_argument("--sensor-seed", type=int, default=0, help="kalman: seed of the IMU, encoder and fix noise (default 0)")
     p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
 
 
@@ -141,7 +153,29 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
     if args.max_slope_deg is not None and not (0.0 < args.max_slope_deg < 90.0):
         raise HarnessError(f"--max-slope-deg must lie in (0, 90) degrees, got {args.max_slope_deg}")
     follow = args.follow or ("feedback" if args.online else "trajectory")
-    return CoSimConfig(comm_step=args.comm_step, max_duration=duration, fall=FallThresholds(), follow=follow, pushes=_pushes(args))
+    return CoSimConfig(
+        comm_step=args.comm_step,
+        max_duration=duration,
+        fall=FallThresholds(),
+        follow=follow,
+        pushes=_pushes(args),
+        estimator=args.estimator,
+        body_sensors=_body_sensors(args),
+    )
+
+
+def _body_sensors(args: argparse.Namespace) -> BodySensorConfig:
+    from .body_sensors import BodySensorConfig
+    from .errors import SimulationError
+
+    if args.estimator != "kalman" and (args.fix_rate != 0.0 or args.sensor_seed != 0):
+        raise HarnessError("--fix-rate and --sensor-seed feed the estimator: add --estimator kalman")
+    config = BodySensorConfig(seed=args.sensor_seed, fix_rate=args.fix_rate, fix_noise=args.fix_noise)
+    try:
+        config.validate()
+    except SimulationError as err:
+        raise HarnessError(str(err)) from err
+    return config
 
 
 def _pushes(args: argparse.Namespace) -> PushSchedule | None:
@@ -236,7 +270,17 @@ def _summary_line(rec: RunRecord) -> str:
         f"{m.scenario:14s} {m.method:6s} goal={'yes' if m.goal_reached else 'no ':3s} fell={'yes' if m.fell else 'no ':3s} "
         f"{tracking} final={m.final_distance_to_goal:.2f} m "
         f"t_goal={'–' if m.time_to_goal is None else f'{m.time_to_goal:.1f} s'} "
-        f"wall/sim={rec.timing_per_sim_second['total']:.3f}"
+        f"wall/sim={rec.timing_per_sim_second['total']:.3f}" + _estimation_summary(rec)
+    )
+
+
+def _estimation_summary(rec: RunRecord) -> str:
+    e = rec.estimation
+    if e is None:
+        return ""
+    return (
+        f" | estimate: vel rms={e.velocity_rms:.3f} m/s drift={e.drift_percent:.2f} % of {e.path_length:.1f} m "
+        f"pos rms={e.position_rms:.3f} m yaw final={e.yaw_error_final:+.3f} rad tracking rms={e.tracking_rms:.3f} m status={e.status_bits:#x}"
     )
 
 
@@ -264,6 +308,11 @@ def execute(args: argparse.Namespace) -> int:
     from .report import write_report
 
     config = _config(args)
+    if config.estimator == "kalman":
+        from .fmu_runner import read_contract
+
+        # Before any planning: an FMU without the estimator cannot run this.
+        read_contract(fmu).require_estimation()
     if config.follow == "feedback" and any(m != "pf" for m in methods):
         raise HarnessError("feedback mode follows the P-F feedback field: use --method pf (graph planners give only a path)")
     online_config = _online_config(args) if args.online else None
@@ -321,6 +370,15 @@ def execute(args: argparse.Namespace) -> int:
         f"communication step {config.comm_step * 1000:.0f} ms, physics 1 kHz (DART, ODE collision).",
         "",
         (
+            f"State estimate in the loop (kalman): {config.body_sensors.imu.name} IMU, {config.body_sensors.encoder.name} "
+            f"{config.body_sensors.encoder.bits}-bit joint encoders, position fixes "
+            + (f"at {config.body_sensors.fix_rate:g} Hz, σ {config.body_sensors.fix_noise:g} m" if config.body_sensors.fix_rate > 0 else "off")
+            + f", sensor seed {config.body_sensors.seed}."
+            if config.estimator == "kalman"
+            else "The controller runs on the simulated body's exact state (estimator groundTruth)."
+        ),
+        "",
+        (
             "Plans from a running service (`--connect`); ∫p ds on the scenarios' own traversability model."
             if args.connect
             else f"Robot footprint radius {args.footprint_radius:.2f} m: the service plans on p maximised over that radius "
@@ -342,6 +400,7 @@ def execute(args: argparse.Namespace) -> int:
                         "timing_per_sim_second": r.timing_per_sim_second,
                         "stop_reason": r.stop_reason,
                         **({"online": r.online.as_dict()} if r.online is not None else {}),
+                        **({"estimation": r.estimation.as_dict()} if r.estimation is not None else {}),
                     }
                     for rs in runs.values()
                     for r in rs

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import fmu_runner as fr
+from .body_sensors import BodySensorConfig, BodySensors
 from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
@@ -87,6 +88,10 @@ class CoSimConfig:
     pushes: PushSchedule | None = None
     # Mass added to the trunk (the controller is not told).
     payload: Payload | None = None
+    # What the controller runs on: "groundTruth" (the DART state) or "kalman" (its own estimate
+    # from the body sensors below; needs an FMU with the estimator).
+    estimator: str = "groundTruth"
+    body_sensors: BodySensorConfig = field(default_factory=BodySensorConfig)
 
     def validate(self) -> None:
         if not (self.physics_dt > 0 and math.isfinite(self.physics_dt)):
@@ -98,6 +103,9 @@ class CoSimConfig:
             raise SimulationError("stand_time and settle_time must be >= 0")
         if self.follow not in FOLLOW_MODES:
             raise SimulationError(f"unknown follow mode '{self.follow}' (choose from {', '.join(FOLLOW_MODES)})")
+        if self.estimator not in fr.ESTIMATOR_MODES:
+            raise SimulationError(f"unknown estimator mode '{self.estimator}' (choose from {', '.join(fr.ESTIMATOR_MODES)})")
+        self.body_sensors.validate()
 
 
 @dataclass
@@ -232,6 +240,7 @@ class CoSimulation:
         contacts_view = fmu.contacts_array
         perf = time.perf_counter
 
+        estimator = EstimatorInTheLoop(fmu, c, n_steps) if c.estimator == "kalman" else None
         fmu.initialize(0.0)
         stop_reason = "completed"
         fall_step: int | None = None
@@ -264,6 +273,8 @@ class CoSimulation:
                     world.apply_trunk_force(force)
                     assert log_push is not None
                     log_push[k] = push_force
+            # The truth is logged before the body sensors overwrite joint angles with their readings.
+            log_state[k] = state
             if k % ratio == 0:
                 input_values[ref_in] = ref_row[ref_columns]
                 input_values[body_height_in] = c.body_height
@@ -275,6 +286,8 @@ class CoSimulation:
                     map_origin[0], map_origin[1] = grid[0], grid[1]
                     input_values[map_spacing] = terrain.resolution
                     map_heights[:] = grid[2].ravel()
+                if estimator is not None:
+                    estimator.write_inputs(t, state)
                 mode = modes.Locomotion if walking else modes.Stand
                 t0 = perf()
                 fmu.exchange_inputs(mode)
@@ -289,7 +302,6 @@ class CoSimulation:
             world.step()
             timing.physics += perf() - t0
 
-            log_state[k] = state
             log_outputs[k] = outputs.values
             log_ref[k] = ref_row
             flags = log_flags[k]
@@ -297,6 +309,8 @@ class CoSimulation:
             flags[4:8] = world.foot_contacts()
             flags[8] = fmu.fsm_state
             flags[9] = mode
+            if estimator is not None:
+                estimator.log_step(k)
 
             # The controller's damping state is its own verdict that the robot is down.
             if walking and fall_step is None and k % 10 == 0 and (flags[8] == fsm.Damping or self._fallen(state, min_height)):
@@ -346,6 +360,9 @@ class CoSimulation:
         }
         if log_push is not None:
             log["push_force"] = log_push[:n]
+        log["estimator"] = np.array(c.estimator)
+        if estimator is not None:
+            log.update(estimator.log(n))
         if online is not None:
             log.update(replan_log(online))
         return RunResult(self.scenario.name, self.plan.method, log, timing, stop_reason)
@@ -358,6 +375,65 @@ class CoSimulation:
         roll, pitch, _ = quaternion_to_rpy(state[3:7])
         # Absolute tilt with margin for the slope the robot stands on (≤ ~15° on walkable routes).
         return abs(roll) > self.config.fall.max_roll + 0.3 or abs(pitch) > self.config.fall.max_pitch + 0.3
+
+
+class EstimatorInTheLoop:
+    """Kalman mode: body sensor readings into the FMU's estimator inputs, its estimate into the log.
+
+    Joint angles reach the FMU as the encoders read them; the log keeps the DART truth.
+    """
+
+    def __init__(self, fmu: fr.ControllerFmu, config: CoSimConfig, n_steps: int) -> None:
+        self.config = config
+        self.io = fmu.enable_estimation(config.estimator)
+        self.sensors = BodySensors(config.body_sensors, config.comm_step)
+        self.joint_q = fmu.inputs.view(fr.JOINT_Q)
+        # est.pos, est.vel, est.rpy | imu.gyro, imu.acc | fix.pos
+        self._log = np.zeros((n_steps, 18))
+        self._status = np.zeros(n_steps, dtype=np.int32)
+        self._fix_valid = np.zeros(n_steps, dtype=bool)
+        self._new_fix = False
+
+    def write_inputs(self, t: float, state: NDArray[np.float64]) -> None:
+        readings = self.sensors.sample(t, state)
+        io = self.io
+        io.gyro[:] = readings.gyro
+        io.acc[:] = readings.acc
+        io.fix_pos[:] = readings.fix_pos
+        io.fix_valid[0] = int(readings.fix_valid)
+        self._new_fix = readings.fix_valid
+        self.joint_q[:] = readings.joint_q
+
+    def log_step(self, k: int) -> None:
+        io = self.io
+        row = self._log[k]
+        row[0:3] = io.est_pos
+        row[3:6] = io.est_vel
+        row[6:9] = io.est_rpy
+        row[9:12] = io.gyro
+        row[12:15] = io.acc
+        row[15:18] = io.fix_pos
+        self._status[k] = io.est_status[0]
+        self._fix_valid[k] = self._new_fix
+        self._new_fix = False
+
+    def log(self, n: int) -> dict[str, NDArray[np.float64]]:
+        sensors = self.config.body_sensors
+        return {
+            "est_pos": self._log[:n, 0:3],
+            "est_vel": self._log[:n, 3:6],
+            "est_rpy": self._log[:n, 6:9],
+            "est_status": self._status[:n],
+            "imu_gyro": self._log[:n, 9:12],
+            "imu_acc": self._log[:n, 12:15],
+            "fix_pos": self._log[:n, 15:18],
+            "fix_valid": self._fix_valid[:n],
+            "fix_rate": np.array(sensors.fix_rate),
+            "fix_noise": np.array(sensors.fix_noise),
+            "sensor_seed": np.array(sensors.seed),
+            "imu_model": np.array(sensors.imu.name),
+            "encoder_model": np.array(sensors.encoder.name),
+        }
 
 
 def replan_log(online: OnlineNavigator) -> dict[str, NDArray[np.float64]]:

@@ -84,6 +84,28 @@ USED_VARIABLES: dict[str, str] = (
     | {name: "output" for name in (*REAL_OUTPUTS, *CONTACT_OUTPUTS, FSM_OUTPUT)}
 )
 
+# State estimation (issue 18): body sensor inputs, the estimate, the mode parameter. Needed only
+# when a run asks for the estimator (kalman mode); an FMU without them still runs on ground truth.
+# The FMU's own `contact[k]` inputs (measured contact, −1 = gait schedule) keep their start value.
+IMU_GYRO = tuple(f"imu.gyro[{i}]" for i in range(1, 4))
+IMU_ACC = tuple(f"imu.acc[{i}]" for i in range(1, 4))
+FIX_POS = tuple(f"fix.pos[{i}]" for i in range(1, 4))
+FIX_VALID = "fix.valid"
+ESTIMATION_REAL_INPUTS = IMU_GYRO + IMU_ACC + FIX_POS
+EST_POS = tuple(f"est.pos[{i}]" for i in range(1, 4))
+EST_VEL = tuple(f"est.vel[{i}]" for i in range(1, 4))
+EST_RPY = tuple(f"est.rpy[{i}]" for i in range(1, 4))
+ESTIMATION_REAL_OUTPUTS = EST_POS + EST_VEL + EST_RPY
+EST_STATUS = "est.status"
+ESTIMATOR_PARAMETER = "estimator"
+# Estimator modes by item name; the codes are read from the parameter's enumeration type.
+ESTIMATOR_MODES = ("groundTruth", "kalman")
+ESTIMATION_VARIABLES: dict[str, str] = (
+    {name: "input" for name in (*ESTIMATION_REAL_INPUTS, FIX_VALID)}
+    | {name: "output" for name in (*ESTIMATION_REAL_OUTPUTS, EST_STATUS)}
+    | {ESTIMATOR_PARAMETER: "parameter"}
+)
+
 
 class NamedVector:
     """A float vector whose entries are FMU variables, addressed by name (views, no copies)."""
@@ -153,13 +175,69 @@ class FmuContract:
                 problems.append(f"{name} is not of type {type_name}")
         if problems:
             raise SimulationError(f"{source} lacks what the harness needs: {'; '.join(problems)}")
+        self.source = source
         self.value_references = {name: int(variables[name].valueReference) for name in USED_VARIABLES}
         self.parameters = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
         self.fsm = enumeration(md, FSM_TYPE)
         self.mode = enumeration(md, MODE_TYPE)
+        self.estimation_problems = _estimation_problems(variables)
+        self.estimator_codes: dict[str, int] = {}
+        if not self.estimation_problems:
+            self.value_references |= {name: int(variables[name].valueReference) for name in ESTIMATION_VARIABLES}
+            self.estimator_codes = _estimator_codes(variables[ESTIMATOR_PARAMETER])
+            missing = [m for m in ESTIMATOR_MODES if m not in self.estimator_codes]
+            if missing:
+                self.estimation_problems.append(f"parameter {ESTIMATOR_PARAMETER} has no item {', '.join(missing)}")
+
+    @property
+    def has_estimation(self) -> bool:
+        """Whether the FMU has the state estimator's inputs, outputs and mode parameter."""
+        return not self.estimation_problems
+
+    def require_estimation(self) -> None:
+        if self.estimation_problems:
+            raise SimulationError(
+                f"{self.source} has no state estimator ({'; '.join(self.estimation_problems[:4])}"
+                f"{'; …' if len(self.estimation_problems) > 4 else ''}): rebuild the FMU (`bash scripts/build_fmu_portable.sh`) "
+                "or run with --estimator groundTruth"
+            )
 
     def vrs(self, names: Sequence[str]) -> list[int]:
         return [self.value_references[n] for n in names]
+
+
+def _estimation_problems(variables: dict[str, Any]) -> list[str]:
+    problems = []
+    for name, causality in ESTIMATION_VARIABLES.items():
+        v = variables.get(name)
+        if v is None:
+            problems.append(f"no variable {name}")
+        elif v.causality != causality:
+            problems.append(f"{name} is {v.causality}, not {causality}")
+    return problems
+
+
+def _estimator_codes(parameter: Any) -> dict[str, int]:
+    """Estimator mode name → code: the items of the parameter's enumeration type, else the mode's index."""
+    declared = getattr(parameter, "declaredType", None)
+    items = getattr(declared, "items", None)
+    if items:
+        return {str(item.name): int(item.value) for item in items}
+    return {name: code for code, name in enumerate(ESTIMATOR_MODES)}
+
+
+@dataclass
+class EstimationIo:
+    """Live views of the estimator's FMU variables (written by `exchange_inputs`, read by `read_outputs`)."""
+
+    gyro: NDArray[np.float64]
+    acc: NDArray[np.float64]
+    fix_pos: NDArray[np.float64]
+    fix_valid: NDArray[np.int32]
+    est_pos: NDArray[np.float64]
+    est_vel: NDArray[np.float64]
+    est_rpy: NDArray[np.float64]
+    est_status: NDArray[np.int32]
 
 
 def _read_model_description(fmu_path: Path) -> Any:
@@ -247,12 +325,15 @@ class ControllerFmu:
         self._set_real = f["fmi2SetReal"]
         self._get_real = f["fmi2GetReal"]
         self._set_integer = f["fmi2SetInteger"]
+        self._set_boolean = f["fmi2SetBoolean"]
         self._get_integer = f["fmi2GetInteger"]
         self._get_boolean = f["fmi2GetBoolean"]
         self._do_step = f["fmi2DoStep"]
         self._component = self._fmu.component
         self._initialized = False
         self._terminated = False
+        self._estimation: tuple[Any, ...] | None = None
+        self.estimation: EstimationIo | None = None
 
     def _check(self, status: int, what: str) -> None:
         if not _fmi_status_ok(status):
@@ -273,7 +354,43 @@ class ControllerFmu:
             else:
                 raise SimulationError(f"parameter '{name}' has unsupported type {v.type}")
 
+    def enable_estimation(self, mode: str) -> EstimationIo:
+        """Sets the `estimator` parameter to `mode` and exchanges the estimator's variables from now on.
+
+        Before initialisation; refuses an FMU without the estimator with a clear error.
+        """
+        if mode not in ESTIMATOR_MODES:
+            raise SimulationError(f"unknown estimator mode '{mode}' (choose from {', '.join(ESTIMATOR_MODES)})")
+        self.contract.require_estimation()
+        self.set_parameters({ESTIMATOR_PARAMETER: self.contract.estimator_codes[mode]})
+        vrs = self.contract.vrs
+        in_vr = (ctypes.c_uint * len(ESTIMATION_REAL_INPUTS))(*vrs(ESTIMATION_REAL_INPUTS))
+        in_val = (ctypes.c_double * len(ESTIMATION_REAL_INPUTS))()
+        valid_vr = (ctypes.c_uint * 1)(*vrs([FIX_VALID]))
+        valid_val = (ctypes.c_int * 1)()
+        out_vr = (ctypes.c_uint * len(ESTIMATION_REAL_OUTPUTS))(*vrs(ESTIMATION_REAL_OUTPUTS))
+        out_val = (ctypes.c_double * len(ESTIMATION_REAL_OUTPUTS))()
+        status_vr = (ctypes.c_uint * 1)(*vrs([EST_STATUS]))
+        status_val = (ctypes.c_int * 1)()
+        self._estimation = (in_vr, in_val, valid_vr, valid_val, out_vr, out_val, status_vr, status_val)
+        inputs = NamedVector(ESTIMATION_REAL_INPUTS, np.ctypeslib.as_array(in_val))
+        outputs = NamedVector(ESTIMATION_REAL_OUTPUTS, np.ctypeslib.as_array(out_val))
+        self.estimation = EstimationIo(
+            gyro=inputs.view(IMU_GYRO),
+            acc=inputs.view(IMU_ACC),
+            fix_pos=inputs.view(FIX_POS),
+            fix_valid=np.ctypeslib.as_array(valid_val),
+            est_pos=outputs.view(EST_POS),
+            est_vel=outputs.view(EST_VEL),
+            est_rpy=outputs.view(EST_RPY),
+            est_status=np.ctypeslib.as_array(status_val),
+        )
+        return self.estimation
+
     def initialize(self, start_time: float = 0.0) -> None:
+        if self.estimation is None and self.contract.has_estimation:
+            # Said explicitly, so a run without sensors never depends on the FMU's default mode.
+            self.set_parameters({ESTIMATOR_PARAMETER: self.contract.estimator_codes["groundTruth"]})
         try:
             self._fmu.setupExperiment(startTime=start_time)
             self.exchange_inputs(self.contract.mode.Passive)
@@ -288,6 +405,10 @@ class ControllerFmu:
         self._check(self._set_real(self._component, self._in_vr, len(self._in_vr), self._in_val), "fmi2SetReal")
         self._mode_val[0] = mode
         self._check(self._set_integer(self._component, self._mode_vr, 1, self._mode_val), "fmi2SetInteger")
+        if self._estimation is not None:
+            in_vr, in_val, valid_vr, valid_val = self._estimation[:4]
+            self._check(self._set_real(self._component, in_vr, len(in_vr), in_val), "fmi2SetReal (estimator inputs)")
+            self._check(self._set_boolean(self._component, valid_vr, 1, valid_val), "fmi2SetBoolean (fix.valid)")
 
     def do_step(self, time: float, step: float) -> None:
         self._check(self._do_step(self._component, time, step, 1), f"fmi2DoStep(t={time:.4f}, h={step})")
@@ -298,6 +419,10 @@ class ControllerFmu:
         n_contacts = len(self._contact_vr)
         self._check(self._get_boolean(self._component, self._contact_vr, n_contacts, self._contact_val), "fmi2GetBoolean")
         self._check(self._get_integer(self._component, self._fsm_vr, 1, self._fsm_val), "fmi2GetInteger")
+        if self._estimation is not None:
+            out_vr, out_val, status_vr, status_val = self._estimation[4:]
+            self._check(self._get_real(self._component, out_vr, len(out_vr), out_val), "fmi2GetReal (estimate)")
+            self._check(self._get_integer(self._component, status_vr, 1, status_val), "fmi2GetInteger (est.status)")
 
     @property
     def torques(self) -> NDArray[np.float64]:

@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from .cosim import CoSimConfig, CoSimulation, RunResult, save_log
 from .errors import MissingArtifactError, ScenarioError
+from .estimation_metrics import EstimationMetrics, compute_estimation_metrics, has_estimate
 from .feedback_field import FeedbackField
 from .metrics import OnlineMetrics, RunMetrics, TraversabilityField, compute_metrics, compute_online_metrics
 from .online import OnlineConfig, OnlineNavigator, check_first_answer
@@ -52,6 +53,7 @@ class SimOutcome:
     metrics: RunMetrics
     wall_seconds: float
     online: OnlineMetrics | None = None
+    estimation: EstimationMetrics | None = None
 
     def record(self, log_file: str | None = None) -> RunRecord:
         return RunRecord(
@@ -62,6 +64,7 @@ class SimOutcome:
             stop_reason=self.result.stop_reason,
             log_file=log_file,
             online=self.online,
+            estimation=self.estimation,
         )
 
 
@@ -119,11 +122,12 @@ def simulate(
         config.fall,
         planner_cost=plan.metrics.get("cost"),
     )
+    estimation = compute_estimation_metrics(result.log) if has_estimate(result.log) else None
     if log_path is not None:
         save_log(result, log_path)
     if lcm_log_path is not None:
         write_state_log(result.log, lcm_log_path)
-    return SimOutcome(result, metrics, wall)
+    return SimOutcome(result, metrics, wall, estimation=estimation)
 
 
 def simulate_online(

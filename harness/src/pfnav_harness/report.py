@@ -16,6 +16,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
+from .estimation_metrics import EstimationMetrics, estimation_section
 from .metrics import OnlineMetrics, RunMetrics
 from .scenario import Scenario, Terrain
 from .world import LEGS
@@ -35,6 +36,8 @@ class RunRecord:
     stop_reason: str
     log_file: str | None = None
     online: OnlineMetrics | None = None
+    # Estimate against truth, for runs with the estimator in the loop (kalman mode).
+    estimation: EstimationMetrics | None = None
 
 
 def _label(method: str) -> str:
@@ -226,6 +229,7 @@ def write_report(
             lines.append("")
     online_lines = online_section(scenarios, runs, out_dir)
     lines.extend(online_lines)
+    lines.extend(estimation_section(runs, out_dir))
     lines.extend(footer_lines)
     report = out_dir / "report.md"
     report.write_text("\n".join(lines) + "\n")

@@ -1,0 +1,243 @@
+"""What a real quadruped measures of itself: an IMU on the trunk, joint encoders, an optional position fix.
+
+The models read the DART trunk state (`QuadrupedWorld.state_vector` layout: pos, quat w-x-y-z,
+world velocity, world angular velocity, joint angles, joint velocities) and produce what the
+controller FMU's estimator inputs take:
+
+* **IMU** (`imu.gyro[1..3]`, `imu.acc[1..3]`, body frame): gyro = Rᵀ ω_world; accelerometer =
+  specific force Rᵀ (a_world − g), g = (0, 0, −9.81) m/s², so a level robot at rest reads +9.81 on z.
+  a_world is the velocity difference of the trunk origin over the sampling interval. DART's own
+  `BodyNode.getLinearAcceleration()` after a step equals Δv/dt of that step to 1e-13 m/s², contact
+  impulses included (checked in test_hs_body_sensors); the difference is used because with a
+  communication step longer than the physics step it is the interval's mean, like an IMU's
+  delta-velocity output, rather than the last physics step's value. Each axis gets white noise
+  of standard deviation `noise density × √(sample rate)` and a bias that starts at N(0, B²) and
+  walks (see `ImuSpec`); readings saturate at the data-sheet range.
+* **Encoders** (`joint.q[i]`): angles rounded to the resolution of a 14-bit absolute encoder on the
+  joint. Joint velocities are passed on as DART gives them: motor drivers report a filtered
+  velocity, and a 1 kHz difference of a 14-bit angle would step in 0.38 rad/s quanta that no
+  controller consumes unfiltered.
+* **Position fix** (`fix.pos[1..3]`, `fix.valid`): at `fix_rate` Hz the true trunk position plus
+  N(0, fix_noise²) per axis (GNSS-RTK or motion-capture like); `fix.valid` is true only in the
+  sample in which a new fix arrived.
+
+Every noise source has its own random stream spawned from one seed (`numpy.random.SeedSequence`,
+PCG64), so turning the fix on or off does not change the IMU's noise, and a seed reproduces a run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import SimulationError
+
+FloatArray = NDArray[np.float64]
+
+STANDARD_GRAVITY = 9.80665
+# Gravity of the DART world (world.py) and of the specific-force convention of imu.acc.
+GRAVITY_WORLD = np.array([0.0, 0.0, -9.81])
+_DEG = math.pi / 180.0
+_NOISE_BLOCK = 4096
+
+
+@dataclass(frozen=True)
+class ImuSpec:
+    """A MEMS IMU's noise and range in SI units, per axis.
+
+    The bias random walk is derived from the data sheet's in-run bias stability B (the Allan
+    deviation floor): the bias starts at N(0, B²) (what is left after a standstill calibration)
+    and walks with density B/√T, so it drifts by about B every `bias_time_constant` T seconds.
+    A random walk is a pessimistic stand-in for the flicker noise B describes (it keeps growing).
+    """
+
+    name: str
+    gyro_noise_density: float  # rad/s/√Hz
+    gyro_bias_stability: float  # rad/s
+    gyro_range: float  # rad/s
+    acc_noise_density: float  # m/s²/√Hz
+    acc_bias_stability: float  # m/s²
+    acc_range: float  # m/s²
+    bias_time_constant: float = 100.0  # s
+
+    @property
+    def gyro_bias_walk(self) -> float:
+        """Gyro bias random-walk density, rad/s/√s."""
+        return self.gyro_bias_stability / math.sqrt(self.bias_time_constant)
+
+    @property
+    def acc_bias_walk(self) -> float:
+        """Accelerometer bias random-walk density, m/s²/√s."""
+        return self.acc_bias_stability / math.sqrt(self.bias_time_constant)
+
+
+# Analog Devices ADIS16470 "Wide Dynamic Range, Miniature MEMS IMU", data sheet Table 1
+# (Specifications, T = 25 °C, typical, 1σ): gyroscope dynamic range ±2000 °/s, in-run bias
+# stability 8 °/hr, rate noise density 0.008 °/s/√Hz rms (angular random walk 0.34 °/√hr);
+# accelerometer dynamic range ±40 g, in-run bias stability 13 µg, velocity random walk
+# 0.037 m/s/√hr. The gyro white noise uses the rate noise density (the larger of the two gyro
+# figures); the accelerometer's uses the velocity random walk, 0.037 m/s/√hr = 6.2e-4 m/s²/√Hz.
+ADIS16470 = ImuSpec(
+    name="ADIS16470",
+    gyro_noise_density=0.008 * _DEG,
+    gyro_bias_stability=8.0 / 3600.0 * _DEG,
+    gyro_range=2000.0 * _DEG,
+    acc_noise_density=0.037 / 60.0,
+    acc_bias_stability=13e-6 * STANDARD_GRAVITY,
+    acc_range=40.0 * STANDARD_GRAVITY,
+)
+
+
+@dataclass(frozen=True)
+class EncoderSpec:
+    """An absolute joint encoder: `bits` of resolution per revolution of the joint."""
+
+    name: str
+    bits: int
+
+    @property
+    def resolution(self) -> float:
+        """One count, rad."""
+        return 2.0 * math.pi / (1 << self.bits)
+
+
+# ams AS5047P (data sheet "AS5047P 14-Bit On-Axis Magnetic Rotary Position Sensor"): 14-bit
+# absolute angle, 2π/16384 = 0.38 mrad. The MIT Mini Cheetah reads it on the motor before a 6:1
+# gearbox; here it sits on the joint itself, the coarser (conservative) case.
+AS5047P = EncoderSpec(name="AS5047P", bits=14)
+
+
+@dataclass(frozen=True)
+class BodySensorConfig:
+    """The body sensors of one run (named apart from `sensing.SensorConfig`, the terrain sensor)."""
+
+    seed: int = 0
+    imu: ImuSpec = ADIS16470
+    encoder: EncoderSpec = AS5047P
+    # Absolute position fixes per second; 0: none.
+    fix_rate: float = 0.0
+    # Standard deviation of each fix coordinate, m.
+    fix_noise: float = 0.02
+    # Multiplies every IMU noise and bias (1: the data sheet; 0: ideal readings, for tests).
+    imu_noise_scale: float = 1.0
+    quantize_joints: bool = True
+
+    def validate(self) -> None:
+        if not (isinstance(self.seed, int) and self.seed >= 0):
+            raise SimulationError(f"the sensor seed must be an integer >= 0, got {self.seed!r}")
+        if not (math.isfinite(self.fix_rate) and self.fix_rate >= 0.0):
+            raise SimulationError(f"the fix rate must be >= 0 Hz (0 = no fixes), got {self.fix_rate}")
+        if not (math.isfinite(self.fix_noise) and self.fix_noise >= 0.0):
+            raise SimulationError(f"the fix noise must be >= 0 m, got {self.fix_noise}")
+        if not (math.isfinite(self.imu_noise_scale) and self.imu_noise_scale >= 0.0):
+            raise SimulationError(f"the IMU noise scale must be >= 0, got {self.imu_noise_scale}")
+        if not (1 <= self.encoder.bits <= 32):
+            raise SimulationError(f"encoder resolution must be 1..32 bits, got {self.encoder.bits}")
+
+
+@dataclass
+class BodyReadings:
+    """One sample of every body sensor (the FMU's estimator inputs)."""
+
+    gyro: FloatArray = field(default_factory=lambda: np.zeros(3))
+    acc: FloatArray = field(default_factory=lambda: np.zeros(3))
+    joint_q: FloatArray = field(default_factory=lambda: np.zeros(12))
+    joint_dq: FloatArray = field(default_factory=lambda: np.zeros(12))
+    fix_pos: FloatArray = field(default_factory=lambda: np.zeros(3))
+    fix_valid: bool = False
+
+
+def quaternion_to_matrix(q: FloatArray) -> FloatArray:
+    """Rotation matrix (body → world) of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64).tolist()
+    return np.array(
+        [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        ]
+    )
+
+
+class BodySensors:
+    """Seeded IMU, encoder and fix models, sampled every `sample_period` seconds."""
+
+    def __init__(self, config: BodySensorConfig, sample_period: float) -> None:
+        config.validate()
+        if not (math.isfinite(sample_period) and sample_period > 0.0):
+            raise SimulationError(f"the sensor sample period must be positive, got {sample_period}")
+        self.config = config
+        self.sample_period = sample_period
+        imu_seq, fix_seq = np.random.SeedSequence(config.seed).spawn(2)
+        self._imu_rng = np.random.Generator(np.random.PCG64(imu_seq))
+        self._fix_rng = np.random.Generator(np.random.PCG64(fix_seq))
+        spec, scale = config.imu, config.imu_noise_scale
+        root_rate = math.sqrt(1.0 / sample_period)
+        # White noise and bias-step standard deviations per axis: gyro xyz, then accelerometer xyz.
+        self._white = scale * np.repeat([spec.gyro_noise_density * root_rate, spec.acc_noise_density * root_rate], 3)
+        self._walk = scale * np.repeat([spec.gyro_bias_walk, spec.acc_bias_walk], 3) * math.sqrt(sample_period)
+        self.bias = scale * np.repeat([spec.gyro_bias_stability, spec.acc_bias_stability], 3) * self._imu_rng.standard_normal(6)
+        self._range = np.repeat([spec.gyro_range, spec.acc_range], 3)
+        self._previous_velocity: FloatArray | None = None
+        self._fixes = 0
+        # Normal draws for the IMU, 12 per sample (6 white, 6 bias steps), drawn in blocks: one
+        # generator call per sample would cost more than the rest of the model.
+        self._noise = np.zeros((0, 12))
+        self._next_noise = 0
+        self._world_vectors = np.zeros((3, 2))
+        self.readings = BodyReadings()
+
+    def _imu_noise(self) -> FloatArray:
+        if self._next_noise == len(self._noise):
+            self._noise = self._imu_rng.standard_normal((_NOISE_BLOCK, 12))
+            self._next_noise = 0
+        row = self._noise[self._next_noise]
+        self._next_noise += 1
+        return row
+
+    def sample(self, t: float, state: FloatArray) -> BodyReadings:
+        """The readings at time `t` from the 37-entry trunk and joint state (updates `readings`)."""
+        out = self.readings
+        velocity = state[7:10]
+        if self._previous_velocity is None:
+            self._previous_velocity = velocity.copy()
+        vectors = self._world_vectors
+        vectors[:, 0] = state[10:13]
+        # Specific force in the world frame: (Δv / Δt) − g.
+        vectors[:, 1] = (velocity - self._previous_velocity) / self.sample_period - GRAVITY_WORLD
+        self._previous_velocity[:] = velocity
+        body = quaternion_to_matrix(state[3:7]).T @ vectors
+        noise = self._imu_noise()
+        measured = np.concatenate((body[:, 0], body[:, 1]))
+        measured += self.bias
+        measured += self._white * noise[:6]
+        # Saturation (np.clip costs several times minimum + maximum on 6 entries).
+        np.minimum(measured, self._range, out=measured)
+        np.maximum(measured, -self._range, out=measured)
+        self.bias += self._walk * noise[6:]
+        out.gyro[:] = measured[:3]
+        out.acc[:] = measured[3:]
+
+        joint_q = state[13:25]
+        if self.config.quantize_joints:
+            step = self.config.encoder.resolution
+            np.multiply(joint_q, 1.0 / step, out=out.joint_q)
+            np.rint(out.joint_q, out=out.joint_q)
+            out.joint_q *= step
+        else:
+            out.joint_q[:] = joint_q
+        out.joint_dq[:] = state[25:37]
+
+        out.fix_valid = False
+        rate = self.config.fix_rate
+        if rate > 0.0:
+            # Fix n arrives at n / rate; a tiny margin keeps sums of steps on the intended side.
+            due = math.floor(t * rate + 1e-9) + 1
+            if due > self._fixes:
+                self._fixes = due
+                out.fix_pos[:] = state[0:3] + self.config.fix_noise * self._fix_rng.standard_normal(3)
+                out.fix_valid = True
+        return out
