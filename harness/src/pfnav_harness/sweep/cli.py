@@ -1,0 +1,151 @@
+"""`pfnav-sweep`: Monte-Carlo robustness sweeps of the co-simulation on Dask (docs/sweeps.md).
+
+    pfnav-sweep check SPEC.toml                 validate a spec, show its runs
+    pfnav-sweep plan SPEC.toml --out DIR        export and plan each terrain seed (LCM planner service)
+    pfnav-sweep run SPEC.toml --out DIR         plan what is missing, run every run not yet stored, report
+    pfnav-sweep report DIR                      write DIR/REPORT.md and plots from the stored rows
+
+Planning talks LCM udpm://, so `plan` and a first `run` go through `bash scripts/netns.sh ...`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .. import paths
+from ..errors import HarnessError
+from ..planner_client import DEFAULT_LCM_URL, Plan, plan_scenario
+from ..scenario import Scenario
+from .spec import FACTORS, SweepSpec, load_spec
+from .store import SweepStore
+
+if TYPE_CHECKING:
+    from .driver import Planner
+    from .runner import Course
+
+
+def _lcm_planner(lcm_url: str, allow_host_network: bool) -> Planner:
+    from ..cli import in_private_network_namespace
+
+    def plan(scenario: Scenario, method: str) -> Plan:
+        if lcm_url.startswith("udpm://") and not allow_host_network and not in_private_network_namespace():
+            raise HarnessError("planning uses LCM udpm://, which only runs inside a private network namespace: run through `bash scripts/netns.sh ...`")
+        return plan_scenario(scenario, [method], lcm_url, service_binary=paths.planner_service_path())[method]
+
+    return plan
+
+
+def _courses(spec: SweepSpec, store: SweepStore, args: argparse.Namespace, work: Path) -> dict[int, Course]:
+    from .driver import prepare_courses
+
+    return prepare_courses(spec, store, paths.pf_plan_path(), _lcm_planner(args.lcm_url, args.allow_host_network), work)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    spec = load_spec(args.spec)
+    seeds = spec.terrain_seeds()
+    print(f"{args.spec}: {spec.runs} runs of '{spec.scenario}' ({spec.sampling} sampling, seed {spec.seed}), {spec.duration:g} simulated s each")
+    print(f"spec hash {spec.hash}")
+    print(f"terrain seeds: {', '.join('scenario default' if s is None else str(s) for s in seeds)}")
+    varied = [name for name in FACTORS if name in spec.factors]
+    print(f"factors: {', '.join(varied) or 'none (every run the same)'}")
+    for run_id in range(min(args.show, spec.runs)):
+        row = spec.run_factors(run_id)
+        print(f"  run {run_id}: " + ", ".join(f"{name}={row[name]:.4g}" if isinstance(row[name], float) else f"{name}={row[name]}" for name in varied))
+    return 0
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    spec = load_spec(args.spec)
+    store = SweepStore.create(args.out, spec)
+    with tempfile.TemporaryDirectory(prefix="pfnav_sweep_plan_") as tmp:
+        courses = _courses(spec, store, args, Path(tmp))
+    print(f"{len(courses)} terrain(s) planned into {store.plans_dir}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .cluster import dask_client
+    from .driver import SweepSummary, run_sweep
+    from .report import write_report
+    from .runner import Artifacts
+
+    spec = load_spec(args.spec)
+    store = SweepStore.create(args.out, spec)
+    artifacts = Artifacts(paths.fmu_path(), paths.urdf_path(), paths.pf_plan_path())
+    # The exported scenarios live on while the workers run (a shared folder for remote workers).
+    work = args.out / "scenarios"
+    courses = _courses(spec, store, args, work)
+    if len(store.done_ids()) < spec.runs:
+        with dask_client(args.workers, args.scheduler) as client:
+            summary = run_sweep(spec, store, courses, artifacts, client, show_progress=not args.no_progress)
+    else:
+        summary = SweepSummary(spec.runs, spec.runs, 0, 0, 0.0)
+    print(
+        f"{summary.ran} run(s) done ({summary.errors} error(s)), {summary.skipped} already stored; "
+        f"{summary.wall_seconds:.0f} s wall, {summary.runs_per_minute:.1f} runs/min"
+    )
+    if not args.no_report:
+        print(f"report: {write_report(store)}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from .report import write_report
+
+    store = SweepStore.open_existing(args.store)
+    print(f"report: {write_report(store)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="pfnav-sweep", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    check = sub.add_parser("check", help="validate a spec and show its first runs")
+    check.add_argument("spec", type=Path)
+    check.add_argument("--show", type=int, default=5, help="runs to show (default 5)")
+    for name, text in (("plan", "export and plan each terrain seed of a spec"), ("run", "run a sweep (resumes a stopped one)")):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("spec", type=Path)
+        p.add_argument("--out", type=Path, required=True, help="store folder: rows (Parquet), plans, report")
+        p.add_argument("--lcm-url", default=os.environ.get("LCM_DEFAULT_URL", DEFAULT_LCM_URL), help=f"LCM URL of the planner (default {DEFAULT_LCM_URL})")
+        p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
+        if name == "run":
+            p.add_argument("--workers", type=int, default=None, help="local Dask worker processes (default: one per core)")
+            p.add_argument(
+                "--scheduler", default=None, metavar="ADDRESS", help="use the Dask scheduler at ADDRESS (e.g. tcp://host:8786) instead of a local cluster"
+            )
+            p.add_argument("--no-progress", action="store_true", help="no progress bar")
+            p.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+    report = sub.add_parser("report", help="write the report of a store folder")
+    report.add_argument("store", type=Path)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        print(f"pfnav-sweep: error: --workers must be >= 1, got {args.workers}", file=sys.stderr)
+        return 2
+    if args.command == "run" and args.workers is not None and args.scheduler is not None:
+        print("pfnav-sweep: error: --workers starts a local cluster; with --scheduler the cluster's own workers run the sweep", file=sys.stderr)
+        return 2
+    commands = {"check": cmd_check, "plan": cmd_plan, "run": cmd_run, "report": cmd_report}
+    try:
+        return commands[args.command](args)
+    except HarnessError as err:
+        print(f"pfnav-sweep: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("pfnav-sweep: interrupted; finished runs are stored, run again to continue", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

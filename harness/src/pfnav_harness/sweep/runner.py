@@ -1,0 +1,190 @@
+"""One sweep run on a worker: a row of factor values in, a result row out.
+
+Workers only co-simulate: the scenario and its plan arrive ready-made from the driver (planned once
+per terrain seed). Each run builds its own DART world and FMU instance and closes them at its end;
+with one thread per worker process no two runs ever share an FMU (FMUs are not thread-safe). Any
+exception in a run becomes a row with outcome "error" and the reason; the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..cosim import CoSimConfig, CoSimulation
+from ..metrics import RunMetrics, TraversabilityField, compute_metrics
+from ..planner_client import Plan
+from ..pushes import HEADING_DIRECTIONS, PushSchedule, horizontal_push
+from ..scenario import Scenario
+from ..world import Payload
+
+OUTCOMES = ("goal", "fell", "timeout", "error")
+
+
+@dataclass(frozen=True)
+class Artifacts:
+    """Where a worker finds the FMU, the robot and pf-plan (resolved by the driver; workers need the same paths)."""
+
+    fmu: Path
+    urdf: Path
+    pf_plan: Path | None
+
+
+@dataclass(frozen=True)
+class Course:
+    """What every run on one terrain shares: the exported scenario and the driver's plan on it."""
+
+    terrain_seed: int
+    scenario: Scenario
+    plan: Plan
+
+
+@dataclass(frozen=True)
+class RunTask:
+    run_id: int
+    factors: dict[str, float | str]
+    duration: float
+    stand_time: float
+    spec_hash: str
+
+
+def push_schedule(factors: dict[str, float | str]) -> PushSchedule | None:
+    """The run's push (None without one): a magnitude of 0 N means no push."""
+    magnitude = float(factors["push_magnitude"])
+    if magnitude <= 0.0:
+        return None
+    direction = factors["push_direction"]
+    if isinstance(direction, str):
+        push = horizontal_push(magnitude, HEADING_DIRECTIONS[direction], float(factors["push_time"]), float(factors["push_duration"]), heading_relative=True)
+    else:
+        push = horizontal_push(magnitude, float(direction), float(factors["push_time"]), float(factors["push_duration"]))
+    return PushSchedule([push])
+
+
+def run_config(task: RunTask) -> CoSimConfig:
+    f = task.factors
+    payload = Payload(float(f["payload_mass"]), (float(f["payload_offset_x"]), float(f["payload_offset_y"]), float(f["payload_offset_z"])))
+    return CoSimConfig(
+        comm_step=float(f["comm_step"]),
+        stand_time=task.stand_time,
+        max_duration=task.duration,
+        friction=float(f["friction"]),
+        pushes=push_schedule(f),
+        payload=None if payload == Payload() else payload,
+    )
+
+
+def start_run(course: Course, artifacts: Artifacts, config: CoSimConfig, cache_dir: Path) -> CoSimulation:
+    """The run's starting point: a fresh world and FMU instance with the robot placed at the plan's start.
+
+    Every run stands up from scratch today. Once the FMU can save and restore its state (issue 20,
+    parts 1-2) this is the one place to restore a saved post-stand-up state of body and controller
+    instead, so runs skip the common prefix.
+    """
+    return CoSimulation(course.scenario, course.plan, artifacts.fmu, artifacts.urdf, cache_dir, config)
+
+
+# Per worker process: the terrain mesh cache and pf-plan's traversability field of each terrain
+# (made on the first run of that terrain, reused by the following ones).
+_cache_dir: Path | None = None
+_fields: dict[tuple[str, int], TraversabilityField] = {}
+
+
+def _worker_cache_dir() -> Path:
+    global _cache_dir
+    if _cache_dir is None:
+        # Per process: two workers writing the same mesh file at once could read each other's half-written file.
+        _cache_dir = Path(tempfile.mkdtemp(prefix=f"pfnav_sweep_{os.getpid()}_"))
+    return _cache_dir
+
+
+def _field(course: Course, artifacts: Artifacts) -> TraversabilityField:
+    key = (course.scenario.name, course.terrain_seed)
+    field = _fields.get(key)
+    if field is None:
+        field = _fields[key] = TraversabilityField(course.scenario.terrain, course.scenario.traversability, artifacts.pf_plan)
+    return field
+
+
+def outcome_of(metrics: RunMetrics) -> str:
+    if metrics.fell:
+        return "fell"
+    return "goal" if metrics.goal_reached else "timeout"
+
+
+def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
+    """A result row: run id, every factor value (push direction split into degrees and frame), results."""
+    f = task.factors
+    direction = f["push_direction"]
+    relative = isinstance(direction, str)
+    row: dict[str, Any] = {
+        "run_id": task.run_id,
+        "spec_hash": task.spec_hash,
+        "terrain_seed": course.terrain_seed,
+        "push_magnitude": float(f["push_magnitude"]),
+        "push_direction_deg": HEADING_DIRECTIONS[direction] if isinstance(direction, str) else float(direction),
+        "push_heading_relative": relative,
+        "push_time": float(f["push_time"]),
+        "push_duration": float(f["push_duration"]),
+        "payload_mass": float(f["payload_mass"]),
+        "payload_offset_x": float(f["payload_offset_x"]),
+        "payload_offset_y": float(f["payload_offset_y"]),
+        "payload_offset_z": float(f["payload_offset_z"]),
+        "friction": float(f["friction"]),
+        "comm_step": float(f["comm_step"]),
+        "outcome": "error",
+        "fall_time": math.nan,
+        "rms_tracking_error": math.nan,
+        "max_tracking_error": math.nan,
+        "path_cost": math.nan,
+        "path_length": math.nan,
+        "simulated_time": 0.0,
+        "stop_reason": "",
+        "failure_reason": "",
+        "wall_time": 0.0,
+        "cpu_time": 0.0,
+    }
+    row.update(results)
+    return row
+
+
+def run_one(task: RunTask, course: Course, artifacts: Artifacts) -> dict[str, Any]:
+    """Co-simulates one run and returns its result row; never raises for a failed run."""
+    start = time.perf_counter()
+    cpu_start = time.process_time()
+    try:
+        config = run_config(task)
+        with start_run(course, artifacts, config, _worker_cache_dir()) as sim:
+            result = sim.run()
+        metrics = compute_metrics(
+            result.log, course.scenario.terrain, course.scenario.goal, _field(course, artifacts), course.scenario.name, course.plan.method, config.fall
+        )
+        walk_start = float(result.log["walk_start"])
+        return result_row(
+            task,
+            course,
+            outcome=outcome_of(metrics),
+            # On the walk clock, like the push times.
+            fall_time=metrics.fall_time - walk_start if metrics.fall_time is not None else math.nan,
+            rms_tracking_error=metrics.rms_error,
+            max_tracking_error=metrics.max_error,
+            path_cost=metrics.executed_cost,
+            path_length=metrics.executed_length,
+            simulated_time=float(np.round(result.timing.simulated, 6)),
+            stop_reason=result.stop_reason,
+            wall_time=time.perf_counter() - start,
+            cpu_time=time.process_time() - cpu_start,
+        )
+    except Exception as err:  # a failed run is a row, never the end of the sweep
+        where = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
+        location = f" ({Path(where.filename).name}:{where.lineno})" if where else ""
+        reason = f"{type(err).__name__}: {err}{location}"
+        return result_row(task, course, failure_reason=reason, wall_time=time.perf_counter() - start, cpu_time=time.process_time() - cpu_start)

@@ -1,0 +1,108 @@
+"""Fall rates with 95 % Wilson score intervals, overall and per factor level or bin.
+
+Runs that ended in an error are not trials (they say nothing about falling) and are counted apart.
+A factor with at most `MAX_LEVELS` distinct values is split by value; a continuous one (random
+sampling over a range) into `BINS` equal-width bins over the values drawn.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pyarrow as pa
+
+# z of a two-sided 95 % interval.
+Z95 = 1.959963984540054
+MAX_LEVELS = 8
+BINS = 5
+# Result columns that are factors (what a fall rate is broken down by), with their axis labels.
+FACTOR_COLUMNS = {
+    "push_magnitude": "push magnitude (N)",
+    "push_direction_deg": "push direction (deg)",
+    "push_heading_relative": "push direction relative to heading",
+    "push_time": "push start, walk clock (s)",
+    "push_duration": "push duration (s)",
+    "payload_mass": "payload (fraction of trunk mass)",
+    "payload_offset_x": "payload offset x (m)",
+    "payload_offset_y": "payload offset y (m)",
+    "payload_offset_z": "payload offset z (m)",
+    "friction": "friction coefficient",
+    "terrain_seed": "terrain seed",
+    "comm_step": "FMU communication step (s)",
+}
+
+
+def wilson_interval(successes: int, trials: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion; (0, 1) without trials."""
+    if trials < 0 or not 0 <= successes <= trials:
+        raise ValueError(f"need 0 <= successes <= trials, got {successes} of {trials}")
+    if trials == 0:
+        return 0.0, 1.0
+    p = successes / trials
+    z2 = z * z
+    centre = (p + z2 / (2 * trials)) / (1 + z2 / trials)
+    half = z * math.sqrt(p * (1 - p) / trials + z2 / (4 * trials * trials)) / (1 + z2 / trials)
+    # Clamp the rounding noise at the ends (0/n and n/n give exactly 0 and 1).
+    return max(0.0, centre - half) if successes else 0.0, min(1.0, centre + half) if successes < trials else 1.0
+
+
+@dataclass(frozen=True)
+class FallRate:
+    label: str
+    runs: int
+    falls: int
+    errors: int
+    low: float
+    high: float
+    # Bin centre (or the level itself when numeric), for plotting; NaN for a non-numeric level.
+    x: float = math.nan
+
+    @property
+    def rate(self) -> float:
+        return self.falls / self.runs if self.runs else math.nan
+
+
+def fall_rate(outcomes: np.ndarray, label: str = "all runs", x: float = math.nan) -> FallRate:
+    outcomes = np.asarray(outcomes, dtype=object)
+    errors = int(np.sum(outcomes == "error"))
+    runs = len(outcomes) - errors
+    falls = int(np.sum(outcomes == "fell"))
+    low, high = wilson_interval(falls, runs)
+    return FallRate(label, runs, falls, errors, low, high, x)
+
+
+def _format(value: float) -> str:
+    return f"{value:.4g}"
+
+
+def factor_breakdown(table: pa.Table, column: str) -> list[FallRate]:
+    """Fall rate per level (few distinct values) or per equal-width bin of `column`; empty when it does not vary."""
+    values = np.asarray(table[column].to_pylist(), dtype=object)
+    outcomes = np.asarray(table["outcome"].to_pylist(), dtype=object)
+    distinct = sorted(set(values.tolist()))
+    if len(distinct) <= 1:
+        return []
+    if len(distinct) <= MAX_LEVELS or isinstance(distinct[0], bool):
+        return [
+            fall_rate(outcomes[values == level], f"{column} = {_format(level) if isinstance(level, float) else level}", float(level))
+            for level in distinct
+        ]
+    numbers = values.astype(np.float64)
+    edges = np.linspace(numbers.min(), numbers.max(), BINS + 1)
+    index = np.clip(np.searchsorted(edges, numbers, side="right") - 1, 0, BINS - 1)
+    rates = []
+    for b in range(BINS):
+        inside = index == b
+        closing = "]" if b == BINS - 1 else ")"
+        label = f"{column} in [{_format(edges[b])}, {_format(edges[b + 1])}{closing}"
+        rates.append(fall_rate(outcomes[inside], label, 0.5 * (edges[b] + edges[b + 1])))
+    return rates
+
+
+def outcome_counts(table: pa.Table) -> dict[str, int]:
+    from .runner import OUTCOMES
+
+    outcomes = table["outcome"].to_pylist()
+    return {name: outcomes.count(name) for name in OUTCOMES}

@@ -1,0 +1,104 @@
+"""Sweep specs: parsing, refusals with a clear reason, and per-run factor draws that depend on (seed, run id) only."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from pfnav_harness import paths
+from pfnav_harness.sweep.spec import FACTORS, SpecError, load_spec, parse_spec
+
+BASE: dict[str, Any] = {"scenario": "mountain_pass", "duration": 4.0, "seed": 3, "runs": 20}
+
+
+def spec_with(**changes: Any) -> dict[str, Any]:
+    return {**BASE, **changes}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (spec_with(factors={"gravity": 9.81}), "unknown factor 'gravity'"),
+        (spec_with(factors={"friction": {"range": [0.9, 0.9]}}), "empty range [0.9, 0.9]"),
+        (spec_with(factors={"friction": {"range": [1.0, 0.5]}}), "empty range"),
+        (spec_with(factors={"friction": {"values": []}}), "non-empty list"),
+        (spec_with(factors={"friction": {"range": [0.0, 1.0]}}), "values must be > 0"),
+        (spec_with(factors={"push_direction": {"values": ["up"]}}), "unknown value 'up'"),
+        (spec_with(factors={"push_magnitude": {"range": [0, 50], "values": [1]}}), "exactly one of"),
+        (spec_with(factors={"terrain_seed": {"values": [1.5]}}), "must be integers"),
+        (spec_with(factors={"sensor_noise_seed": {"values": [1, 2]}}), "not available yet: sensor noise needs the state estimator"),
+        (spec_with(runs=-3), "`runs` must be an integer >= 1, got -3"),
+        (spec_with(runs=0), "`runs` must be an integer >= 1"),
+        (spec_with(duration=0), "`duration`"),
+        (spec_with(sampling="sobol"), "`sampling` must be one of random, grid"),
+        (spec_with(colour="red"), "unknown key(s) colour"),
+        ({"scenario": "pits", "duration": 2.0}, "missing `seed`"),
+        (spec_with(sampling="grid", factors={"friction": {"range": [0.5, 1.0]}}), "grid sampling needs `steps`"),
+        (spec_with(sampling="grid", runs=5, factors={"friction": {"values": [0.5, 1.0]}}), "grid sampling has 2 combinations"),
+    ],
+)
+def test_bad_specs_are_refused_with_the_reason(data: dict[str, Any], message: str) -> None:
+    with pytest.raises(SpecError) as err:
+        parse_spec(data)
+    assert message in str(err.value)
+
+
+def test_bad_toml_and_missing_file(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.toml"
+    broken.write_text("scenario = \n")
+    with pytest.raises(SpecError, match="not valid TOML"):
+        load_spec(broken)
+    with pytest.raises(SpecError, match="cannot read the sweep spec"):
+        load_spec(tmp_path / "absent.toml")
+
+
+def test_random_draws_depend_on_seed_and_run_id_only() -> None:
+    factors = {"push_magnitude": {"range": [0.0, 100.0]}, "push_direction": {"values": ["left", "right", 45.0]}, "terrain_seed": {"range": [1, 4]}}
+    spec = parse_spec(spec_with(factors=factors))
+    rows = [spec.run_factors(i) for i in range(spec.runs)]
+    # Reproducible, in any order.
+    assert [spec.run_factors(i) for i in reversed(range(spec.runs))] == rows[::-1]
+    assert all(0.0 <= r["push_magnitude"] <= 100.0 for r in rows)
+    assert {r["push_direction"] for r in rows} == {"left", "right", 45.0}
+    assert {r["terrain_seed"] for r in rows} <= {1, 2, 3, 4} and all(isinstance(r["terrain_seed"], int) for r in rows)
+    assert len({r["push_magnitude"] for r in rows}) == spec.runs
+    # Factors left out keep their defaults.
+    assert all(r["friction"] == FACTORS["friction"].default for r in rows)
+    # Adding a factor does not change the draws of the others; another seed does.
+    more = parse_spec(spec_with(factors={**factors, "friction": {"range": [0.5, 1.0]}}))
+    assert [more.run_factors(i)["push_magnitude"] for i in range(spec.runs)] == [r["push_magnitude"] for r in rows]
+    reseeded = parse_spec(spec_with(seed=4, factors=factors))
+    assert reseeded.run_factors(0)["push_magnitude"] != rows[0]["push_magnitude"]
+    assert spec.terrain_seeds() == list(dict.fromkeys(r["terrain_seed"] for r in rows))
+    with pytest.raises(SpecError, match="outside"):
+        spec.run_factors(spec.runs)
+
+
+def test_grid_takes_every_combination_once() -> None:
+    spec = parse_spec(
+        spec_with(runs=None, sampling="grid", factors={"friction": {"range": [0.5, 1.0], "steps": 3}, "push_direction": {"values": ["left", "right"]}})
+    )
+    assert spec.runs == 6
+    combos = [(r["push_direction"], r["friction"]) for r in (spec.run_factors(i) for i in range(6))]
+    assert combos == [(d, f) for d in ("left", "right") for f in (0.5, 0.75, 1.0)]
+
+
+def test_hash_covers_content_not_layout(tmp_path: Path) -> None:
+    a = tmp_path / "a.toml"
+    b = tmp_path / "b.toml"
+    a.write_text('scenario = "pits"\nduration = 3\nseed = 1\nruns = 2\n[factors]\nfriction = 0.6\npush_magnitude = { range = [1, 2] }\n')
+    b.write_text('# the same sweep\nruns = 2\nseed = 1\nscenario = "pits"\nduration = 3.0\n[factors]\npush_magnitude = {range=[1,2]}\nfriction = 0.6\n')
+    assert load_spec(a).hash == load_spec(b).hash
+    c = tmp_path / "c.toml"
+    c.write_text(a.read_text().replace("runs = 2", "runs = 3"))
+    assert load_spec(c).hash != load_spec(a).hash
+
+
+def test_the_repository_specs_are_valid() -> None:
+    specs = sorted((paths.repo_root() / "sweeps").glob("*.toml"))
+    assert len(specs) >= 2
+    loaded = {p.stem: load_spec(p) for p in specs}
+    assert loaded["tiny"].runs == 4
+    assert max(s.runs for s in loaded.values()) >= 300
