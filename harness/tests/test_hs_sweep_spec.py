@@ -8,7 +8,10 @@ from typing import Any
 import pytest
 
 from pfnav_harness import paths
+from pfnav_harness.sweep.driver import run_tasks
+from pfnav_harness.sweep.runner import run_config
 from pfnav_harness.sweep.spec import FACTORS, SpecError, load_spec, parse_spec
+from pfnav_harness.world import Payload
 
 BASE: dict[str, Any] = {"scenario": "mountain_pass", "duration": 4.0, "seed": 3, "runs": 20}
 
@@ -28,7 +31,8 @@ def spec_with(**changes: Any) -> dict[str, Any]:
         (spec_with(factors={"push_direction": {"values": ["up"]}}), "unknown value 'up'"),
         (spec_with(factors={"push_magnitude": {"range": [0, 50], "values": [1]}}), "exactly one of"),
         (spec_with(factors={"terrain_seed": {"values": [1.5]}}), "must be integers"),
-        (spec_with(factors={"sensor_noise_seed": {"values": [1, 2]}}), "not available yet: sensor noise needs the state estimator"),
+        (spec_with(factors={"sensor_noise_seed": {"values": [1, 2]}}), 'only acts with `estimator = "kalman"`'),
+        (spec_with(estimator="particle"), "`estimator` must be one of groundTruth, kalman"),
         (spec_with(runs=-3), "`runs` must be an integer >= 1, got -3"),
         (spec_with(runs=0), "`runs` must be an integer >= 1"),
         (spec_with(duration=0), "`duration`"),
@@ -102,3 +106,26 @@ def test_the_repository_specs_are_valid() -> None:
     loaded = {p.stem: load_spec(p) for p in specs}
     assert loaded["tiny"].runs == 4
     assert max(s.runs for s in loaded.values()) >= 300
+
+
+def test_sensor_noise_seed_reaches_the_run_config_with_the_estimator() -> None:
+    spec = parse_spec(spec_with(estimator="kalman", factors={"sensor_noise_seed": {"range": [0, 1000]}}))
+    task = run_tasks(spec, set())[3]
+    config = run_config(task)
+    assert config.estimator == "kalman"
+    assert config.body_sensors.seed == task.factors["sensor_noise_seed"] == spec.run_factors(3)["sensor_noise_seed"]
+    assert run_config(run_tasks(parse_spec(BASE), set())[0]).estimator == "groundTruth"
+
+
+def test_run_config_carries_push_payload_and_friction() -> None:
+    factors = {"push_magnitude": 50.0, "push_direction": "right", "push_time": 3.0, "payload_mass": 0.1, "payload_offset_x": 0.02, "friction": 0.6}
+    config = run_config(run_tasks(parse_spec(spec_with(runs=1, factors=factors)), set())[0])
+    assert config.friction == 0.6 and config.max_duration == 4.0
+    assert config.payload == Payload(0.1, (0.02, 0.0, 0.0))
+    assert config.pushes is not None
+    (push,) = config.pushes
+    assert push.heading_relative and push.start == 3.0 and push.duration == 0.2
+    assert push.force == pytest.approx((0.0, -50.0, 0.0))
+    # No push, no payload by default.
+    plain = run_config(run_tasks(parse_spec(BASE), set())[0])
+    assert plain.pushes is None and plain.payload is None

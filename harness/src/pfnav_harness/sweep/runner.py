@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..body_sensors import BodySensorConfig
 from ..cosim import CoSimConfig, CoSimulation
 from ..metrics import RunMetrics, TraversabilityField, compute_metrics
 from ..planner_client import Plan
@@ -54,6 +55,7 @@ class RunTask:
     duration: float
     stand_time: float
     spec_hash: str
+    estimator: str = "groundTruth"
 
 
 def push_schedule(factors: dict[str, float | str]) -> PushSchedule | None:
@@ -79,6 +81,8 @@ def run_config(task: RunTask) -> CoSimConfig:
         friction=float(f["friction"]),
         pushes=push_schedule(f),
         payload=None if payload == Payload() else payload,
+        estimator=task.estimator,
+        body_sensors=BodySensorConfig(seed=int(f["sensor_noise_seed"])),
     )
 
 
@@ -140,6 +144,7 @@ def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
         "payload_offset_z": float(f["payload_offset_z"]),
         "friction": float(f["friction"]),
         "comm_step": float(f["comm_step"]),
+        "sensor_noise_seed": int(f["sensor_noise_seed"]),
         "outcome": "error",
         "fall_time": math.nan,
         "rms_tracking_error": math.nan,

@@ -24,10 +24,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import HarnessError
+from ..fmu_runner import ESTIMATOR_MODES
 from ..pushes import HEADING_DIRECTIONS
 
 SAMPLINGS = ("random", "grid")
-SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "factors")
+SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "factors")
 
 
 class SpecError(HarnessError, ValueError):
@@ -68,11 +69,11 @@ FACTORS: dict[str, FactorInfo] = {
     # Default: the scenario's own seed (resolved when the scenario is exported).
     "terrain_seed": FactorInfo("scenario generator seed (a new terrain, exported and planned once per seed)", "", -1, low=0, integer=True),
     "comm_step": FactorInfo("FMU communication step (a multiple of the 1 ms physics step)", "s", 0.001, low=0.0, low_open=True),
+    # Only with `estimator = "kalman"`: on ground truth the controller never sees the sensors.
+    "sensor_noise_seed": FactorInfo("seed of the body sensors' noise (IMU, encoders, fixes) the controller's estimator reads", "", 0, low=0, integer=True),
 }
-# Factors the issue lists that the simulation cannot honour yet: refused, never silently ignored.
-NOT_YET_AVAILABLE = {
-    "sensor_noise_seed": "sensor noise needs the state estimator (simulated sensors feeding the controller), which has not landed yet",
-}
+# Factors that only act in some configurations: refused where they would be silently ignored.
+NEEDS_ESTIMATOR = ("sensor_noise_seed",)
 
 
 @dataclass(frozen=True)
@@ -126,6 +127,8 @@ class SweepSpec:
     stand_time: float = 1.5
     factors: dict[str, Factor] = field(default_factory=dict)
     source: Path | None = None
+    # What the controller runs on: "groundTruth" (the simulator's state) or "kalman" (its estimator on the body sensors).
+    estimator: str = "groundTruth"
 
     def as_json(self) -> dict[str, Any]:
         """The spec's content (what the hash covers): no file name, no comments, factors in canonical order."""
@@ -137,6 +140,7 @@ class SweepSpec:
             "sampling": self.sampling,
             "method": self.method,
             "stand_time": self.stand_time,
+            "estimator": self.estimator,
             "factors": {name: self.factors[name].as_json() for name in FACTORS if name in self.factors},
         }
 
@@ -215,8 +219,6 @@ def _factor_value(name: str, value: Any) -> float | str:
 
 
 def parse_factor(name: str, raw: Any) -> Factor:
-    if name in NOT_YET_AVAILABLE:
-        raise SpecError(f"factor '{name}' is not available yet: {NOT_YET_AVAILABLE[name]}")
     if name not in FACTORS:
         known = ", ".join(FACTORS)
         raise SpecError(f"unknown factor '{name}' (known: {known})")
@@ -275,6 +277,9 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     stand_time = data.get("stand_time", 1.5)
     if isinstance(stand_time, bool) or not isinstance(stand_time, int | float) or not (math.isfinite(stand_time) and stand_time >= 0):
         raise SpecError(f"{where}`stand_time` must be >= 0 s, got {stand_time!r}")
+    estimator = data.get("estimator", "groundTruth")
+    if estimator not in ESTIMATOR_MODES:
+        raise SpecError(f"{where}`estimator` must be one of {', '.join(ESTIMATOR_MODES)}, got {estimator!r}")
     raw_factors = data.get("factors", {})
     if not isinstance(raw_factors, dict):
         raise SpecError(f"{where}`factors` must be a table")
@@ -282,7 +287,13 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
         factors = {name: parse_factor(name, raw) for name, raw in raw_factors.items()}
     except SpecError as err:
         raise SpecError(f"{where}{err}") from None
-    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source)
+    for name in NEEDS_ESTIMATOR:
+        if name in factors and estimator != "kalman":
+            raise SpecError(
+                f"{where}factor '{name}' only acts with `estimator = \"kalman\"` (on ground truth the controller never reads the sensors); "
+                "set it, or leave the factor out"
+            )
+    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source, estimator)
     runs = data.get("runs")
     if sampling == "grid":
         size = spec_without_runs.grid_size()
@@ -293,7 +304,7 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
         raise SpecError(f"{where}missing `runs` (random sampling)")
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise SpecError(f"{where}`runs` must be an integer >= 1, got {runs!r}")
-    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source)
+    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator)
 
 
 def load_spec(path: Path) -> SweepSpec:

@@ -31,6 +31,7 @@ FACTOR_COLUMNS = {
     "friction": "friction coefficient",
     "terrain_seed": "terrain seed",
     "comm_step": "FMU communication step (s)",
+    "sensor_noise_seed": "sensor noise seed",
 }
 
 

@@ -43,6 +43,7 @@ ROW_SCHEMA = pa.schema(
         ("payload_offset_z", pa.float64()),
         ("friction", pa.float64()),
         ("comm_step", pa.float64()),
+        ("sensor_noise_seed", pa.int64()),
         ("outcome", pa.string()),
         ("fall_time", pa.float64()),
         ("rms_tracking_error", pa.float64()),
