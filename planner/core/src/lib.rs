@@ -12,6 +12,7 @@ pub mod feedback_grid;
 pub mod generators;
 pub mod graph;
 pub mod grid;
+pub mod import;
 pub mod io;
 pub mod lp;
 pub mod lp_problem;

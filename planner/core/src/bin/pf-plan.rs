@@ -1,6 +1,7 @@
 //! `pf-plan`: plan on a built-in scenario or a map file with P-F, A* or Dijkstra; list and export
 //! scenarios; measure a path (∫p ds) or write the traversability field with the planner's own cost
-//! model; run the demo (all methods × all scenarios → report.md + PNGs).
+//! model; import an elevation model (GeoTIFF, ESRI ASCII grid) as a map; run the demo (all
+//! methods × all scenarios → report.md + PNGs).
 
 use std::fs;
 use std::io::{Read, Write};
@@ -13,12 +14,16 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
+use pf_planner::import::{
+    import_map, numbers, scenario_from, stem_name, Crop, DemFormat, ImportOptions, Placement,
+    Resolution,
+};
 use pf_planner::io::{
     load_scenario_limited, parse_path_csv, read_path_csv, save_scenario, write_npy_f64,
     MapScenario, MAX_PATH_CSV_BYTES,
 };
 use pf_planner::lp::LpSolver;
-use pf_planner::map::Point;
+use pf_planner::map::{Point, MAX_MAP_CELLS};
 use pf_planner::metrics::evaluate_path;
 use pf_planner::pf::BasisKind;
 use pf_planner::plan::{Method, Plan, Planner, PlannerOptions};
@@ -53,6 +58,9 @@ enum Command {
     /// The traversability p of every map cell (the field plans are measured on) as a float64
     /// `.npy` of shape (height, width).
     Traversability(TraversabilityArgs),
+    /// A map from an elevation model (GeoTIFF or ESRI ASCII grid): crop, resample, nodata to
+    /// obstacles, uniform scale; written like `scenario export` (see docs/terrain-import.md).
+    Import(ImportArgs),
     /// All methods on all scenarios: DIR/report.md and one PNG per scenario.
     Demo {
         /// Output directory.
@@ -229,6 +237,68 @@ struct PlanArgs {
     field_plot: Option<PathBuf>,
 }
 
+#[derive(clap::Args)]
+struct ImportArgs {
+    /// Elevation model: .asc (ESRI ASCII grid) or .tif/.tiff (GeoTIFF).
+    input: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Scenario name (default: the input's file stem).
+    #[arg(long)]
+    name: Option<String>,
+    /// Format, when the extension does not tell.
+    #[arg(long, value_enum)]
+    format: Option<FormatArg>,
+    /// Keep the cells whose centres lie in this window, source coordinates.
+    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = numbers::<4>, allow_negative_numbers = true)]
+    crop: Option<[f64; 4]>,
+    /// Keep these source cells (ends exclusive; row 0 = the file's first, northern row).
+    #[arg(long, value_name = "C0,R0,C1,R1", value_parser = numbers::<4>, conflicts_with = "crop")]
+    crop_cells: Option<[f64; 4]>,
+    /// Cell size of the written map, metres (after --scale); default: the source's.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    cell_size: Option<f64>,
+    /// Fit the crop in NX x NY square cells instead of --cell-size.
+    #[arg(long, value_name = "NX,NY", value_parser = numbers::<2>, conflicts_with = "cell_size")]
+    size: Option<[f64; 2]>,
+    /// Multiply cell size and heights by F (slopes kept), e.g. 0.02 for a 1 m DEM at robot scale.
+    #[arg(
+        long,
+        value_name = "F",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
+    scale: f64,
+    /// Start, map coordinates (metres from the crop's south-west corner, after --scale).
+    #[arg(long, value_name = "X,Y", value_parser = numbers::<2>, allow_negative_numbers = true)]
+    start: Option<[f64; 2]>,
+    /// Heading at the start, radians.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    start_yaw: f64,
+    /// Goal centre, map coordinates.
+    #[arg(long, value_name = "X,Y", value_parser = numbers::<2>, allow_negative_numbers = true)]
+    goal: Option<[f64; 2]>,
+    /// Goal radius, metres.
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
+    goal_radius: f64,
+    /// Source cell size in metres, for GeoTIFFs without one or in degrees.
+    #[arg(long, value_name = "M", allow_negative_numbers = true)]
+    source_cell_size: Option<f64>,
+    /// Keep absolute elevations (default: the lowest valid cell becomes 0 m).
+    #[arg(long)]
+    keep_elevation: bool,
+    /// Largest number of cells read from the source or written, checked before allocating.
+    #[arg(long, value_name = "N", default_value_t = MAX_MAP_CELLS)]
+    max_cells: usize,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FormatArg {
+    Asc,
+    Tif,
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
     Exact,
@@ -264,6 +334,7 @@ fn main() -> Result<()> {
             write_npy_f64(&args.out, (field.height, field.width), &field.values)?;
             emit(&args.out.display().to_string())
         }
+        Command::Import(args) => run_import(&args),
         Command::Demo {
             out,
             grid,
@@ -334,6 +405,67 @@ fn run_path_cost(args: &PathCostArgs) -> Result<()> {
         "max_slope_deg": m.max_slope_deg,
     });
     emit(&serde_json::to_string(&doc)?)
+}
+
+fn run_import(args: &ImportArgs) -> Result<()> {
+    let whole = |v: f64, what: &str| {
+        if v >= 0.0 && v.fract() == 0.0 && v <= usize::MAX as f64 {
+            Ok(v as usize)
+        } else {
+            Err(anyhow::anyhow!("{what}: {v} is not a whole number >= 0"))
+        }
+    };
+    let crop = match (args.crop, args.crop_cells) {
+        (Some([x0, y0, x1, y1]), _) => Some(Crop::World {
+            min: [x0, y0],
+            max: [x1, y1],
+        }),
+        (None, Some([c0, r0, c1, r1])) => Some(Crop::Cells {
+            column0: whole(c0, "--crop-cells")?,
+            row0: whole(r0, "--crop-cells")?,
+            column1: whole(c1, "--crop-cells")?,
+            row1: whole(r1, "--crop-cells")?,
+        }),
+        (None, None) => None,
+    };
+    let resolution = match (args.cell_size, args.size) {
+        (Some(size), _) => Resolution::CellSize(size),
+        (None, Some([nx, ny])) => Resolution::Size {
+            columns: whole(nx, "--size")?,
+            rows: whole(ny, "--size")?,
+        },
+        (None, None) => Resolution::Source,
+    };
+    let options = ImportOptions {
+        format: args.format.map(|f| match f {
+            FormatArg::Asc => DemFormat::EsriAscii,
+            FormatArg::Tif => DemFormat::GeoTiff,
+        }),
+        crop,
+        resolution,
+        scale: args.scale,
+        keep_elevation: args.keep_elevation,
+        source_cell_size: args.source_cell_size,
+        max_cells: args.max_cells,
+    };
+    let bar = spinner(format!("reading {}", args.input.display()));
+    let imported = import_map(&args.input, &options);
+    bar.finish_and_clear();
+    let imported = imported.with_context(|| format!("importing {}", args.input.display()))?;
+    for warning in &imported.summary.warnings {
+        tracing::warn!("{warning}");
+    }
+    emit(&imported.summary.to_string())?;
+    let placement = Placement {
+        name: args.name.clone().unwrap_or_else(|| stem_name(&args.input)),
+        start: args.start,
+        start_yaw: args.start_yaw,
+        goal: args.goal,
+        goal_radius: args.goal_radius,
+    };
+    let scenario = scenario_from(imported.map, &placement)?;
+    let json = save_scenario(&scenario, &args.out)?;
+    emit(&json.display().to_string())
 }
 
 fn spinner(message: String) -> ProgressBar {
