@@ -1,0 +1,146 @@
+"""Incline scenarios (issue 19, part 5): the plane, the straight reference, the slip measure, and one
+slope per direction walked by the controller FMU.
+
+The closed-loop tests use the steepest angle the current controller passes in every direction
+(10°; scripts/bench_slopes.py measures 10/20/30° and docs/slopes.md explains the failures).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pfnav_harness import paths
+from pfnav_harness.errors import MissingArtifactError, ScenarioError
+from pfnav_harness.incline import (
+    DIRECTIONS,
+    NOMINAL_SPEED,
+    WALK_DISTANCE,
+    incline_scenario,
+    incline_terrain,
+    run_incline,
+    stance_slips,
+    straight_plan,
+    support_margin,
+)
+from pfnav_harness.world import QuadrupedWorld
+
+# Steepest slope the current controller stands up and walks on in all three directions.
+PASSING_ANGLE = 10.0
+# Required walk along the direction (of the 3 m reference).
+MIN_WALKED = 2.5
+
+
+def test_the_plane_rises_along_x_at_the_angle_with_heights_from_zero() -> None:
+    terrain = incline_terrain(20.0)
+    z, dzdx, dzdy = terrain.height_and_gradient(np.array([1.0, 4.0, 7.0]), np.array([2.0, 4.0, 6.0]))
+    assert np.allclose(dzdx, math.tan(math.radians(20.0)))
+    assert np.allclose(dzdy, 0.0)
+    assert terrain.heights.min() >= 0.0
+    assert z[2] - z[0] == pytest.approx(6.0 * math.tan(math.radians(20.0)))
+
+
+@pytest.mark.parametrize("direction", list(DIRECTIONS))
+def test_the_walk_is_centred_far_from_the_edges_and_heads_along_its_direction(direction: str) -> None:
+    scenario = incline_scenario(30.0, direction)
+    (x0, y0), (x1, y1) = scenario.terrain.bounds()
+    start, goal = scenario.start, scenario.goal.center
+    assert math.hypot(goal[0] - start[0], goal[1] - start[1]) == pytest.approx(WALK_DISTANCE)
+    for x, y in (start, goal):
+        assert min(x - x0, x1 - x, y - y0, y1 - y) >= 2.0
+    rise = scenario.terrain.height_at(*goal) - scenario.terrain.height_at(*start)
+    expected = {"up": 1.0, "down": -1.0, "across": 0.0}[direction] * WALK_DISTANCE * math.tan(math.radians(30.0))
+    assert rise == pytest.approx(expected, abs=1e-9)
+
+
+def test_the_straight_plan_is_timed_at_the_nominal_speed() -> None:
+    scenario = incline_scenario(10.0, "across")
+    plan = straight_plan(scenario)
+    assert plan.duration == pytest.approx(WALK_DISTANCE / NOMINAL_SPEED)
+    assert np.allclose(np.hypot(plan.vx, plan.vy), NOMINAL_SPEED)
+    assert np.allclose(plan.yaw, DIRECTIONS["across"])
+    assert (plan.x[-1], plan.y[-1]) == pytest.approx(scenario.goal.center)
+    assert np.allclose(plan.z, scenario.terrain.height(plan.x, plan.y))
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: incline_terrain(75.0), "angle"),
+        (lambda: incline_terrain(float("nan")), "angle"),
+        (lambda: incline_scenario(10.0, "sideways"), "direction"),
+        (lambda: incline_scenario(10.0, "up", distance=7.5), "distance"),
+        (lambda: straight_plan(incline_scenario(10.0, "up"), speed=0.0), "speed"),
+    ],
+)
+def test_bad_input_is_refused_with_the_reason(call: Callable[[], object], message: str) -> None:
+    with pytest.raises(ScenarioError, match=message):
+        call()
+
+
+def _foot_track(n: int, slide_per_step: float, roll_per_step: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """One foot on flat ground: its centre moves by the roll (r·θ) plus a slide along x."""
+    theta = roll_per_step * np.arange(n)
+    position = np.zeros((n, 1, 3))
+    position[:, 0, 0] = radius * theta + slide_per_step * np.arange(n)
+    position[:, 0, 2] = radius
+    rotation = np.zeros((n, 1, 3, 3))
+    c, s = np.cos(theta), np.sin(theta)
+    # Rolling towards +x is a rotation about +y.
+    rotation[:, 0] = np.stack([np.stack([c, 0 * c, s], -1), np.stack([0 * c, 1 + 0 * c, 0 * c], -1), np.stack([-s, 0 * c, c], -1)], -2)
+    return position, rotation
+
+
+def test_a_rolling_foot_does_not_slip_and_a_sliding_one_does() -> None:
+    n, radius, dt = 200, 0.02, 0.001
+    scheduled = np.ones((n, 1), dtype=np.int8)
+    touching = np.ones((n, 1), dtype=np.int8)
+    rolling = _foot_track(n, 0.0, 0.001, radius)
+    sliding = _foot_track(n, 0.0005, 0.0, radius)
+    up = np.array([0.0, 0.0, 1.0])
+    (rolled,) = stance_slips(scheduled, touching, *rolling, radius, up, dt)
+    (slid,) = stance_slips(scheduled, touching, *sliding, radius, up, dt)
+    assert rolled.slip < 1e-4
+    assert slid.slip == pytest.approx(0.0005 * (n - 1))
+    # Once the foot has left the ground (longer than the contact gap) its motion is not slip.
+    touching[50:] = 0
+    (lifted,) = stance_slips(scheduled, touching, *sliding, radius, up, dt)
+    assert lifted.slip == pytest.approx(0.0005 * 49)
+
+
+def test_the_aligned_pose_leaves_the_support_polygon_on_a_steep_cross_slope(tmp_path: Path) -> None:
+    """The pose the robot is placed in (body parallel to the plane) puts its centre of mass
+    h·sin θ downhill of its feet: inside their polygon on flat ground, outside it 30° across."""
+    margins = {}
+    for angle in (0.0, 30.0):
+        scenario = incline_scenario(angle, "across")
+        world = QuadrupedWorld(scenario.terrain, paths.urdf_path(), tmp_path)
+        world.place(*scenario.start, scenario.start_yaw)
+        margins[angle] = support_margin(world)
+    assert 0.1 < margins[0.0] < 0.15
+    assert margins[30.0] < 0.0
+
+
+@pytest.fixture(scope="module")
+def fmu() -> Path:
+    try:
+        return paths.fmu_path()
+    except MissingArtifactError as err:
+        pytest.fail(str(err), pytrace=False)
+
+
+@pytest.mark.parametrize("direction", list(DIRECTIONS))
+def test_the_robot_stands_up_and_walks_the_slope(direction: str, fmu: Path, tmp_path: Path) -> None:
+    run = run_incline(PASSING_ANGLE, direction, fmu, paths.urdf_path(), tmp_path, friction=0.8)
+    outcome = run.outcome
+    summary = f"{PASSING_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
+    assert outcome.stood_up, summary
+    assert not outcome.fell, summary
+    assert outcome.walked >= MIN_WALKED, summary
+    # The feet hold: a stance foot that slides by centimetres is a robot about to slip away.
+    assert outcome.max_stance_slip < 0.03, summary
+    assert not outcome.non_foot_contacts, f"{summary}; links on the ground: {outcome.non_foot_contacts}"
