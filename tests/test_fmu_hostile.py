@@ -198,7 +198,7 @@ def integer_probes(lo: int, hi: int) -> list[int]:
 
 
 def test_every_parameter_declares_a_range_holding_its_start(parameters: list[Any]) -> None:
-    assert len(parameters) == 43
+    assert len(parameters) == 54
     for v in parameters:
         assert v.type in ("Real", "Integer", "Enumeration"), v.name
         lo, hi = bounds(v)
@@ -528,7 +528,7 @@ class Fuzzer:
             modes = enumeration(self.fmu_model_description, "ModeRequest")
             self.call(op, "cmd.mode", slave.setInteger, [self.vr["cmd.mode"]], [rng.choice([modes.Stand, modes.Locomotion])])
         elif op == "setBoolean":
-            self.call(op, "setBoolean contact[1]", slave.setBoolean, [self.vr["contact[1]"]], [True])
+            self.call(op, "setBoolean stance[1]", slave.setBoolean, [self.vr["stance[1]"]], [True])
         elif op == "get":
             getter = rng.choice([slave.getReal, slave.getInteger, slave.getBoolean])
             vrs = [rng.choice([0, 5, 100, 250, 10**6, 2**32 - 1]) for _ in range(rng.randint(1, 3))]

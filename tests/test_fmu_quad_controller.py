@@ -199,7 +199,7 @@ def standing(stand_pose: list[float], x: float = 0.0, yaw: float = 0.0) -> Input
 def outputs(slave: FMU2Slave, refs: dict[str, int]) -> dict[str, Any]:
     tau = slave.getReal([refs[f"joint.tau[{i}]"] for i in range(1, 13)])
     forces = slave.getReal([refs[f"force[{leg}].{a}"] for leg in range(1, 5) for a in "xyz"])
-    contacts = slave.getBoolean([refs[f"contact[{leg}]"] for leg in range(1, 5)])
+    contacts = slave.getBoolean([refs[f"stance[{leg}]"] for leg in range(1, 5)])
     (fsm,) = slave.getInteger([refs["fsm.state"]])
     (solved,) = slave.getBoolean([refs["mpc.solved"]])
     return {
@@ -360,10 +360,10 @@ def test_package_layout_and_description(fmu_file: Path, fmu_model_description: A
     assert float(by_name["gait.period"].start) == config["gait_period"]
     assert int(by_name["mpc.horizon"].start) == config["mpc_horizon"]
     assert float(by_name["mpc.q[6]"].start) == config["mpc_q"][5]
-    assert by_name["cmd.mode"].type == "Enumeration" and by_name["contact[1]"].type == "Boolean"
+    assert by_name["cmd.mode"].type == "Enumeration" and by_name["stance[1]"].type == "Boolean"
     assert by_name["mpc.horizon"].type == "Integer" and by_name["gait.kind"].declaredType.name == "GaitKind"
     outputs_ = [u.variable.name for u in md.outputs]
-    assert len(outputs_) == 31 and "joint.tau[12]" in outputs_ and "mpc.solveTime" in outputs_
+    assert len(outputs_) == 41 and "joint.tau[12]" in outputs_ and "mpc.solveTime" in outputs_
 
 
 def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
@@ -447,7 +447,7 @@ MISUSE_RUNNING: list[tuple[str, Callable[[FMU2Slave, dict[str, int]], Any], str]
     ("type mismatch", lambda s, r: s.getBoolean([r["base.pos.x"]]), "does not refer to a Boolean variable"),
     ("string vr", lambda s, r: s.getString([0]), "does not refer to a String variable"),
     ("set output real", lambda s, r: s.setReal([r["joint.tau[1]"]], [1.0]), "cannot set joint.tau[1]: it is an output"),
-    ("set output bool", lambda s, r: s.setBoolean([r["contact[2]"]], [True]), "cannot set contact[2]: it is an output"),
+    ("set output bool", lambda s, r: s.setBoolean([r["stance[2]"]], [True]), "cannot set stance[2]: it is an output"),
     ("set output int", lambda s, r: s.setInteger([r["fsm.state"]], [2]), "cannot set fsm.state: it is an output"),
     ("fixed param", lambda s, r: s.setReal([r["gait.period"]], [0.4]), "cannot set gait.period: it is a fixed parameter"),
     ("nan", lambda s, r: s.setReal([r["base.pos.x"]], [math.nan]), "invalid value for base.pos.x: NaN is not a finite number"),

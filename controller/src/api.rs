@@ -366,6 +366,129 @@ impl FsmState {
     }
 }
 
+/// Which state the controller runs on. The discriminant is the stable integer code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum EstimatorKind {
+    /// The measured base pose and twist of [`RobotState`] (simulation ground truth).
+    GroundTruth = 0,
+    /// Orientation filter (gyro + accelerometer) and the 18-state leg-kinematics Kalman filter;
+    /// the base pose of [`RobotState`] is read once, at the first tick, to place the robot.
+    Kalman = 1,
+}
+
+impl EstimatorKind {
+    /// Every estimator with its name and description (the code is the discriminant): the one list
+    /// the FMU's `EstimatorKind` enumeration type (`estimator`) is generated from.
+    pub const ALL: [(EstimatorKind, &'static str, &'static str); 2] = [
+        (
+            EstimatorKind::GroundTruth,
+            "groundTruth",
+            "The base pose and twist inputs (base.*) are the state",
+        ),
+        (
+            EstimatorKind::Kalman,
+            "kalman",
+            "IMU orientation filter + leg-kinematics Kalman filter; base.pos/base.quat read at the first tick only",
+        ),
+    ];
+
+    /// Stable integer code (the discriminant).
+    pub fn as_code(self) -> i32 {
+        self as i32
+    }
+
+    /// Inverse of [`EstimatorKind::as_code`].
+    pub fn from_code(code: i32) -> Option<EstimatorKind> {
+        EstimatorKind::ALL
+            .iter()
+            .find(|&&(v, ..)| v.as_code() == code)
+            .map(|&(kind, ..)| kind)
+    }
+}
+
+/// One IMU sample, body frame (the IMU sits at the base origin, axes along the base axes).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ImuReading {
+    /// Angular velocity, body frame, rad/s.
+    pub gyro: [f64; 3],
+    /// Specific force a − g, body frame, m/s² (+[`GRAVITY`] on z when standing level).
+    pub acc: [f64; 3],
+}
+
+impl Default for ImuReading {
+    /// A level robot at rest.
+    fn default() -> Self {
+        ImuReading {
+            gyro: [0.0; 3],
+            acc: [0.0, 0.0, GRAVITY],
+        }
+    }
+}
+
+/// What a foot contact sensor (or the master) says about one foot. The discriminant is the
+/// stable integer code of the FMU inputs `contact[1..4]`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ContactReading {
+    /// No sensor: the estimator uses the controller's own stance schedule.
+    #[default]
+    Unknown = -1,
+    /// The foot is off the ground.
+    NoContact = 0,
+    /// The foot is on the ground.
+    InContact = 1,
+}
+
+impl ContactReading {
+    /// Stable integer code (the discriminant).
+    pub fn as_code(self) -> i32 {
+        self as i32
+    }
+
+    /// Inverse of [`ContactReading::as_code`].
+    pub fn from_code(code: i32) -> Option<ContactReading> {
+        [
+            ContactReading::Unknown,
+            ContactReading::NoContact,
+            ContactReading::InContact,
+        ]
+        .into_iter()
+        .find(|c| c.as_code() == code)
+    }
+}
+
+/// An absolute position measurement of the base origin (GNSS, motion capture), world frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PositionFix {
+    /// Base origin, world frame, m.
+    pub position: [f64; 3],
+    /// Whether `position` is a new measurement to fuse (false: no fix this tick).
+    pub valid: bool,
+}
+
+/// The sensor inputs of one control tick besides the encoders of [`RobotState`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SensorReadings {
+    /// IMU sample.
+    pub imu: ImuReading,
+    /// Contact per leg (index = [`Leg::index`]).
+    pub contacts: [ContactReading; NUM_LEGS],
+    /// Absolute position fix, fused once when `valid`.
+    pub fix: PositionFix,
+}
+
+/// The estimate the controller ran on this tick, as reported to the master.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EstimateReport {
+    /// Base origin, world frame, m.
+    pub position: [f64; 3],
+    /// Base linear velocity, world frame, m/s.
+    pub velocity: [f64; 3],
+    /// Roll, pitch, yaw (ZYX Euler angles), rad.
+    pub rpy: [f64; 3],
+    /// Estimator status bits ([`crate::estimator::StatusFlag`]); 0 = healthy.
+    pub status: u32,
+}
+
 /// Output of one control tick.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Command {
@@ -385,6 +508,8 @@ pub struct Command {
     pub mpc_solve_time_s: f64,
     /// Whether the last MPC solve succeeded (false also when no MPC ran yet).
     pub mpc_solved: bool,
+    /// The state estimate this tick ran on, and the estimator's status.
+    pub estimate: EstimateReport,
 }
 
 /// Errors while building a [`crate::RobotModel`].

@@ -11,7 +11,7 @@ use std::ops::RangeInclusive;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::api::GaitKind;
+use crate::api::{EstimatorKind, GaitKind};
 use crate::limits;
 
 /// The value of one element of a configuration field.
@@ -23,6 +23,8 @@ pub enum FieldValue {
     Count(usize),
     /// A gait.
     Gait(GaitKind),
+    /// An estimator.
+    Estimator(EstimatorKind),
 }
 
 impl FieldValue {
@@ -34,6 +36,7 @@ impl FieldValue {
             // Counts beyond 2^53 lose precision but stay far outside every range.
             FieldValue::Count(n) => n as f64,
             FieldValue::Gait(g) => f64::from(g.as_code()),
+            FieldValue::Estimator(e) => f64::from(e.as_code()),
         }
     }
 }
@@ -47,6 +50,8 @@ pub enum FieldKind {
     Count,
     /// [`GaitKind`].
     Gait,
+    /// [`EstimatorKind`].
+    Estimator,
 }
 
 /// A type a configuration field may have: how its elements are read, written and bounded.
@@ -128,6 +133,30 @@ impl FieldType for GaitKind {
     }
     fn bounds(range: &Self::Range) -> (f64, f64) {
         let codes = range.iter().map(|&(g, ..)| g.as_code());
+        let min = codes.clone().min().unwrap_or(0);
+        let max = codes.max().unwrap_or(0);
+        (f64::from(min), f64::from(max))
+    }
+}
+
+impl FieldType for EstimatorKind {
+    /// The estimators accepted: all of [`EstimatorKind::ALL`].
+    type Range = [(EstimatorKind, &'static str, &'static str); 2];
+    const KIND: FieldKind = FieldKind::Estimator;
+    const LEN: usize = 1;
+    const IS_ARRAY: bool = false;
+    fn element(&self, _: usize) -> FieldValue {
+        FieldValue::Estimator(*self)
+    }
+    fn set_element(&mut self, _: usize, value: FieldValue) -> bool {
+        let FieldValue::Estimator(v) = value else {
+            return false;
+        };
+        *self = v;
+        true
+    }
+    fn bounds(range: &Self::Range) -> (f64, f64) {
+        let codes = range.iter().map(|&(e, ..)| e.as_code());
         let min = codes.clone().min().unwrap_or(0);
         let max = codes.max().unwrap_or(0);
         (f64::from(min), f64::from(max))
@@ -412,6 +441,55 @@ controller_config! {
         max_terrain_pitch: f64 = 0.35,
             fmi "terrain.maxPitch", range limits::MAX_TERRAIN_PITCH, unit "rad",
             "Largest body pitch the terrain-following reference may ask for";
+        /// Which state the controller runs on (see `docs/estimation.md`).
+        estimator: EstimatorKind = EstimatorKind::GroundTruth,
+            fmi "estimator", range EstimatorKind::ALL, unit "",
+            "State estimator: groundTruth (the base.* inputs) or kalman (IMU + leg kinematics; base.pos/base.quat read at the first tick only)";
+        /// Gyro white-noise density (angle random walk), rad/s/√Hz.
+        est_gyro_noise: f64 = 1e-3,
+            fmi "est.gyroNoise", range limits::EST_GYRO_NOISE, unit "rad/s/sqrt(Hz)",
+            "Gyro white-noise density (angle random walk) of the orientation filter";
+        /// Gyro bias random-walk density, rad/s²/√Hz.
+        est_gyro_bias_walk: f64 = 1e-4,
+            fmi "est.gyroBiasWalk", range limits::EST_GYRO_BIAS_WALK, unit "rad/s2/sqrt(Hz)",
+            "Gyro bias random-walk density of the orientation filter";
+        /// Standard deviation of the accelerometer as a gravity-direction reference, m/s² (sensor
+        /// noise plus the trunk's own accelerations while walking).
+        est_acc_tilt_noise: f64 = 0.5,
+            fmi "est.accTiltNoise", range limits::EST_ACC_TILT_NOISE, unit "m/s2",
+            "Accelerometer noise as a gravity-direction (tilt) reference, walking accelerations included";
+        /// Accelerometer noise density driving the Kalman filter's velocity, m/s²/√Hz (sensor
+        /// noise plus vibration and the tilt error times g).
+        est_acc_noise: f64 = 0.1,
+            fmi "est.accNoise", range limits::EST_ACC_NOISE, unit "m/s2/sqrt(Hz)",
+            "Accelerometer noise density, the velocity process noise of the Kalman filter";
+        /// Standard deviation of a stance foot's position relative to the trunk from leg
+        /// kinematics, m.
+        est_leg_position_noise: f64 = 0.01,
+            fmi "est.legPosNoise", range limits::EST_LEG_POSITION_NOISE, unit "m",
+            "Leg-kinematics foot position noise (stance, per axis)";
+        /// Standard deviation of a stance foot's velocity relative to the trunk from leg
+        /// kinematics, m/s.
+        est_leg_velocity_noise: f64 = 0.1,
+            fmi "est.legVelNoise", range limits::EST_LEG_VELOCITY_NOISE, unit "m/s",
+            "Leg-kinematics foot velocity noise (stance, per axis)";
+        /// Random-walk density of a stance foot's world position (rolling foot, slip), m/√s.
+        est_foot_drift: f64 = 0.02,
+            fmi "est.footDrift", range limits::EST_FOOT_DRIFT, unit "m/sqrt(s)",
+            "Process noise density of a stance foot's world position (rolling foot sphere, slip)";
+        /// Standard deviation of an absolute position fix, m.
+        est_fix_noise: f64 = 0.02,
+            fmi "est.fixNoise", range limits::EST_FIX_NOISE, unit "m",
+            "Absolute position fix noise (per axis)";
+        /// Factor on the leg-kinematics noise variances of a foot in swing (and, ramped, around
+        /// touch-down and lift-off).
+        est_swing_noise_factor: f64 = 100.0,
+            fmi "est.swingNoiseFactor", range limits::EST_SWING_NOISE_FACTOR, unit "",
+            "Factor on the leg-kinematics noise variances of a swing foot (ramped around touch-down)";
+        /// Gyro full-scale range, rad/s: a reading at or beyond it is saturated.
+        est_gyro_limit: f64 = 34.9,
+            fmi "est.gyroLimit", range limits::EST_GYRO_LIMIT, unit "rad/s",
+            "Gyro full-scale range (34.9 rad/s = 2000 deg/s); readings at or beyond it are saturated";
     }
 }
 
@@ -473,7 +551,7 @@ mod tests {
                 .iter()
                 .map(|f| f.len)
                 .sum::<usize>(),
-            43
+            54
         );
     }
 

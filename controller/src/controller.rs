@@ -2,7 +2,8 @@
 //! estimate → gait state machine → footholds → MPC scheduling → leg control laws → torques,
 //! each stage its own module with its own state:
 //!
-//! - `estimate`: the measured state as the stages use it (rotation, feet, gravity).
+//! - `estimator` + `estimate`: the state the stages use (rotation, feet, gravity), from the
+//!   measured base state (ground truth) or from the IMU/leg-kinematics filters.
 //! - `fsm`: passive / stand-up / stand / locomotion / damping, one state per file;
 //!   the locomotion state runs the gait schedule and drives the next three stages.
 //! - `footholds`: Raibert footholds at the terrain height (height map or plane),
@@ -25,10 +26,11 @@
 use nalgebra::Vector3;
 
 use crate::api::{
-    Command, ControllerError, FsmState, HeightMap, Leg, Reference, RobotState, NUM_JOINTS, NUM_LEGS,
+    Command, ControllerError, EstimateReport, FsmState, HeightMap, Leg, Reference, RobotState,
+    SensorReadings, NUM_JOINTS, NUM_LEGS,
 };
 use crate::config::ControllerConfig;
-use crate::estimate::Estimate;
+use crate::estimator::StateEstimator;
 use crate::footholds::FootholdPlanner;
 pub use crate::footholds::FOOTHOLD_SEARCH_RADIUS;
 use crate::fsm::{Fsm, FsmTransition, Stages};
@@ -43,6 +45,7 @@ pub struct Controller {
     model: RobotModel,
     config: ControllerConfig,
     com_offset_body: Vector3<f64>,
+    estimator: StateEstimator,
     fsm: Fsm,
     stages: Stages,
     last_transition: Option<FsmTransition>,
@@ -73,6 +76,7 @@ impl Controller {
             legs: LegControl::new(&model, &config, stand_joint_positions),
         };
         Ok(Controller {
+            estimator: StateEstimator::new(&config),
             fsm: Fsm::new(&config),
             last_transition: None,
             stages,
@@ -122,6 +126,16 @@ impl Controller {
         Ok(())
     }
 
+    /// The estimate of the last tick and the estimator's status (all zero before the first tick).
+    pub fn estimate(&self) -> EstimateReport {
+        self.estimator.report()
+    }
+
+    /// The estimator stage (its kind, gyro bias).
+    pub fn estimator(&self) -> &StateEstimator {
+        &self.estimator
+    }
+
     /// The robot model.
     pub fn model(&self) -> &RobotModel {
         &self.model
@@ -157,24 +171,44 @@ impl Controller {
             desired_foot_positions: [[0.0; 3]; NUM_LEGS],
             mpc_solve_time_s: 0.0,
             mpc_solved: false,
+            estimate: self.estimator.report(),
         }
     }
 
-    /// One control tick. Deterministic: the same sequence of inputs gives bit-identical outputs.
-    /// On invalid input the controller's internal state is left untouched and an error returned.
+    /// One control tick with the default sensor readings ([`SensorReadings::default`]: a level
+    /// IMU at rest, contacts from the schedule, no fix). Meant for the ground-truth estimator;
+    /// with the Kalman estimator use [`Controller::step_with_sensors`].
     pub fn step(
         &mut self,
         state: &RobotState,
         reference: &Reference,
         dt: f64,
     ) -> Result<Command, ControllerError> {
+        self.step_with_sensors(state, &SensorReadings::default(), reference, dt)
+    }
+
+    /// One control tick. Deterministic: the same sequence of inputs gives bit-identical outputs.
+    /// On invalid input (non-finite joints, or a bad base state when it is read: always in
+    /// ground-truth mode, at the first tick in Kalman mode) the controller's internal state is
+    /// left untouched and an error returned. Bad `sensors` are not an error: the estimator holds
+    /// or skips them and reports it in [`Command::estimate`]'s status.
+    pub fn step_with_sensors(
+        &mut self,
+        state: &RobotState,
+        sensors: &SensorReadings,
+        reference: &Reference,
+        dt: f64,
+    ) -> Result<Command, ControllerError> {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(ControllerError::InvalidDt(dt));
         }
-        validate_state(state)?;
+        validate_state(state, self.estimator.reads_base_state())?;
         validate_reference(reference, self.config.mpc_dt)?;
 
-        let estimate = Estimate::from_measurement(&self.model, state);
+        let plan = self.fsm.stance_plan();
+        let estimate = self
+            .estimator
+            .update(&self.model, state, sensors, &plan, dt);
         if let Some(transition) = self
             .fsm
             .check_transition(&self.stages, &estimate, reference)
@@ -196,6 +230,7 @@ impl Controller {
             desired_foot_positions: actuation.feet,
             mpc_solve_time_s: self.stages.mpc.solve_time_s(),
             mpc_solved: self.stages.mpc.solved(),
+            estimate: self.estimator.report(),
         })
     }
 }

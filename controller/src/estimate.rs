@@ -1,7 +1,7 @@
-//! State estimation stage: today the measured state is taken as the estimate; this stage derives
-//! what the later stages need from it once per tick (rotation, roll/pitch/yaw, per-leg joint
-//! angles, world foot positions, gravity in the base frame). A real estimator (contact-aided
-//! Kalman filter) would replace `Estimate::from_measurement`.
+//! The state the later stages run on: rotation, roll/pitch/yaw, base position and twist, per-leg
+//! joint angles, world foot positions, gravity in the base frame. In ground-truth mode it is the
+//! measured state ([`Estimate::from_measurement`]); in Kalman mode the base pose and twist come
+//! from [`crate::estimator`] and the rest from the encoders ([`Estimate::from_base`]).
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
@@ -37,18 +37,44 @@ pub fn leg_slice<const N: usize>(values: &[f64; N], leg: Leg) -> [f64; 3] {
     [values[3 * l], values[3 * l + 1], values[3 * l + 2]]
 }
 
+/// Roll, pitch, yaw (ZYX Euler angles) of a rotation matrix, rad.
+pub fn rpy_of(rotation: &Matrix3<f64>) -> Vector3<f64> {
+    Vector3::new(
+        rotation[(2, 1)].atan2(rotation[(2, 2)]),
+        (-rotation[(2, 0)]).clamp(-1.0, 1.0).asin(),
+        rotation[(1, 0)].atan2(rotation[(0, 0)]),
+    )
+}
+
+/// The base pose and twist an [`Estimate`] is built around.
+#[derive(Clone, Copy, Debug)]
+pub struct BaseState {
+    /// Body → world attitude.
+    pub attitude: UnitQuaternion<f64>,
+    /// Base origin, world frame, m.
+    pub position: Vector3<f64>,
+    /// Base linear velocity, world frame, m/s.
+    pub velocity: Vector3<f64>,
+    /// Base angular velocity, world frame, rad/s.
+    pub angular_velocity: Vector3<f64>,
+}
+
 impl Estimate {
     /// The estimate of a validated measured state.
     pub fn from_measurement(model: &RobotModel, state: &RobotState) -> Estimate {
         let o = state.base_orientation;
-        let quaternion = UnitQuaternion::from_quaternion(Quaternion::new(o[0], o[1], o[2], o[3]));
-        let rotation = *quaternion.to_rotation_matrix().matrix();
-        let rpy = Vector3::new(
-            rotation[(2, 1)].atan2(rotation[(2, 2)]),
-            (-rotation[(2, 0)]).clamp(-1.0, 1.0).asin(),
-            rotation[(1, 0)].atan2(rotation[(0, 0)]),
-        );
-        let position = Vector3::from(state.base_position);
+        let base = BaseState {
+            attitude: UnitQuaternion::from_quaternion(Quaternion::new(o[0], o[1], o[2], o[3])),
+            position: Vector3::from(state.base_position),
+            velocity: Vector3::from(state.base_linear_velocity),
+            angular_velocity: Vector3::from(state.base_angular_velocity),
+        };
+        Estimate::from_base(model, &base, state)
+    }
+
+    /// The estimate around `base` with the joints of `state` (its base fields are not read).
+    pub fn from_base(model: &RobotModel, base: &BaseState, state: &RobotState) -> Estimate {
+        let rotation = *base.attitude.to_rotation_matrix().matrix();
         let mut q = [[0.0; 3]; NUM_LEGS];
         let mut dq = [[0.0; 3]; NUM_LEGS];
         let mut feet_world = [Vector3::zeros(); NUM_LEGS];
@@ -57,15 +83,15 @@ impl Estimate {
             q[l] = leg_slice(&state.joint_positions, leg);
             dq[l] = leg_slice(&state.joint_velocities, leg);
             let foot = Vector3::from(model.foot_position_body(leg, q[l]));
-            feet_world[l] = position + rotation * foot;
+            feet_world[l] = base.position + rotation * foot;
         }
         let gravity = rotation.transpose() * Vector3::new(0.0, 0.0, -GRAVITY);
         Estimate {
             rotation,
-            rpy,
-            position,
-            velocity: Vector3::from(state.base_linear_velocity),
-            angular_velocity: Vector3::from(state.base_angular_velocity),
+            rpy: rpy_of(&rotation),
+            position: base.position,
+            velocity: base.velocity,
+            angular_velocity: base.angular_velocity,
             q,
             dq,
             feet_world,

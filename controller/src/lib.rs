@@ -24,14 +24,20 @@
 //!   `osqp-sys` 1.0 downloads qdldl from GitHub at build time (impossible offline).
 //! - Base state velocities must be world-frame; the CoM is taken at the standing-pose composite
 //!   CoM offset from the base origin.
+//! - [`Controller::step_with_sensors`] also takes the IMU, contact and position-fix readings
+//!   ([`SensorReadings`]); with [`ControllerConfig::estimator`] = [`EstimatorKind::Kalman`] the
+//!   stages run on the [`estimator`]'s estimate and the base pose of the [`RobotState`] is read at
+//!   the first tick only. [`Command::estimate`] reports the estimate and its status bits.
 //!
 //! Module layout: the pipeline stages of `Controller::step` are private modules (`estimate`,
-//! `fsm`, `footholds`, `mpc_schedule`, `leg_control`, `validation`); [`math`] holds the shared
-//! geometry helpers, so no two modules depend on each other.
+//! `fsm`, `footholds`, `mpc_schedule`, `leg_control`, `validation`) except [`estimator`], public
+//! for its benchmark and its status table; [`math`] holds the shared geometry helpers, so no two
+//! modules depend on each other.
 pub mod api;
 pub mod config;
 pub mod controller;
 mod estimate;
+pub mod estimator;
 mod footholds;
 mod fsm;
 pub mod gait;
@@ -46,5 +52,6 @@ mod validation;
 pub use api::*;
 pub use config::ControllerConfig;
 pub use controller::Controller;
+pub use estimator::{EstimatorStatus, StatusFlag};
 pub use fsm::FsmTransition;
 pub use model::RobotModel;

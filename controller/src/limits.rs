@@ -50,3 +50,23 @@ pub const MAX_TILT: RangeInclusive<f64> = 0.05..=PI;
 pub const JOINT_LIMIT_MARGIN: RangeInclusive<f64> = 0.0..=1.0;
 /// `max_terrain_pitch`, rad.
 pub const MAX_TERRAIN_PITCH: RangeInclusive<f64> = 0.0..=1.2;
+/// `est_gyro_noise`, rad/s/√Hz (MEMS gyros: 1e-4 … 1e-2).
+pub const EST_GYRO_NOISE: RangeInclusive<f64> = 1e-6..=1.0;
+/// `est_gyro_bias_walk`, rad/s²/√Hz.
+pub const EST_GYRO_BIAS_WALK: RangeInclusive<f64> = 1e-8..=0.1;
+/// `est_acc_tilt_noise`, m/s².
+pub const EST_ACC_TILT_NOISE: RangeInclusive<f64> = 1e-3..=100.0;
+/// `est_acc_noise`, m/s²/√Hz.
+pub const EST_ACC_NOISE: RangeInclusive<f64> = 1e-5..=10.0;
+/// `est_leg_position_noise`, m.
+pub const EST_LEG_POSITION_NOISE: RangeInclusive<f64> = 1e-5..=1.0;
+/// `est_leg_velocity_noise`, m/s.
+pub const EST_LEG_VELOCITY_NOISE: RangeInclusive<f64> = 1e-4..=10.0;
+/// `est_foot_drift`, m/√s.
+pub const EST_FOOT_DRIFT: RangeInclusive<f64> = 1e-6..=1.0;
+/// `est_fix_noise`, m.
+pub const EST_FIX_NOISE: RangeInclusive<f64> = 1e-4..=100.0;
+/// `est_swing_noise_factor`.
+pub const EST_SWING_NOISE_FACTOR: RangeInclusive<f64> = 1.0..=1e6;
+/// `est_gyro_limit`, rad/s (±2000 °/s is the usual largest MEMS range).
+pub const EST_GYRO_LIMIT: RangeInclusive<f64> = 1.0..=100.0;

@@ -34,20 +34,28 @@ pub fn validate_config(config: &ControllerConfig) -> Result<(), ControllerError>
     Ok(())
 }
 
-/// Checks the measured state: finite values, a quaternion of norm ≈ 1.
-pub fn validate_state(state: &RobotState) -> Result<(), ControllerError> {
+/// Checks the measured state: finite joint values and, when `with_base` (the base pose and twist
+/// are used this tick), finite base values and a quaternion of norm ≈ 1.
+pub fn validate_state(state: &RobotState, with_base: bool) -> Result<(), ControllerError> {
     let bad = |m: String| Err(ControllerError::InvalidState(m));
-    for (values, what) in [
-        (&state.base_position[..], "base_position"),
-        (&state.base_orientation[..], "base_orientation"),
-        (&state.base_linear_velocity[..], "base_linear_velocity"),
-        (&state.base_angular_velocity[..], "base_angular_velocity"),
-        (&state.joint_positions[..], "joint_positions"),
-        (&state.joint_velocities[..], "joint_velocities"),
-    ] {
+    let base: [(&[f64], &str); 4] = [
+        (&state.base_position, "base_position"),
+        (&state.base_orientation, "base_orientation"),
+        (&state.base_linear_velocity, "base_linear_velocity"),
+        (&state.base_angular_velocity, "base_angular_velocity"),
+    ];
+    let joints: [(&[f64], &str); 2] = [
+        (&state.joint_positions, "joint_positions"),
+        (&state.joint_velocities, "joint_velocities"),
+    ];
+    let checked = if with_base { &base[..] } else { &[] };
+    for &(values, what) in checked.iter().chain(&joints) {
         if let Err(m) = check_finite(values, what) {
             return bad(m);
         }
+    }
+    if !with_base {
+        return Ok(());
     }
     let norm = state
         .base_orientation

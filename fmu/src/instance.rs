@@ -1,9 +1,7 @@
 //! One FMU instance: the FMI 2.0 Co-Simulation call-state machine around a `Controller`.
 //! Everything here is safe Rust; `exports.rs` only converts the C arguments.
 
-use quad_controller::{
-    Command, Controller, ControllerConfig, FsmTransition, HeightMap, Reference, RobotState,
-};
+use quad_controller::{Command, Controller, ControllerConfig, FsmTransition};
 
 use crate::budget::max_ticks_per_step;
 use crate::ffi::Fmi2Status;
@@ -11,7 +9,7 @@ use crate::logger::Logger;
 use crate::resources::Resources;
 use crate::variables::{
     check_value, initial_command, initial_inputs, read_input, read_output, read_parameter, table,
-    write_input, write_parameter, Binding, Causality, ScalarType, Value,
+    write_input, write_parameter, Binding, Causality, Inputs, ScalarType, Value,
 };
 use crate::FmuError;
 
@@ -55,9 +53,7 @@ pub struct Instance {
     phase: Phase,
     resources: Resources,
     config: ControllerConfig,
-    state: RobotState,
-    reference: Reference,
-    height_map: HeightMap,
+    inputs: Inputs,
     command: Command,
     controller: Option<Controller>,
     start_time: f64,
@@ -79,9 +75,11 @@ impl Instance {
             phase: Phase::Instantiated,
             resources,
             config,
-            state,
-            reference,
-            height_map: HeightMap::default(),
+            inputs: Inputs {
+                state,
+                reference,
+                ..Inputs::default()
+            },
             command: initial_command(),
             controller: None,
             start_time: 0.0,
@@ -223,8 +221,7 @@ impl Instance {
                 Binding::Parameter { field, element } => {
                     Some(read_parameter(field, element, &self.config))
                 }
-                b => read_output(b, &self.command)
-                    .or_else(|| read_input(b, &self.state, &self.reference, &self.height_map)),
+                b => read_output(b, &self.command).or_else(|| read_input(b, &self.inputs)),
             };
             // Every binding is either a parameter, an input or an output (see the table tests).
             let value = value.ok_or(FmuError::UnknownValueReference { vr, expected })?;
@@ -272,13 +269,7 @@ impl Instance {
                 Binding::Parameter { field, element } => {
                     write_parameter(field, element, &mut self.config, value)
                 }
-                b => write_input(
-                    b,
-                    value,
-                    &mut self.state,
-                    &mut self.reference,
-                    &mut self.height_map,
-                ),
+                b => write_input(b, value, &mut self.inputs),
             }
         }
         Ok(())
@@ -328,8 +319,14 @@ impl Instance {
         controller
             .set_input_period(step.max(dt))
             .map_err(|e| FmuError::InvalidArgument(e.to_string()))?;
-        if let Err(e) = controller.set_height_map(&self.height_map) {
-            self.command = controller.safe_command(&self.state);
+        let Inputs {
+            state,
+            reference,
+            height_map,
+            sensors,
+        } = &self.inputs;
+        if let Err(e) = controller.set_height_map(height_map) {
+            self.command = controller.safe_command(state);
             self.phase = Phase::StepFailed;
             self.last_successful_time = self.start_time + self.ticks_done as f64 * dt;
             return Err(FmuError::StepRejected {
@@ -337,11 +334,17 @@ impl Instance {
                 reason: e.to_string(),
             });
         }
+        // A fix arrives once per doStep: only the first tick fuses it. The status bits of every
+        // tick of the step are reported (a rejected fix on the first tick must not be lost).
+        let mut tick_sensors = *sensors;
+        let mut status = None;
         while self.ticks_done < target {
             let before = self.command.fsm_state;
-            match controller.step(&self.state, &self.reference, dt) {
+            match controller.step_with_sensors(state, &tick_sensors, reference, dt) {
                 Ok(command) => {
                     self.command = command;
+                    status = Some(status.unwrap_or(0) | command.estimate.status);
+                    tick_sensors.fix.valid = false;
                     self.ticks_done += 1;
                     if self.command.fsm_state != before {
                         let time = self.start_time + self.ticks_done as f64 * dt;
@@ -349,7 +352,7 @@ impl Instance {
                     }
                 }
                 Err(e) => {
-                    self.command = controller.safe_command(&self.state);
+                    self.command = controller.safe_command(state);
                     self.phase = Phase::StepFailed;
                     self.last_successful_time = self.start_time + self.ticks_done as f64 * dt;
                     return Err(FmuError::StepRejected {
@@ -358,6 +361,9 @@ impl Instance {
                     });
                 }
             }
+        }
+        if let Some(status) = status {
+            self.command.estimate.status = status;
         }
         self.time = end;
         self.last_successful_time = end;

@@ -38,7 +38,7 @@ pub const MODEL_IDENTIFIER: &str = "QuadController";
 
 /// The GUID written to `modelDescription.xml` and checked by `fmi2Instantiate`. Change it
 /// whenever the variable table changes incompatibly.
-pub const GUID: &str = "{5f1c2a8e-7b3d-4e61-9a0c-3d2b8f4e6a11}";
+pub const GUID: &str = "{320c93d8-147c-4514-a9e7-440d4235dda0}";
 
 /// `DefaultExperiment` stop time, s.
 pub const DEFAULT_STOP_TIME: f64 = 10.0;

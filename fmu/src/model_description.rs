@@ -140,11 +140,12 @@ pub fn model_description_xml() -> String {
     let units: BTreeSet<_> = table().iter().filter_map(|v| v.unit).collect();
     out.push_str("  <UnitDefinitions>\n");
     for unit in units {
-        let _ = write!(
-            out,
-            "    <Unit name=\"{}\">\n      <BaseUnit",
-            xml_escape(unit.name())
-        );
+        let name = xml_escape(unit.name());
+        if unit.base_units().is_empty() {
+            let _ = writeln!(out, "    <Unit name=\"{name}\"/>");
+            continue;
+        }
+        let _ = write!(out, "    <Unit name=\"{name}\">\n      <BaseUnit");
         for (attribute, exponent) in unit.base_units() {
             let _ = write!(out, " {attribute}=\"{exponent}\"");
         }

@@ -8,6 +8,7 @@ use super::{balancing_transition, Actuation, Stages, Tick};
 use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
+use crate::estimator::StancePlan;
 use crate::footholds::{FootholdPlanner, MotionTarget};
 use crate::gait::{swing_trajectory, Gait, LegPhase};
 
@@ -125,6 +126,14 @@ impl Locomotion {
             forces,
             feet,
         }
+    }
+
+    /// The gait's phase of every leg at the coming tick.
+    pub fn stance_plan(&self) -> StancePlan {
+        Leg::ALL.map(|leg| match self.gait.phase(leg, self.gait_time) {
+            LegPhase::Stance(s) => Some(s),
+            LegPhase::Swing(_) => None,
+        })
     }
 
     pub fn check_transition(&self, fault: Option<&str>, mode: ModeRequest) -> Option<FsmState> {

@@ -13,6 +13,7 @@ mod stand_up;
 use crate::api::{FsmState, Leg, ModeRequest, Reference, LEG_JOINT_NAMES, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
 use crate::estimate::Estimate;
+use crate::estimator::StancePlan;
 use crate::footholds::FootholdPlanner;
 use crate::gait::Gait;
 use crate::leg_control::LegControl;
@@ -178,6 +179,15 @@ impl Fsm {
     /// Current state.
     pub fn state(&self) -> FsmState {
         self.current
+    }
+
+    /// Which legs this tick's state plans in stance: the gait schedule in locomotion, all four
+    /// (mid-stance) otherwise: standing, standing up, and resting or damping on the ground.
+    pub fn stance_plan(&self) -> StancePlan {
+        match self.current {
+            FsmState::Locomotion => self.locomotion.stance_plan(),
+            _ => [Some(0.5); NUM_LEGS],
+        }
     }
 
     /// The state the current one hands over to this tick, if any, with the fault that caused

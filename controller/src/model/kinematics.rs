@@ -53,14 +53,24 @@ impl RobotModel {
         to_array33(&self.jacobian(leg, q_leg))
     }
 
-    fn jacobian(&self, leg: Leg, q: [f64; 3]) -> Matrix3<f64> {
-        let frames = self.frames(leg, q);
+    /// Foot position (base frame, m) and foot Jacobian of one leg from one kinematics pass (the
+    /// estimator needs both every tick).
+    pub fn foot_position_and_jacobian(
+        &self,
+        leg: Leg,
+        q_leg: [f64; 3],
+    ) -> (Vector3<f64>, Matrix3<f64>) {
+        let frames = self.frames(leg, q_leg);
         let mut jac = Matrix3::zeros();
         for i in 0..3 {
             let column = frames.joint_axis[i].cross(&(frames.foot - frames.joint_origin[i]));
             jac.set_column(i, &column);
         }
-        jac
+        (frames.foot, jac)
+    }
+
+    fn jacobian(&self, leg: Leg, q: [f64; 3]) -> Matrix3<f64> {
+        self.foot_position_and_jacobian(leg, q).1
     }
 
     /// Inverse kinematics: joint angles placing the foot at `p_body` (base frame), knee-backward

@@ -322,3 +322,133 @@ fn a_rejected_set_call_stores_none_of_its_values() {
     .unwrap();
     assert_eq!(got, [0.0, 0.0]);
 }
+
+fn reals(i: &Instance, names: &[&str]) -> Vec<f64> {
+    let vrs: Vec<u32> = names.iter().map(|n| vr(n)).collect();
+    let mut values = vec![f64::NAN; vrs.len()];
+    i.get("fmi2GetReal", ScalarType::Real, &vrs, |k, v| {
+        if let Value::Real(x) = v {
+            values[k] = x;
+        }
+    })
+    .unwrap();
+    values
+}
+
+fn estimator_status(i: &Instance) -> i32 {
+    let mut status = -1;
+    i.get(
+        "fmi2GetInteger",
+        ScalarType::Integer,
+        &[vr("est.status")],
+        |_, v| {
+            if let Value::Integer(x) = v {
+                status = x;
+            }
+        },
+    )
+    .unwrap();
+    status
+}
+
+const ESTIMATE: [&str; 9] = [
+    "est.pos[1]",
+    "est.pos[2]",
+    "est.pos[3]",
+    "est.vel[1]",
+    "est.vel[2]",
+    "est.vel[3]",
+    "est.rpy[1]",
+    "est.rpy[2]",
+    "est.rpy[3]",
+];
+
+fn torques_are_finite(i: &Instance) -> bool {
+    let names: Vec<String> = (1..=12).map(|k| format!("joint.tau[{k}]")).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    reals(i, &names).iter().all(|t| t.is_finite())
+}
+
+#[test]
+fn ground_truth_mode_reports_the_base_inputs_as_the_estimate() {
+    let mut i = running();
+    i.set(
+        "fmi2SetReal",
+        &[vr("base.pos.x"), vr("base.vel.y")],
+        &[Value::Real(0.1), Value::Real(0.05)],
+    )
+    .unwrap();
+    i.do_step(0.0, 0.01).unwrap();
+    let estimate = reals(&i, &ESTIMATE);
+    assert_eq!(estimate[0], 0.1);
+    assert_eq!(estimate[2], reals(&i, &["base.pos.z"])[0]);
+    assert_eq!(estimate[4], 0.05);
+    assert_eq!(estimator_status(&i), 0);
+}
+
+/// Kalman mode on the inputs of a robot standing still (the start values: standing pose, level
+/// IMU at rest): the estimate stays at the truth; NaN IMU samples are reported in est.status and
+/// never reach the torques.
+#[test]
+fn kalman_mode_stands_on_its_estimate_and_survives_nan_imu_samples() {
+    let mut i = instance();
+    i.set("fmi2SetInteger", &[vr("estimator")], &[Value::Integer(1)])
+        .unwrap();
+    i.setup_experiment(0.0, None).unwrap();
+    i.enter_initialization_mode().unwrap();
+    i.exit_initialization_mode().unwrap();
+    let truth = reals(&i, &["base.pos.x", "base.pos.y", "base.pos.z"]);
+    let mut t = 0.0;
+    for _ in 0..200 {
+        i.do_step(t, 0.01).unwrap();
+        t += 0.01;
+    }
+    assert_eq!(i.command.fsm_state, FsmState::Stand);
+    let estimate = reals(&i, &ESTIMATE);
+    for axis in 0..3 {
+        assert!((estimate[axis] - truth[axis]).abs() < 1e-3, "{estimate:?}");
+        assert!(estimate[3 + axis].abs() < 1e-3, "{estimate:?}");
+        assert!(estimate[6 + axis].abs() < 1e-3, "{estimate:?}");
+    }
+    assert_eq!(estimator_status(&i), 0);
+
+    // A fix at the truth is fused quietly.
+    i.set(
+        "fmi2SetReal",
+        &[vr("fix.pos[1]"), vr("fix.pos[2]"), vr("fix.pos[3]")],
+        &[
+            Value::Real(truth[0]),
+            Value::Real(truth[1]),
+            Value::Real(truth[2]),
+        ],
+    )
+    .unwrap();
+    i.set(
+        "fmi2SetBoolean",
+        &[vr("fix.valid")],
+        &[Value::Boolean(true)],
+    )
+    .unwrap();
+    i.do_step(t, 0.01).unwrap();
+    t += 0.01;
+    assert_eq!(estimator_status(&i), 0);
+
+    // NaN gyro and accelerometer samples: accepted, reported, the torques stay finite.
+    i.set(
+        "fmi2SetReal",
+        &[vr("imu.gyro[1]"), vr("imu.acc[3]")],
+        &[Value::Real(f64::NAN), Value::Real(f64::NAN)],
+    )
+    .unwrap();
+    for _ in 0..50 {
+        i.do_step(t, 0.01).unwrap();
+        t += 0.01;
+        assert!(torques_are_finite(&i));
+        assert!(reals(&i, &ESTIMATE).iter().all(|v| v.is_finite()));
+        assert_eq!(estimator_status(&i), 1 | 4);
+    }
+    // NaN stays refused where it is not a sensor glitch.
+    assert!(i
+        .set("fmi2SetReal", &[vr("fix.pos[1]")], &[Value::Real(f64::NAN)])
+        .is_err());
+}

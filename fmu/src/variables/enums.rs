@@ -4,7 +4,7 @@
 
 use std::sync::OnceLock;
 
-use quad_controller::{FsmState, GaitKind, ModeRequest};
+use quad_controller::{EstimatorKind, FsmState, GaitKind, ModeRequest};
 
 /// An item of an enumeration type.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -66,6 +66,8 @@ pub const FSM_STATE_TYPE: &str = "FsmState";
 pub const MODE_REQUEST_TYPE: &str = "ModeRequest";
 /// Name of the enumeration type of `gait.kind`.
 pub const GAIT_KIND_TYPE: &str = "GaitKind";
+/// Name of the enumeration type of `estimator`.
+pub const ESTIMATOR_KIND_TYPE: &str = "EstimatorKind";
 
 /// The enumeration types, built once (order of `<TypeDefinitions>`).
 pub fn enum_types() -> &'static [EnumType] {
@@ -89,6 +91,12 @@ pub fn enum_types() -> &'static [EnumType] {
                 "Gait of the locomotion state",
                 &GaitKind::ALL,
                 GaitKind::as_code,
+            ),
+            EnumType::new(
+                ESTIMATOR_KIND_TYPE,
+                "State the controller runs on",
+                &EstimatorKind::ALL,
+                EstimatorKind::as_code,
             ),
         ]
     })

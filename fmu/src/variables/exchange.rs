@@ -4,7 +4,8 @@
 
 use quad_controller::config::{FieldKind, FieldValue};
 use quad_controller::{
-    Command, ControllerConfig, GaitKind, HeightMap, ModeRequest, Reference, RobotState,
+    Command, ContactReading, ControllerConfig, EstimatorKind, GaitKind, HeightMap, ModeRequest,
+    Reference, RobotState, SensorReadings,
 };
 
 use super::{table, Binding, Value, Variable};
@@ -18,6 +19,7 @@ pub fn read_parameter(field: usize, element: usize, config: &ControllerConfig) -
         FieldValue::Real(v) => Value::Real(v),
         FieldValue::Count(n) => Value::Integer(i32::try_from(n).unwrap_or(i32::MAX)),
         FieldValue::Gait(g) => Value::Integer(g.as_code()),
+        FieldValue::Estimator(e) => Value::Integer(e.as_code()),
     }
 }
 
@@ -35,6 +37,10 @@ pub fn write_parameter(field: usize, element: usize, config: &mut ControllerConf
             Some(g) => FieldValue::Gait(g),
             None => return,
         },
+        (FieldKind::Estimator, Value::Integer(v)) => match EstimatorKind::from_code(v) {
+            Some(e) => FieldValue::Estimator(e),
+            None => return,
+        },
         // The table gives every parameter exactly one type; other pairs cannot be requested.
         _ => return,
     };
@@ -48,6 +54,7 @@ pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
         reason,
     };
     let number = match value {
+        Value::Real(v) if !v.is_finite() && variable.accepts_non_finite() => return Ok(()),
         Value::Real(v) if !v.is_finite() => {
             return Err(invalid(format!("{v} is not a finite number")));
         }
@@ -78,13 +85,27 @@ pub fn check_parameters(config: &ControllerConfig) -> Result<(), FmuError> {
     Ok(())
 }
 
+/// The inputs of an instance, as the controller takes them.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Inputs {
+    /// Measured state (ground-truth base pose and twist, joint encoders).
+    pub state: RobotState,
+    /// Reference from the planner.
+    pub reference: Reference,
+    /// Local terrain height map.
+    pub height_map: HeightMap,
+    /// IMU, contact sensors, position fix.
+    pub sensors: SensorReadings,
+}
+
 /// Reads an input variable from the stored inputs.
-pub fn read_input(
-    binding: Binding,
-    state: &RobotState,
-    reference: &Reference,
-    map: &HeightMap,
-) -> Option<Value> {
+pub fn read_input(binding: Binding, inputs: &Inputs) -> Option<Value> {
+    let Inputs {
+        state,
+        reference,
+        height_map: map,
+        sensors,
+    } = inputs;
     let real = match binding {
         Binding::BasePosition(i) => state.base_position[i],
         Binding::BaseOrientation(i) => state.base_orientation[i],
@@ -105,25 +126,45 @@ pub fn read_input(
         Binding::HeightMapOrigin(i) => map.origin[i],
         Binding::HeightMapSpacing => map.spacing,
         Binding::HeightMapHeight(i) => map.heights[i],
+        Binding::ImuGyro(i) => sensors.imu.gyro[i],
+        Binding::ImuAcc(i) => sensors.imu.acc[i],
+        Binding::FixPosition(i) => sensors.fix.position[i],
         Binding::ModeRequest => return Some(Value::Integer(reference.mode.as_code())),
+        Binding::ContactSensor(leg) => {
+            return Some(Value::Integer(sensors.contacts[leg].as_code()));
+        }
+        Binding::FixValid => return Some(Value::Boolean(sensors.fix.valid)),
         _ => return None,
     };
     Some(Value::Real(real))
 }
 
 /// Writes an input variable (value already checked with [`check_value`]).
-pub fn write_input(
-    binding: Binding,
-    value: Value,
-    state: &mut RobotState,
-    reference: &mut Reference,
-    map: &mut HeightMap,
-) {
-    if let (Binding::ModeRequest, Value::Integer(code)) = (binding, value) {
-        if let Some(mode) = ModeRequest::from_code(code) {
-            reference.mode = mode;
+pub fn write_input(binding: Binding, value: Value, inputs: &mut Inputs) {
+    let Inputs {
+        state,
+        reference,
+        height_map: map,
+        sensors,
+    } = inputs;
+    match (binding, value) {
+        (Binding::ModeRequest, Value::Integer(code)) => {
+            if let Some(mode) = ModeRequest::from_code(code) {
+                reference.mode = mode;
+            }
+            return;
         }
-        return;
+        (Binding::ContactSensor(leg), Value::Integer(code)) => {
+            if let Some(reading) = ContactReading::from_code(code) {
+                sensors.contacts[leg] = reading;
+            }
+            return;
+        }
+        (Binding::FixValid, Value::Boolean(valid)) => {
+            sensors.fix.valid = valid;
+            return;
+        }
+        _ => {}
     }
     let Value::Real(v) = value else { return };
     let field = match binding {
@@ -146,6 +187,9 @@ pub fn write_input(
         Binding::HeightMapOrigin(i) => &mut map.origin[i],
         Binding::HeightMapSpacing => &mut map.spacing,
         Binding::HeightMapHeight(i) => &mut map.heights[i],
+        Binding::ImuGyro(i) => &mut sensors.imu.gyro[i],
+        Binding::ImuAcc(i) => &mut sensors.imu.acc[i],
+        Binding::FixPosition(i) => &mut sensors.fix.position[i],
         _ => return,
     };
     *field = v;
@@ -155,11 +199,18 @@ pub fn write_input(
 pub fn read_output(binding: Binding, command: &Command) -> Option<Value> {
     Some(match binding {
         Binding::JointTorque(i) => Value::Real(command.joint_torques[i]),
-        Binding::Contact(leg) => Value::Boolean(command.contacts[leg]),
+        Binding::ScheduledStance(leg) => Value::Boolean(command.contacts[leg]),
         Binding::FsmState => Value::Integer(command.fsm_state.as_code()),
         Binding::DesiredForce(leg, axis) => Value::Real(command.desired_forces[leg][axis]),
         Binding::MpcSolveTime => Value::Real(command.mpc_solve_time_s),
         Binding::MpcSolved => Value::Boolean(command.mpc_solved),
+        Binding::EstimatedPosition(i) => Value::Real(command.estimate.position[i]),
+        Binding::EstimatedVelocity(i) => Value::Real(command.estimate.velocity[i]),
+        Binding::EstimatedRpy(i) => Value::Real(command.estimate.rpy[i]),
+        // The status word has 7 bits: it always fits.
+        Binding::EstimatorStatus => {
+            Value::Integer(i32::try_from(command.estimate.status).unwrap_or(i32::MAX))
+        }
         _ => return None,
     })
 }

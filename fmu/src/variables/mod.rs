@@ -11,8 +11,8 @@
 use std::sync::OnceLock;
 
 use quad_controller::{
-    Command, Controller, ControllerConfig, FsmState, Reference, RobotModel, RobotState, NUM_JOINTS,
-    NUM_LEGS,
+    Command, Controller, ControllerConfig, EstimateReport, FsmState, Reference, RobotModel,
+    RobotState, NUM_JOINTS, NUM_LEGS,
 };
 
 mod enums;
@@ -21,11 +21,12 @@ mod table;
 mod types;
 
 pub use enums::{
-    enum_type, enum_types, EnumItem, EnumType, FSM_STATE_TYPE, GAIT_KIND_TYPE, MODE_REQUEST_TYPE,
+    enum_type, enum_types, EnumItem, EnumType, ESTIMATOR_KIND_TYPE, FSM_STATE_TYPE, GAIT_KIND_TYPE,
+    MODE_REQUEST_TYPE,
 };
 pub use exchange::{
     check_parameters, check_value, read_input, read_output, read_parameter, write_input,
-    write_parameter,
+    write_parameter, Inputs,
 };
 pub use types::{Causality, ScalarType, Unit, Value, Variability};
 
@@ -72,10 +73,20 @@ pub enum Binding {
     HeightMapHeight(usize),
     /// `Reference::mode`.
     ModeRequest,
+    /// `SensorReadings::imu.gyro[i]`.
+    ImuGyro(usize),
+    /// `SensorReadings::imu.acc[i]`.
+    ImuAcc(usize),
+    /// `SensorReadings::contacts[leg]` (its integer code).
+    ContactSensor(usize),
+    /// `SensorReadings::fix.position[i]`.
+    FixPosition(usize),
+    /// `SensorReadings::fix.valid`.
+    FixValid,
     /// `Command::joint_torques[i]`.
     JointTorque(usize),
-    /// `Command::contacts[leg]`.
-    Contact(usize),
+    /// `Command::contacts[leg]` (the scheduled stance).
+    ScheduledStance(usize),
     /// `Command::fsm_state`.
     FsmState,
     /// `Command::desired_forces[leg][axis]`.
@@ -84,6 +95,14 @@ pub enum Binding {
     MpcSolveTime,
     /// `Command::mpc_solved`.
     MpcSolved,
+    /// `Command::estimate.position[i]`.
+    EstimatedPosition(usize),
+    /// `Command::estimate.velocity[i]`.
+    EstimatedVelocity(usize),
+    /// `Command::estimate.rpy[i]`.
+    EstimatedRpy(usize),
+    /// `Command::estimate.status`.
+    EstimatorStatus,
     /// Element `element` of the field `field` (index into [`ControllerConfig::FIELDS`]).
     Parameter {
         /// Index into [`ControllerConfig::FIELDS`].
@@ -143,6 +162,13 @@ impl Variable {
         )
     }
 
+    /// Whether `fmi2SetReal` accepts NaN/inf. Only the IMU inputs do: a glitching IMU sample is
+    /// something the estimator must survive (it holds or skips the sample and reports it in
+    /// `est.status`), so the master passes it on instead of being refused.
+    pub fn accepts_non_finite(&self) -> bool {
+        matches!(self.binding, Binding::ImuGyro(_) | Binding::ImuAcc(_))
+    }
+
     /// Whether `fmi2Set*` may write it while the simulation runs (step complete).
     pub fn settable_while_running(&self) -> bool {
         self.causality == Causality::Input || self.variability == Variability::Tunable
@@ -159,6 +185,16 @@ pub fn initial_command() -> Command {
         desired_foot_positions: [[0.0; 3]; NUM_LEGS],
         mpc_solve_time_s: 0.0,
         mpc_solved: false,
+        estimate: initial_estimate(),
+    }
+}
+
+/// The estimate outputs before the first doStep: the start pose of [`initial_inputs`] at rest.
+fn initial_estimate() -> EstimateReport {
+    let (state, _) = initial_inputs();
+    EstimateReport {
+        position: state.base_position,
+        ..EstimateReport::default()
     }
 }
 

@@ -4,12 +4,14 @@
 
 use quad_controller::config::FieldKind;
 use quad_controller::{
-    ControllerConfig, HeightMap, Leg, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE, NUM_JOINTS,
+    ContactReading, ControllerConfig, HeightMap, Leg, SensorReadings, StatusFlag, HEIGHT_MAP_CELLS,
+    HEIGHT_MAP_SIZE, NUM_JOINTS,
 };
 
 use super::{
     enum_type, initial_command, initial_inputs, read_parameter, robot_model, Binding, Causality,
-    Unit, Value, Variability, Variable, FSM_STATE_TYPE, GAIT_KIND_TYPE, MODE_REQUEST_TYPE,
+    Unit, Value, Variability, Variable, ESTIMATOR_KIND_TYPE, FSM_STATE_TYPE, GAIT_KIND_TYPE,
+    MODE_REQUEST_TYPE,
 };
 
 struct TableBuilder {
@@ -129,8 +131,10 @@ impl TableBuilder {
                     (Some(min), Some(max)),
                     Binding::Parameter { field, element },
                 );
-                if f.kind == FieldKind::Gait {
-                    self.of_type(GAIT_KIND_TYPE);
+                match f.kind {
+                    FieldKind::Gait => self.of_type(GAIT_KIND_TYPE),
+                    FieldKind::Estimator => self.of_type(ESTIMATOR_KIND_TYPE),
+                    FieldKind::Real | FieldKind::Count => {}
                 }
             }
         }
@@ -139,6 +143,7 @@ impl TableBuilder {
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 const QUATERNION: [&str; 4] = ["w", "x", "y", "z"];
+const RPY: [&str; 3] = ["roll", "pitch", "yaw"];
 fn joint_label(index: usize) -> String {
     Leg::ALL[index / 3].joint_label(index % 3)
 }
@@ -312,6 +317,61 @@ pub(super) fn build_table() -> Vec<Variable> {
     );
     t.of_type(MODE_REQUEST_TYPE);
 
+    // Inputs: the sensors the estimator runs on (estimator = kalman).
+    let sensors = SensorReadings::default();
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("imu.gyro[{}]", i + 1),
+            sensors.imu.gyro[i],
+            format!("IMU angular velocity about body {axis}, body frame (NaN/inf accepted: the estimator holds the last valid rate and sets est.status)"),
+            Some(RadianPerSecond),
+            Binding::ImuGyro(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("imu.acc[{}]", i + 1),
+            sensors.imu.acc[i],
+            format!("IMU specific force a - g along body {axis}, body frame (+9.81 on z standing level; NaN/inf accepted and reported in est.status)"),
+            Some(MetrePerSecondSquared),
+            Binding::ImuAcc(i),
+        );
+    }
+    for (leg, leg_name) in Leg::ALL.iter().map(|l| l.name()).enumerate() {
+        t.push(
+            format!("contact[{}]", leg + 1),
+            Causality::Input,
+            Variability::Discrete,
+            Value::Integer(sensors.contacts[leg].as_code()),
+            format!("Foot contact of leg {leg_name}: -1 unknown (the estimator uses the controller's stance schedule), 0 no contact, 1 contact"),
+            None,
+            (
+                Some(f64::from(ContactReading::Unknown.as_code())),
+                Some(f64::from(ContactReading::InContact.as_code())),
+            ),
+            Binding::ContactSensor(leg),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.input(
+            format!("fix.pos[{}]", i + 1),
+            sensors.fix.position[i],
+            format!("Absolute position fix of the base origin, {axis}, world frame (read when fix.valid)"),
+            Some(Metre),
+            Binding::FixPosition(i),
+        );
+    }
+    t.push(
+        "fix.valid".to_owned(),
+        Causality::Input,
+        Variability::Discrete,
+        Value::Boolean(sensors.fix.valid),
+        "A new position fix in fix.pos: set true only for the doStep in which it arrived (fused once, at the step's first control tick)".to_owned(),
+        None,
+        (None, None),
+        Binding::FixValid,
+    );
+
     // Outputs.
     for (i, &limit) in effort.iter().enumerate() {
         t.output(
@@ -328,11 +388,11 @@ pub(super) fn build_table() -> Vec<Variable> {
     }
     for (leg, leg_name) in Leg::ALL.iter().map(|l| l.name()).enumerate() {
         t.output(
-            format!("contact[{}]", leg + 1),
+            format!("stance[{}]", leg + 1),
             Value::Boolean(command.contacts[leg]),
-            format!("Scheduled stance of leg {leg_name}"),
+            format!("Scheduled stance of leg {leg_name} (the gait plan; the measured contact is the input contact[{}])", leg + 1),
             None,
-            Binding::Contact(leg),
+            Binding::ScheduledStance(leg),
         );
     }
     t.output(
@@ -367,6 +427,48 @@ pub(super) fn build_table() -> Vec<Variable> {
         "Whether the last MPC solve succeeded".to_owned(),
         None,
         Binding::MpcSolved,
+    );
+    let estimate = command.estimate;
+    for (i, axis) in AXES.iter().enumerate() {
+        t.output(
+            format!("est.pos[{}]", i + 1),
+            Value::Real(estimate.position[i]),
+            format!("Estimated base origin {axis}, world frame (groundTruth: base.pos.{axis})"),
+            Some(Metre),
+            Binding::EstimatedPosition(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.output(
+            format!("est.vel[{}]", i + 1),
+            Value::Real(estimate.velocity[i]),
+            format!("Estimated base velocity {axis}, world frame (groundTruth: base.vel.{axis})"),
+            Some(MetrePerSecond),
+            Binding::EstimatedVelocity(i),
+        );
+    }
+    for (i, angle) in RPY.iter().enumerate() {
+        t.output(
+            format!("est.rpy[{}]", i + 1),
+            Value::Real(estimate.rpy[i]),
+            format!("Estimated base {angle} (ZYX Euler angles: yaw about world z, then pitch, then roll)"),
+            Some(Radian),
+            Binding::EstimatedRpy(i),
+        );
+    }
+    let bits: Vec<String> = StatusFlag::ALL
+        .iter()
+        .map(|&(flag, name, description)| format!("{} {name}: {description}", flag.bit()))
+        .collect();
+    t.output(
+        "est.status".to_owned(),
+        Value::Integer(0),
+        format!(
+            "Estimator status bit mask, OR over the control ticks of the last doStep (0 = healthy; always 0 in groundTruth mode); bits: {}",
+            bits.join("; ")
+        ),
+        None,
+        Binding::EstimatorStatus,
     );
 
     // Parameters are all fixed: `Controller` is built from them in fmi2ExitInitializationMode

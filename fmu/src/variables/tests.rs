@@ -1,6 +1,6 @@
 use super::*;
 use quad_controller::config::ConfigField;
-use quad_controller::{ControllerConfig, HeightMap, HEIGHT_MAP_CELLS};
+use quad_controller::{ControllerConfig, HEIGHT_MAP_CELLS};
 use std::collections::HashSet;
 
 #[test]
@@ -17,10 +17,10 @@ fn names_and_references_are_unique_and_dense() {
 fn table_has_the_documented_signals() {
     let count = |c: Causality| table().iter().filter(|v| v.causality == c).count();
     // 3 pos + 4 quat + 3 vel + 3 omega + 12 q + 12 dq + 10 reference/terrain + cmd.mode
-    // + height map (x0, y0, spacing, 121 heights)
-    assert_eq!(count(Causality::Input), 48 + 3 + HEIGHT_MAP_CELLS);
-    // 12 tau + 4 contact + fsm + 12 force + solve time + solved
-    assert_eq!(count(Causality::Output), 31);
+    // + height map (x0, y0, spacing, 121 heights) + 3 gyro + 3 acc + 4 contact + 3 fix + valid
+    assert_eq!(count(Causality::Input), 48 + 3 + HEIGHT_MAP_CELLS + 14);
+    // 12 tau + 4 stance + fsm + 12 force + solve time + solved + est pos/vel/rpy + est.status
+    assert_eq!(count(Causality::Output), 31 + 10);
     for name in [
         "base.quat.w",
         "joint.q[12]",
@@ -29,6 +29,17 @@ fn table_has_the_documented_signals() {
         "cmd.mode",
         "joint.tau[12]",
         "contact[4]",
+        "stance[4]",
+        "imu.gyro[3]",
+        "imu.acc[1]",
+        "fix.pos[3]",
+        "fix.valid",
+        "est.pos[1]",
+        "est.vel[3]",
+        "est.rpy[3]",
+        "est.status",
+        "estimator",
+        "est.fixNoise",
         "force[4].z",
         "mpc.solved",
         "gait.period",
@@ -42,15 +53,34 @@ fn table_has_the_documented_signals() {
         ScalarType::Integer
     );
     assert_eq!(
-        by_name("contact[1]").unwrap().scalar_type(),
+        by_name("stance[1]").unwrap().scalar_type(),
         ScalarType::Boolean
     );
+    let contact = by_name("contact[1]").unwrap();
+    assert_eq!(contact.scalar_type(), ScalarType::Integer);
+    assert_eq!(contact.causality, Causality::Input);
+    assert_eq!((contact.min, contact.max), (Some(-1.0), Some(1.0)));
+    assert_eq!(contact.start, Value::Integer(-1));
+    assert_eq!(by_name("imu.acc[3]").unwrap().start, Value::Real(9.81));
+    assert_eq!(by_name("fix.valid").unwrap().start, Value::Boolean(false));
+    let estimator = by_name("estimator").unwrap();
+    assert_eq!(estimator.declared_type, Some(ESTIMATOR_KIND_TYPE));
+    assert_eq!(estimator.start, Value::Integer(0));
+    let status = &by_name("est.status").unwrap().description;
+    for (flag, name, description) in quad_controller::StatusFlag::ALL {
+        let bit = format!("{} {name}: {description}", flag.bit());
+        assert!(status.contains(&bit), "{status} lacks {bit}");
+    }
 }
 
 #[test]
 fn every_binding_round_trips_through_its_storage() {
-    let (mut state, mut reference) = initial_inputs();
-    let mut map = HeightMap::default();
+    let (state, reference) = initial_inputs();
+    let mut inputs = Inputs {
+        state,
+        reference,
+        ..Inputs::default()
+    };
     let mut config = ControllerConfig::default();
     for (k, v) in table().iter().enumerate() {
         let probe = match v.start {
@@ -70,19 +100,9 @@ fn every_binding_round_trips_through_its_storage() {
                 assert_eq!(read_parameter(field, element, &config), probe, "{}", v.name);
             }
             b if v.causality == Causality::Input => {
-                assert_eq!(
-                    read_input(b, &state, &reference, &map),
-                    Some(v.start),
-                    "{}",
-                    v.name
-                );
-                write_input(b, probe, &mut state, &mut reference, &mut map);
-                assert_eq!(
-                    read_input(b, &state, &reference, &map),
-                    Some(probe),
-                    "{}",
-                    v.name
-                );
+                assert_eq!(read_input(b, &inputs), Some(v.start), "{}", v.name);
+                write_input(b, probe, &mut inputs);
+                assert_eq!(read_input(b, &inputs), Some(probe), "{}", v.name);
             }
             b => assert_eq!(
                 read_output(b, &initial_command()),
@@ -120,7 +140,7 @@ fn parameters() -> impl Iterator<Item = (&'static Variable, &'static ConfigField
 
 #[test]
 fn every_parameter_has_a_range_holding_its_start_value() {
-    assert_eq!(parameters().count(), 43);
+    assert_eq!(parameters().count(), 54);
     for (v, field, _) in parameters() {
         let (min, max) = field.range();
         assert_eq!((v.min, v.max), (Some(min), Some(max)), "{}", v.name);

@@ -123,11 +123,21 @@ pub enum Unit {
     NewtonMetrePerRadian,
     /// Newton metre second per radian (joint damping).
     NewtonMetreSecondPerRadian,
+    /// Metre per second squared.
+    MetrePerSecondSquared,
+    /// Gyro white-noise density, rad/s/√Hz.
+    RadianPerSecondPerRootHertz,
+    /// Gyro bias random-walk density, rad/s²/√Hz.
+    RadianPerSecondSquaredPerRootHertz,
+    /// Accelerometer noise density, m/s²/√Hz.
+    MetrePerSecondSquaredPerRootHertz,
+    /// Position random-walk density, m/√s.
+    MetrePerRootSecond,
 }
 
 impl Unit {
     /// Every unit, in declaration order.
-    pub const ALL: [Unit; 9] = [
+    pub const ALL: [Unit; 14] = [
         Unit::Metre,
         Unit::Second,
         Unit::Radian,
@@ -137,6 +147,11 @@ impl Unit {
         Unit::NewtonMetre,
         Unit::NewtonMetrePerRadian,
         Unit::NewtonMetreSecondPerRadian,
+        Unit::MetrePerSecondSquared,
+        Unit::RadianPerSecondPerRootHertz,
+        Unit::RadianPerSecondSquaredPerRootHertz,
+        Unit::MetrePerSecondSquaredPerRootHertz,
+        Unit::MetrePerRootSecond,
     ];
 
     /// Unit name (FMI/Modelica notation).
@@ -151,10 +166,17 @@ impl Unit {
             Unit::NewtonMetre => "N.m",
             Unit::NewtonMetrePerRadian => "N.m/rad",
             Unit::NewtonMetreSecondPerRadian => "N.m.s/rad",
+            Unit::MetrePerSecondSquared => "m/s2",
+            Unit::RadianPerSecondPerRootHertz => "rad/s/sqrt(Hz)",
+            Unit::RadianPerSecondSquaredPerRootHertz => "rad/s2/sqrt(Hz)",
+            Unit::MetrePerSecondSquaredPerRootHertz => "m/s2/sqrt(Hz)",
+            Unit::MetrePerRootSecond => "m/sqrt(s)",
         }
     }
 
-    /// SI base-unit exponents as `(attribute, exponent)` for `<BaseUnit>`.
+    /// SI base-unit exponents as `(attribute, exponent)` for `<BaseUnit>`; empty for the noise
+    /// densities, whose half-integer exponents (s^-1/2) FMI's integer exponents cannot state
+    /// (they are written without a `<BaseUnit>`).
     pub fn base_units(self) -> &'static [(&'static str, i32)] {
         match self {
             Unit::Metre => &[("m", 1)],
@@ -166,6 +188,11 @@ impl Unit {
             Unit::NewtonMetre => &[("kg", 1), ("m", 2), ("s", -2)],
             Unit::NewtonMetrePerRadian => &[("kg", 1), ("m", 2), ("s", -2), ("rad", -1)],
             Unit::NewtonMetreSecondPerRadian => &[("kg", 1), ("m", 2), ("s", -1), ("rad", -1)],
+            Unit::MetrePerSecondSquared => &[("m", 1), ("s", -2)],
+            Unit::RadianPerSecondPerRootHertz
+            | Unit::RadianPerSecondSquaredPerRootHertz
+            | Unit::MetrePerSecondSquaredPerRootHertz
+            | Unit::MetrePerRootSecond => &[],
         }
     }
 }

@@ -1,0 +1,384 @@
+//! State estimation from what a real robot measures: IMU (gyro, accelerometer), joint encoders,
+//! optional foot contact sensors and an optional absolute position fix. The structure of MIT
+//! Cheetah-Software: an orientation filter ([`orientation`]) feeds the rotation to an 18-state
+//! linear Kalman filter of trunk position/velocity and foot positions ([`kalman`]) whose
+//! measurements are leg kinematics. Design, noise values and their reasons: `docs/estimation.md`.
+//!
+//! The base pose of [`RobotState`] is read once, at the first tick, to place the robot (a robot
+//! started at a known pose, at rest); afterwards only the joints of `RobotState` are read.
+//! Bad sensor input never makes the estimate non-finite: it is held, clamped or skipped, and
+//! reported in the status word ([`StatusFlag`]).
+
+pub mod kalman;
+pub mod orientation;
+mod status;
+#[cfg(test)]
+mod tests;
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+pub use status::{EstimatorStatus, StatusFlag};
+
+use crate::api::{
+    ContactReading, EstimateReport, EstimatorKind, Leg, RobotState, SensorReadings, GRAVITY,
+    NUM_LEGS,
+};
+use crate::config::ControllerConfig;
+use crate::estimate::{leg_slice, BaseState, Estimate};
+use crate::gait::Gait;
+use crate::model::RobotModel;
+use kalman::{FixOutcome, LegKalman};
+use orientation::{OrientationFilter, OrientationNoise};
+
+/// The stance schedule per leg: `Some(progress)` (0 → 1 through the stance) for a leg planned in
+/// stance, `None` for a leg planned in swing.
+pub type StancePlan = [Option<f64>; NUM_LEGS];
+
+/// Fraction of a stance at its start and its end over which the leg-kinematics noise ramps from
+/// the swing value to the stance value (Cheetah-Software's trust window): the touch-down may come
+/// early or late and the foot settles, lift-off unloads it.
+pub const TRUST_WINDOW: f64 = 0.2;
+/// Squared Mahalanobis distance beyond which a position fix is refused (3 degrees of freedom:
+/// P(χ² > 25) ≈ 1.5·10⁻⁵ for a consistent filter).
+pub const FIX_GATE_CHI2: f64 = 25.0;
+/// Consecutive refused fixes after which the filter trusts the fixes and relocates to them (a
+/// filter whose own position has drifted away would otherwise refuse every fix for good).
+pub const FIX_REJECTIONS_BEFORE_RELOCATION: u32 = 3;
+/// A foot out of contact for longer than this many swing durations (at least
+/// [`MIN_CONTACT_TIMEOUT`]) sets [`StatusFlag::FootWithoutContact`].
+pub const CONTACT_TIMEOUT_SWINGS: f64 = 3.0;
+/// Smallest contact timeout, s.
+pub const MIN_CONTACT_TIMEOUT: f64 = 1.0;
+
+/// Noise values of the Kalman filter (from [`ControllerConfig`]).
+#[derive(Clone, Copy, Debug)]
+struct LegNoise {
+    acc_density: f64,
+    leg_position_variance: f64,
+    leg_velocity_variance: f64,
+    foot_drift: f64,
+    fix_sigma: f64,
+    swing_factor: f64,
+}
+
+/// The two filters, created at the first tick.
+#[derive(Clone, Debug)]
+struct Filters {
+    orientation: OrientationFilter,
+    kalman: LegKalman,
+    /// The last state that passed the health check (restart point after a numerical failure).
+    last_good: BaseState,
+}
+
+/// The estimator stage: ground truth or the filters, per [`EstimatorKind`].
+#[derive(Clone, Debug)]
+pub struct StateEstimator {
+    kind: EstimatorKind,
+    orientation_noise: OrientationNoise,
+    leg_noise: LegNoise,
+    gyro_limit: f64,
+    contact_timeout: f64,
+    filters: Option<Filters>,
+    last_gyro: Vector3<f64>,
+    time_without_contact: [f64; NUM_LEGS],
+    fix_rejections: u32,
+    report: EstimateReport,
+}
+
+/// How much a leg's kinematics are trusted this tick: 1 in mid-stance, 0 in swing, ramped in the
+/// trust window at both ends of a scheduled stance.
+pub fn leg_trust(reading: ContactReading, planned: Option<f64>) -> f64 {
+    match reading {
+        ContactReading::InContact => 1.0,
+        ContactReading::NoContact => 0.0,
+        ContactReading::Unknown => planned.map_or(0.0, |s| {
+            (s / TRUST_WINDOW)
+                .min((1.0 - s) / TRUST_WINDOW)
+                .clamp(0.0, 1.0)
+        }),
+    }
+}
+
+impl StateEstimator {
+    /// The estimator configured by `config` (nothing is estimated before the first tick).
+    pub fn new(config: &ControllerConfig) -> Self {
+        let gait = Gait::new(config.gait, config.gait_period);
+        StateEstimator {
+            kind: config.estimator,
+            orientation_noise: OrientationNoise {
+                gyro: config.est_gyro_noise,
+                gyro_bias_walk: config.est_gyro_bias_walk,
+                acc_tilt: config.est_acc_tilt_noise,
+            },
+            leg_noise: LegNoise {
+                acc_density: config.est_acc_noise,
+                leg_position_variance: config.est_leg_position_noise.powi(2),
+                leg_velocity_variance: config.est_leg_velocity_noise.powi(2),
+                foot_drift: config.est_foot_drift,
+                fix_sigma: config.est_fix_noise,
+                swing_factor: config.est_swing_noise_factor,
+            },
+            gyro_limit: config.est_gyro_limit,
+            contact_timeout: (CONTACT_TIMEOUT_SWINGS * gait.swing_time()).max(MIN_CONTACT_TIMEOUT),
+            filters: None,
+            last_gyro: Vector3::zeros(),
+            time_without_contact: [0.0; NUM_LEGS],
+            fix_rejections: 0,
+            report: EstimateReport::default(),
+        }
+    }
+
+    /// Which estimator runs.
+    pub fn kind(&self) -> EstimatorKind {
+        self.kind
+    }
+
+    /// Whether this tick reads the base pose/twist of the measured state (ground truth always,
+    /// Kalman only at its first tick).
+    pub fn reads_base_state(&self) -> bool {
+        self.kind == EstimatorKind::GroundTruth || self.filters.is_none()
+    }
+
+    /// The estimate of the last tick, and the status it came with.
+    pub fn report(&self) -> EstimateReport {
+        self.report
+    }
+
+    /// Gyro bias estimate, body frame, rad/s (zero before the first Kalman tick or in
+    /// ground-truth mode).
+    pub fn gyro_bias(&self) -> [f64; 3] {
+        self.filters
+            .as_ref()
+            .map_or([0.0; 3], |f| f.orientation.bias().into())
+    }
+
+    /// One tick: the estimate the later stages run on. `state` must be validated (its base
+    /// fields only when [`StateEstimator::reads_base_state`]); `sensors` may hold anything.
+    pub fn update(
+        &mut self,
+        model: &RobotModel,
+        state: &RobotState,
+        sensors: &SensorReadings,
+        plan: &StancePlan,
+        dt: f64,
+    ) -> Estimate {
+        let (estimate, status) = match self.kind {
+            EstimatorKind::GroundTruth => (
+                Estimate::from_measurement(model, state),
+                EstimatorStatus::HEALTHY,
+            ),
+            EstimatorKind::Kalman => self.kalman_tick(model, state, sensors, plan, dt),
+        };
+        self.report = EstimateReport {
+            position: estimate.position.into(),
+            velocity: estimate.velocity.into(),
+            rpy: estimate.rpy.into(),
+            status: status.bits(),
+        };
+        estimate
+    }
+
+    /// The filters placed at the measured base pose, at rest.
+    fn start_filters(&self, model: &RobotModel, state: &RobotState) -> Filters {
+        let o = state.base_orientation;
+        let attitude = UnitQuaternion::from_quaternion(Quaternion::new(o[0], o[1], o[2], o[3]));
+        let position = Vector3::from(state.base_position);
+        let feet = Leg::ALL.map(|leg| {
+            let q = leg_slice(&state.joint_positions, leg);
+            position + attitude * Vector3::from(model.foot_position_body(leg, q))
+        });
+        Filters {
+            orientation: OrientationFilter::new(attitude, self.orientation_noise),
+            kalman: LegKalman::new(position, &feet),
+            last_good: BaseState {
+                attitude,
+                position,
+                velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+            },
+        }
+    }
+
+    /// The gyro reading to use: the last valid one for a non-finite reading, clamped to the
+    /// full-scale range.
+    fn checked_gyro(&mut self, gyro: [f64; 3], status: &mut EstimatorStatus) -> Vector3<f64> {
+        if gyro.iter().any(|g| !g.is_finite()) {
+            status.set(StatusFlag::GyroInvalid);
+            return self.last_gyro;
+        }
+        let limit = self.gyro_limit;
+        if gyro.iter().any(|g| g.abs() >= limit) {
+            status.set(StatusFlag::GyroSaturated);
+        }
+        self.last_gyro = Vector3::from(gyro).map(|g| g.clamp(-limit, limit));
+        self.last_gyro
+    }
+
+    fn kalman_tick(
+        &mut self,
+        model: &RobotModel,
+        state: &RobotState,
+        sensors: &SensorReadings,
+        plan: &StancePlan,
+        dt: f64,
+    ) -> (Estimate, EstimatorStatus) {
+        let mut status = EstimatorStatus::HEALTHY;
+        let gyro = self.checked_gyro(sensors.imu.gyro, &mut status);
+        let mut filters = match self.filters.take() {
+            Some(filters) => filters,
+            None => self.start_filters(model, state),
+        };
+        let noise = self.leg_noise;
+
+        // Orientation: gyro prediction, accelerometer tilt correction.
+        let body_rate = filters.orientation.predict(&gyro, dt);
+        let acc = Vector3::from(sensors.imu.acc);
+        let acc_valid = acc.iter().all(|a| a.is_finite());
+        if acc_valid {
+            filters.orientation.correct_with_accelerometer(&acc);
+        } else {
+            status.set(StatusFlag::AccInvalid);
+        }
+        let attitude = filters.orientation.attitude();
+        let rotation = *attitude.to_rotation_matrix().matrix();
+
+        // Kalman prediction: the specific force back into a world acceleration.
+        let acceleration = if acc_valid {
+            rotation * acc - Vector3::new(0.0, 0.0, GRAVITY)
+        } else {
+            Vector3::zeros()
+        };
+        let trust: [f64; NUM_LEGS] =
+            std::array::from_fn(|l| leg_trust(sensors.contacts[l], plan[l]));
+        let suspicion = trust.map(|t| 1.0 + (1.0 - t) * noise.swing_factor);
+        let foot_density = suspicion.map(|k| noise.foot_drift * k.sqrt());
+        filters
+            .kalman
+            .predict(&acceleration, dt, noise.acc_density, &foot_density);
+
+        // Leg kinematics: every foot relative to the trunk; the trunk velocity from the feet
+        // trusted to stand still.
+        let omega_body = body_rate;
+        for leg in Leg::ALL {
+            let l = leg.index();
+            let q = leg_slice(&state.joint_positions, leg);
+            let dq = Vector3::from(leg_slice(&state.joint_velocities, leg));
+            let (foot_body, jacobian) = model.foot_position_and_jacobian(leg, q);
+            let relative = rotation * foot_body;
+            let velocity = (trust[l] > 0.0).then(|| {
+                let foot_velocity_body = jacobian * dq + omega_body.cross(&foot_body);
+                -(rotation * foot_velocity_body)
+            });
+            filters.kalman.update_leg(
+                l,
+                &relative,
+                noise.leg_position_variance * suspicion[l],
+                velocity
+                    .as_ref()
+                    .map(|v| (v, noise.leg_velocity_variance * suspicion[l])),
+            );
+        }
+        filters.kalman.symmetrise();
+
+        // Absolute position fix, once per arrival.
+        if sensors.fix.valid {
+            self.fuse_fix(
+                &mut filters,
+                &Vector3::from(sensors.fix.position),
+                &mut status,
+            );
+        }
+
+        let in_contact: [bool; NUM_LEGS] = std::array::from_fn(|l| match sensors.contacts[l] {
+            ContactReading::InContact => true,
+            ContactReading::NoContact => false,
+            ContactReading::Unknown => plan[l].is_some(),
+        });
+        self.track_contacts(&in_contact, dt, &mut status);
+
+        if filters.kalman.is_healthy() && filters.orientation.is_healthy() {
+            filters.last_good = BaseState {
+                attitude,
+                position: filters.kalman.position(),
+                velocity: filters.kalman.velocity(),
+                angular_velocity: rotation * omega_body,
+            };
+        } else {
+            status.set(StatusFlag::CovarianceReset);
+            tracing::warn!("estimator diverged: restarting from the last healthy state");
+            filters = self.restart(model, state, &filters.last_good);
+        }
+        let estimate = Estimate::from_base(model, &filters.last_good, state);
+        self.filters = Some(filters);
+        (estimate, status)
+    }
+
+    fn fuse_fix(
+        &mut self,
+        filters: &mut Filters,
+        fix: &Vector3<f64>,
+        status: &mut EstimatorStatus,
+    ) {
+        let sigma = self.leg_noise.fix_sigma;
+        if !fix.iter().all(|v| v.is_finite()) {
+            status.set(StatusFlag::FixRejected);
+            return;
+        }
+        match filters.kalman.fuse_fix(fix, sigma * sigma, FIX_GATE_CHI2) {
+            FixOutcome::Fused => self.fix_rejections = 0,
+            FixOutcome::Rejected => {
+                status.set(StatusFlag::FixRejected);
+                self.fix_rejections += 1;
+                if self.fix_rejections >= FIX_REJECTIONS_BEFORE_RELOCATION {
+                    let offset = fix - filters.kalman.position();
+                    filters.kalman.relocate(&offset, sigma);
+                    status.set(StatusFlag::CovarianceReset);
+                    self.fix_rejections = 0;
+                    tracing::warn!(
+                        offset = offset.norm(),
+                        "estimator relocated to repeated position fixes"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Filters restarted at `last_good` with the feet where the encoders put them.
+    fn restart(&self, model: &RobotModel, state: &RobotState, last_good: &BaseState) -> Filters {
+        let feet = Leg::ALL.map(|leg| {
+            let q = leg_slice(&state.joint_positions, leg);
+            last_good.position
+                + last_good.attitude * Vector3::from(model.foot_position_body(leg, q))
+        });
+        let mut kalman = LegKalman::new(last_good.position, &feet);
+        // Restarted with the velocity it had and a position as uncertain as a fix.
+        kalman.reset(
+            last_good.position,
+            last_good.velocity,
+            &feet,
+            self.leg_noise.fix_sigma,
+        );
+        Filters {
+            orientation: OrientationFilter::new(last_good.attitude, self.orientation_noise),
+            kalman,
+            last_good: *last_good,
+        }
+    }
+
+    fn track_contacts(
+        &mut self,
+        in_contact: &[bool; NUM_LEGS],
+        dt: f64,
+        status: &mut EstimatorStatus,
+    ) {
+        for (time, &contact) in self.time_without_contact.iter_mut().zip(in_contact) {
+            *time = if contact { 0.0 } else { *time + dt };
+            if *time > self.contact_timeout {
+                status.set(StatusFlag::FootWithoutContact);
+            }
+        }
+        if !in_contact.iter().any(|&c| c) {
+            status.set(StatusFlag::NoStance);
+        }
+    }
+}

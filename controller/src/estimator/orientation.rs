@@ -1,0 +1,145 @@
+//! Attitude and gyro bias from gyro + accelerometer: a multiplicative error-state Kalman filter
+//! (6 error states: attitude error in the body frame, gyro bias). The gyro drives the prediction;
+//! the accelerometer corrects roll and pitch (and the bias of the axes it sees) only while the
+//! specific force is close to g, because while walking it measures the trunk's accelerations
+//! too. Yaw is not observable from these two sensors: its error grows with the yaw bias.
+
+use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+
+use crate::api::GRAVITY;
+
+type Matrix6 = SMatrix<f64, 6, 6>;
+type Vector6 = SVector<f64, 6>;
+
+/// The accelerometer is a gravity reference only while `| |f| − g | ≤ ACC_GATE · g`.
+pub const ACC_GATE: f64 = 0.1;
+/// Initial attitude standard deviation, rad (the start pose is given).
+const INITIAL_ATTITUDE_SIGMA: f64 = 0.01;
+/// Initial gyro-bias standard deviation, rad/s (typical MEMS turn-on bias).
+const INITIAL_BIAS_SIGMA: f64 = 0.01;
+/// A covariance diagonal beyond this (rad², (rad/s)²) means the filter has run away.
+const MAX_VARIANCE: f64 = 1e3;
+/// Largest gyro bias the filter may estimate per axis, rad/s (datasheet turn-on bias is
+/// below 0.05 rad/s; beyond that the "bias" would be a modelling error absorbed).
+const MAX_BIAS: f64 = 0.2;
+
+/// Noise model of the orientation filter.
+#[derive(Clone, Copy, Debug)]
+pub struct OrientationNoise {
+    /// Gyro white-noise density, rad/s/√Hz.
+    pub gyro: f64,
+    /// Gyro bias random-walk density, rad/s²/√Hz.
+    pub gyro_bias_walk: f64,
+    /// Accelerometer standard deviation as a gravity reference, m/s².
+    pub acc_tilt: f64,
+}
+
+/// Attitude (body → world) and gyro bias with their error covariance.
+#[derive(Clone, Debug)]
+pub struct OrientationFilter {
+    attitude: UnitQuaternion<f64>,
+    bias: Vector3<f64>,
+    covariance: Matrix6,
+    noise: OrientationNoise,
+}
+
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+impl OrientationFilter {
+    /// A filter at `attitude` with zero bias.
+    pub fn new(attitude: UnitQuaternion<f64>, noise: OrientationNoise) -> Self {
+        let mut filter = OrientationFilter {
+            attitude,
+            bias: Vector3::zeros(),
+            covariance: Matrix6::zeros(),
+            noise,
+        };
+        filter.reset_covariance();
+        filter
+    }
+
+    /// The initial covariance (also after a detected numerical failure).
+    pub fn reset_covariance(&mut self) {
+        let mut p = Matrix6::zeros();
+        for i in 0..3 {
+            p[(i, i)] = INITIAL_ATTITUDE_SIGMA.powi(2);
+            p[(i + 3, i + 3)] = INITIAL_BIAS_SIGMA.powi(2);
+        }
+        self.covariance = p;
+    }
+
+    /// Body → world attitude.
+    pub fn attitude(&self) -> UnitQuaternion<f64> {
+        self.attitude
+    }
+
+    /// Gyro bias estimate, body frame, rad/s.
+    pub fn bias(&self) -> Vector3<f64> {
+        self.bias
+    }
+
+    /// Whether the state and covariance are finite and bounded.
+    pub fn is_healthy(&self) -> bool {
+        self.attitude.coords.iter().all(|v| v.is_finite())
+            && self.bias.iter().all(|v| v.is_finite())
+            && (0..6).all(|i| (0.0..MAX_VARIANCE).contains(&self.covariance[(i, i)]))
+    }
+
+    /// Propagates by `dt` with the (valid, clamped) gyro reading `gyro` (body frame, rad/s).
+    /// Returns the bias-corrected body rate.
+    pub fn predict(&mut self, gyro: &Vector3<f64>, dt: f64) -> Vector3<f64> {
+        let rate = gyro - self.bias;
+        self.attitude *= UnitQuaternion::from_scaled_axis(rate * dt);
+        // Error dynamics: δθ' = −[ω]× δθ − δb, δb' = noise; first-order transition matrix.
+        let mut f = Matrix6::identity();
+        let rotation_step = Matrix3::identity() - skew(&(rate * dt));
+        f.fixed_view_mut::<3, 3>(0, 0).copy_from(&rotation_step);
+        f.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(-Matrix3::identity() * dt));
+        self.covariance = f * self.covariance * f.transpose();
+        let q_attitude = self.noise.gyro.powi(2) * dt;
+        let q_bias = self.noise.gyro_bias_walk.powi(2) * dt;
+        for i in 0..3 {
+            self.covariance[(i, i)] += q_attitude;
+            self.covariance[(i + 3, i + 3)] += q_bias;
+        }
+        rate
+    }
+
+    /// Corrects roll, pitch and the bias with the specific force `acc` (body frame, m/s²) when its
+    /// norm is within the gate around g. Returns whether it was used.
+    pub fn correct_with_accelerometer(&mut self, acc: &Vector3<f64>) -> bool {
+        if (acc.norm() - GRAVITY).abs() > ACC_GATE * GRAVITY {
+            return false;
+        }
+        // Predicted specific force at rest: gravity's reaction in the body frame. With the true
+        // attitude R·Exp(δθ), f ≈ f̂ + [f̂]× δθ.
+        let predicted = self
+            .attitude
+            .inverse_transform_vector(&Vector3::new(0.0, 0.0, GRAVITY));
+        let jacobian = skew(&predicted);
+        let variance = self.noise.acc_tilt.powi(2);
+        let mut error = Vector6::zeros();
+        // Diagonal measurement noise: three sequential scalar updates equal the batch update.
+        for axis in 0..3 {
+            let mut h = Vector6::zeros();
+            for k in 0..3 {
+                h[k] = jacobian[(axis, k)];
+            }
+            let ph = self.covariance * h;
+            let s = h.dot(&ph) + variance;
+            let innovation = acc[axis] - predicted[axis] - h.dot(&error);
+            let gain = ph / s;
+            error += gain * innovation;
+            self.covariance -= gain * ph.transpose();
+        }
+        self.covariance = 0.5 * (self.covariance + self.covariance.transpose());
+        let attitude_error = Vector3::new(error[0], error[1], error[2]);
+        self.attitude *= UnitQuaternion::from_scaled_axis(attitude_error);
+        let bias_error = Vector3::new(error[3], error[4], error[5]);
+        self.bias = (self.bias + bias_error).map(|b| b.clamp(-MAX_BIAS, MAX_BIAS));
+        true
+    }
+}
