@@ -51,7 +51,7 @@ fn import_prints_a_summary_and_writes_a_scenario_that_plans() {
         "--crop",
         "350000,5200010,350100,5200080",
         "--scale",
-        "0.05",
+        "1/20",
         "--cell-size",
         "0.05",
     ];
@@ -129,7 +129,8 @@ fn import_flags_are_checked() {
             "expected 4 comma-separated numbers",
         ),
         (vec!["--size", "10.5,3"], "not a whole number"),
-        (vec!["--scale", "-1"], "scale"),
+        (vec!["--scale", "-1"], "not a finite factor > 0"),
+        (vec!["--scale", "1/0"], "not a finite factor > 0"),
         (
             vec!["--cell-size", "0.1", "--size", "10,10"],
             "cannot be used with",

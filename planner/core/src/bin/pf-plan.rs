@@ -15,8 +15,8 @@ use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
 use pf_planner::import::{
-    import_map, numbers, scenario_from, stem_name, Crop, DemFormat, ImportOptions, Placement,
-    Resolution,
+    factor, import_map, numbers, scenario_from, stem_name, Crop, DemFormat, ImportOptions,
+    Placement, Resolution,
 };
 use pf_planner::io::{
     load_scenario_limited, parse_path_csv, read_path_csv, save_scenario, write_npy_f64,
@@ -262,13 +262,8 @@ struct ImportArgs {
     /// Fit the crop in NX x NY square cells instead of --cell-size.
     #[arg(long, value_name = "NX,NY", value_parser = numbers::<2>, conflicts_with = "cell_size")]
     size: Option<[f64; 2]>,
-    /// Multiply cell size and heights by F (slopes kept), e.g. 0.02 for a 1 m DEM at robot scale.
-    #[arg(
-        long,
-        value_name = "F",
-        default_value_t = 1.0,
-        allow_negative_numbers = true
-    )]
+    /// Multiply cell size and heights by F (slopes kept), e.g. 1/50 for a 1 m DEM at robot scale.
+    #[arg(long, value_name = "F", default_value = "1", value_parser = factor, allow_negative_numbers = true)]
     scale: f64,
     /// Start, map coordinates (metres from the crop's south-west corner, after --scale).
     #[arg(long, value_name = "X,Y", value_parser = numbers::<2>, allow_negative_numbers = true)]

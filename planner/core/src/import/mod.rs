@@ -148,30 +148,42 @@ pub struct ImportSummary {
 impl fmt::Display for ImportSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let (s, w) = (&self.source, &self.window);
+        let n = short;
         writeln!(
             f,
             "source:  {} of {} x {} cells of {} x {}, lower-left corner ({}, {})",
-            self.format, s.columns, s.rows, s.dx, s.dy, s.west, s.south
+            self.format,
+            s.columns,
+            s.rows,
+            n(s.dx),
+            n(s.dy),
+            n(s.west),
+            n(s.south)
         )?;
         writeln!(
             f,
             "crop:    {} x {} cells, lower-left corner ({}, {}) -> map origin (0, 0)",
-            w.columns, w.rows, w.west, w.south
+            w.columns,
+            w.rows,
+            n(w.west),
+            n(w.south)
         )?;
         writeln!(
             f,
-            "map:     {} x {} cells of {} m ({:.3} x {:.3} m), scale {}",
+            "map:     {} x {} cells of {} m ({} x {} m), scale {}",
             self.width,
             self.height,
-            self.resolution,
-            self.width as f64 * self.resolution,
-            self.height as f64 * self.resolution,
-            self.scale
+            n(self.resolution),
+            n(self.width as f64 * self.resolution),
+            n(self.height as f64 * self.resolution),
+            n(self.scale)
         )?;
         writeln!(
             f,
-            "heights: {:.3} .. {:.3} m (source elevation {} subtracted before scaling)",
-            self.height_min, self.height_max, self.elevation_offset
+            "heights: {} .. {} m (source elevation {} subtracted before scaling)",
+            n(self.height_min),
+            n(self.height_max),
+            n(self.elevation_offset)
         )?;
         writeln!(
             f,
@@ -183,6 +195,17 @@ impl fmt::Display for ImportSummary {
             "nodata:  {:.2} % of the cells (hard obstacles)",
             100.0 * self.nodata_fraction
         )
+    }
+}
+
+/// `v` with at most 6 decimals and no trailing zeros (summaries, not data).
+fn short(v: f64) -> String {
+    let text = format!("{v:.6}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    if text == "-0" {
+        "0".into()
+    } else {
+        text.into()
     }
 }
 
@@ -449,6 +472,20 @@ pub fn numbers<const N: usize>(text: &str) -> Result<[f64; N], String> {
             .ok_or_else(|| format!("{text:?}: {part:?} is not a finite number"))?;
     }
     Ok(out)
+}
+
+/// A positive factor written as a number ("0.02") or a fraction ("1/50").
+pub fn factor(text: &str) -> Result<f64, String> {
+    let value = match text.split_once('/') {
+        Some((a, b)) => {
+            let [a, b] = [a, b].map(|t| t.trim().parse::<f64>().ok());
+            a.zip(b).map(|(a, b)| a / b)
+        }
+        None => text.trim().parse::<f64>().ok(),
+    };
+    value
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .ok_or_else(|| format!("{text:?} is not a finite factor > 0 (e.g. 0.02 or 1/50)"))
 }
 
 /// A scenario name from a file's stem: characters other than letters, digits, '_' and '-'
