@@ -41,7 +41,7 @@ Series = dict[str, NDArray[Any]]
 def outputs(fmu_model_description: Any) -> list[Any]:
     """Every output of the FMU except the timing outputs (fmpy's model variables)."""
     found = [v for v in fmu_model_description.modelVariables if v.causality == "output" and v.name not in TIMING_OUTPUTS]
-    assert {v.type for v in found} == {"Real", "Boolean", "Enumeration"}, {v.type for v in found}
+    assert {v.type for v in found} == {"Real", "Boolean", "Integer", "Enumeration"}, {v.type for v in found}
     return found
 
 
@@ -59,10 +59,10 @@ def bits(values: NDArray[Any]) -> NDArray[Any]:
 
 def run_fmpy(unzipped: Path, md: Any, outputs: list[Any]) -> Series:
     """fmpy's FMU2Slave: start values only, doStep(k·1 ms, 1 ms), all outputs read after each step."""
-    by_type: dict[str, list[Any]] = {"Real": [], "Boolean": [], "Enumeration": []}
+    by_type: dict[str, list[Any]] = {"Real": [], "Boolean": [], "Integer": [], "Enumeration": []}
     for v in outputs:
         by_type[v.type].append(v)
-    getters = {"Real": "getReal", "Boolean": "getBoolean", "Enumeration": "getInteger"}
+    getters = {"Real": "getReal", "Boolean": "getBoolean", "Integer": "getInteger", "Enumeration": "getInteger"}
     series: dict[str, list[Any]] = {v.name: [] for v in outputs}
     slave = new_slave(unzipped, md, "fmpy")
     slave.instantiate(loggingOn=False)
@@ -132,7 +132,7 @@ def with_integer_enumerations(fmu: Path, out: Path) -> Path:
             if item.filename == "modelDescription.xml":
                 text = data.decode()
                 text, count = re.subn(r'<Enumeration declaredType="[^"]*"', "<Integer", text)
-                assert count == 3, count
+                assert count == 4, count
                 data = text.encode()
             target.writestr(item, data)
     return out
