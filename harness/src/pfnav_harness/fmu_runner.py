@@ -65,7 +65,9 @@ TORQUE_OUTPUTS = tuple(f"joint.tau[{i}]" for i in range(1, 13))
 FORCE_OUTPUTS = tuple(f"force[{k}].{c}" for k in range(1, 5) for c in "xyz")
 SOLVE_TIME_OUTPUT = "mpc.solveTime"
 REAL_OUTPUTS = (*TORQUE_OUTPUTS, *FORCE_OUTPUTS, SOLVE_TIME_OUTPUT)
-CONTACT_OUTPUTS = tuple(f"contact[{k}]" for k in range(1, 5))
+# The controller's scheduled stance per leg (named contact[k] before the estimator took that name
+# for its measured-contact inputs).
+CONTACT_OUTPUTS = tuple(f"stance[{k}]" for k in range(1, 5))
 FSM_OUTPUT = "fsm.state"
 
 # Enumeration types (modelDescription <TypeDefinitions>) and the items the harness refers to.
@@ -86,7 +88,8 @@ USED_VARIABLES: dict[str, str] = (
 
 # State estimation (issue 18): body sensor inputs, the estimate, the mode parameter. Needed only
 # when a run asks for the estimator (kalman mode); an FMU without them still runs on ground truth.
-# The FMU's own `contact[k]` inputs (measured contact, −1 = gait schedule) keep their start value.
+# The FMU's `contact[k]` inputs (measured contact, −1 = use the gait schedule) keep their start value:
+# no foot contact sensor is modelled.
 IMU_GYRO = tuple(f"imu.gyro[{i}]" for i in range(1, 4))
 IMU_ACC = tuple(f"imu.acc[{i}]" for i in range(1, 4))
 FIX_POS = tuple(f"fix.pos[{i}]" for i in range(1, 4))
