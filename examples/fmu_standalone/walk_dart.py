@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     ref_vrs = [vr["ref.x"], vr["ref.vx"]]  # the rest of the reference keeps its start value 0 (flat ground, yaw 0)
     torque_vrs = [vr[f"joint.tau[{i}]"] for i in range(1, 13)]
-    contact_vrs = [vr[f"contact[{k}]"] for k in range(1, 5)]
+    stance_vrs = [vr[f"stance[{k}]"] for k in range(1, 5)]
 
     world, robot, base, dofs = build_world(args.urdf)
     place_crouched(robot, dofs)
@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
         slave.doStep(t, DT)
         tau = np.clip(slave.getReal(torque_vrs), -effort, effort)
         fsm = slave.getInteger([vr["fsm.state"]])[0]
-        stance.append("".join("1" if c else "0" for c in slave.getBoolean(contact_vrs)))
+        stance.append("".join("1" if c else "0" for c in slave.getBoolean(stance_vrs)))
         if walking and k > 0 and stance[-1] != stance[-2] and stance[-1] in TROT_PAIRS:
             touchdowns += 1
         forces[dofs] = tau
