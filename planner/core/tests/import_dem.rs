@@ -15,7 +15,8 @@ use pf_planner::io::{load_scenario, save_scenario};
 use pf_planner::map::GridMap;
 use pf_planner::plan::{plan, Method, PlanRequest, PlannerOptions};
 use pf_planner::traversability::slope_deg;
-use tiff::encoder::colortype;
+use tiff::encoder::compression::DeflateLevel;
+use tiff::encoder::{colortype, Compression};
 
 /// Rises 3 m per m to the east and 7 m per m to the north: a flip or a transpose shows.
 fn slanted(x: f64, y: f64) -> f64 {
@@ -95,7 +96,7 @@ fn an_ascii_grid_keeps_its_orientation_north_up_to_the_maps_y_up() {
 }
 
 #[test]
-fn geotiffs_of_every_sample_type_in_strips_or_tiles_give_the_ascii_grids_map() {
+fn geotiffs_of_every_sample_type_compression_strips_or_tiles_give_the_ascii_grids_map() {
     let dir = tempfile::tempdir().expect("tempdir");
     // Integer heights of 60..132 so that every sample type holds them exactly.
     let dem = Dem::from_fn(6, 4, 1000.0, 5000.0, 2.0, |x, y| {
@@ -150,6 +151,30 @@ fn geotiffs_of_every_sample_type_in_strips_or_tiles_give_the_ascii_grids_map() {
                 h,
                 &v.iter().map(|&x| x as i32).collect::<Vec<_>>(),
                 &tags,
+            ),
+        ),
+        (
+            "f32_lzw",
+            geotiff_bytes::<colortype::Gray32Float>(
+                w,
+                h,
+                &v.iter().map(|&x| x as f32).collect::<Vec<_>>(),
+                &TiffTags {
+                    compression: Compression::Lzw,
+                    ..tags.clone()
+                },
+            ),
+        ),
+        (
+            "i16_deflate",
+            geotiff_bytes::<colortype::GrayI16>(
+                w,
+                h,
+                &v.iter().map(|&x| x as i16).collect::<Vec<_>>(),
+                &TiffTags {
+                    compression: Compression::Deflate(DeflateLevel::Best),
+                    ..tags.clone()
+                },
             ),
         ),
         (

@@ -7,7 +7,7 @@ use std::fs;
 use std::io::Cursor;
 use std::path::Path;
 
-use tiff::encoder::{colortype, TiffEncoder};
+use tiff::encoder::{colortype, Compression, TiffEncoder};
 use tiff::tags::Tag;
 
 /// A north-up test DEM: heights at cell centres, the file's (northern) first row first.
@@ -85,13 +85,14 @@ impl Dem {
 }
 
 /// Options of [`geotiff_bytes`].
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct TiffTags<'a> {
     pub georef: Option<([f64; 3], [f64; 6])>,
     pub nodata: Option<&'a str>,
     /// GeoKeyDirectoryTag, written as given.
     pub geo_keys: Option<Vec<u16>>,
     pub rows_per_strip: Option<u32>,
+    pub compression: Compression,
 }
 
 /// A one-image TIFF of `data` (row 0 = north) in strips, with the GeoTIFF tags of `tags`.
@@ -106,7 +107,9 @@ where
 {
     let mut cursor = Cursor::new(Vec::new());
     {
-        let mut encoder = TiffEncoder::new(&mut cursor).expect("encoder");
+        let mut encoder = TiffEncoder::new(&mut cursor)
+            .expect("encoder")
+            .with_compression(tags.compression);
         let mut image = encoder.new_image::<C>(width, height).expect("image");
         if let Some((scale, tie)) = tags.georef {
             image
