@@ -93,6 +93,16 @@ def test_metrics_of_a_log_with_known_errors() -> None:
     assert (e.estimator, e.fix_rate, e.fix_noise, e.sensor_seed) == ("kalman", 2.0, 0.02, 7)
 
 
+def test_a_run_that_fell_is_measured_up_to_its_fall() -> None:
+    log = _log()
+    e = compute_estimation_metrics(log, until=6.0)
+    assert e.measured_until == pytest.approx(6.0)
+    assert e.yaw_error_final == pytest.approx(0.01)
+    assert e.path_length == pytest.approx(2.0)
+    assert e.drift_percent == pytest.approx(2.0)
+    assert compute_estimation_metrics(log).measured_until == pytest.approx(10.0)
+
+
 def test_yaw_error_wraps_around_pi() -> None:
     log = _log()
     log["base_quat"][:] = (math.cos(math.pi / 2 - 0.005), 0.0, 0.0, math.sin(math.pi / 2 - 0.005))  # yaw π − 0.01
@@ -120,7 +130,7 @@ def test_report_section_has_the_table_and_the_plot(tmp_path: Path) -> None:
     lines = estimation_section({"synthetic": [_record(log, True)]}, tmp_path)
     text = "\n".join(lines)
     assert "## State estimation" in text
-    assert "| synthetic | pf | 2 / 0.02 | 0.010 / 0.010 |" in text
+    assert "| synthetic | pf | 10.0 | 2 / 0.02 | 0.010 / 0.010 |" in text
     assert "| 2.00 of 4.0 |" in text and "| 0x1 |" in text
     assert (tmp_path / "synthetic_pf_estimation.png").stat().st_size > 10_000
     assert "(synthetic_pf_estimation.png)" in text
@@ -145,6 +155,7 @@ class EstimatingStandIn(PdStandIn):
             acc=np.zeros(3),
             fix_pos=np.zeros(3),
             fix_valid=np.zeros(1, dtype=np.int32),
+            contact=np.full(4, -1, dtype=np.int32),
             est_pos=np.zeros(3),
             est_vel=np.zeros(3),
             est_rpy=np.zeros(3),
@@ -200,6 +211,19 @@ def test_kalman_mode_feeds_sensor_readings_and_logs_the_estimate(ramp_scenario: 
     # Walking from 0.5 s: the toy status counted fixes 2 … 5 then, 0b010 | 0b011 | 0b100 | 0b101.
     assert e.fixes == 5 and e.status_bits == 7
     assert e.velocity_rms < 0.2  # the stand-in says "at rest" and the robot stands
+    # Without a contact sensor the FMU is told nothing (−1: its gait schedule).
+    assert np.all(stand_in.estimation.contact == -1)
+
+
+def test_the_contact_sensor_reports_the_feet_dart_finds_on_the_ground(ramp_scenario: Scenario, tmp_path: Path) -> None:
+    stand_in = EstimatingStandIn(_fake_contract())
+    config = CoSimConfig(stand_time=0.2, settle_time=0.2, max_duration=0.6, estimator="kalman", body_sensors=BodySensorConfig(contact_sensor=True))
+    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=stand_in) as sim:
+        log = sim.run().log
+    # The PD stand-in keeps all four feet down; the input agrees with the contacts DART logged.
+    np.testing.assert_array_equal(stand_in.estimation.contact, [1, 1, 1, 1])
+    np.testing.assert_array_equal(log["contact_actual"][-2], [1, 1, 1, 1])
+    assert bool(log["contact_sensor"])
 
 
 def test_ground_truth_mode_touches_no_estimator_variables(ramp_scenario: Scenario, tmp_path: Path) -> None:
@@ -224,6 +248,7 @@ def test_an_unknown_estimator_mode_is_refused() -> None:
         (["--estimator", "kalman", "--fix-noise", "nan"], "fix noise"),
         (["--estimator", "kalman", "--sensor-seed", "-3"], "seed"),
         (["--fix-rate", "2"], "add --estimator kalman"),
+        (["--contact-sensor"], "add --estimator kalman"),
     ],
 )
 def test_bad_estimation_flags_give_a_clear_error(args: list[str], message: str) -> None:
@@ -233,8 +258,11 @@ def test_bad_estimation_flags_give_a_clear_error(args: list[str], message: str) 
 
 
 def test_estimation_flags_reach_the_config() -> None:
-    parsed = build_parser().parse_args(["run", "--scenario", "pits", "--estimator", "kalman", "--fix-rate", "2", "--fix-noise", "0.05", "--sensor-seed", "9"])
+    parsed = build_parser().parse_args(
+        ["run", "--scenario", "pits", "--estimator", "kalman", "--fix-rate", "2", "--fix-noise", "0.05", "--sensor-seed", "9", "--contact-sensor"]
+    )
     config = _config(parsed)
     assert config.estimator == "kalman"
-    assert (config.body_sensors.fix_rate, config.body_sensors.fix_noise, config.body_sensors.seed) == (2.0, 0.05, 9)
+    b = config.body_sensors
+    assert (b.fix_rate, b.fix_noise, b.seed, b.contact_sensor) == (2.0, 0.05, 9, True)
     assert _config(build_parser().parse_args(["run", "--scenario", "pits"])).estimator == "groundTruth"

@@ -20,6 +20,8 @@ controller FMU's estimator inputs take:
 * **Position fix** (`fix.pos[1..3]`, `fix.valid`): at `fix_rate` Hz the true trunk position plus
   N(0, fix_noise²) per axis (GNSS-RTK or motion-capture like); `fix.valid` is true only in the
   sample in which a new fix arrived.
+* **Foot contact** (`contact[1..4]`, optional): which feet DART finds touching anything, as an
+  ideal binary contact sensor; without it the FMU's estimator trusts its own gait schedule.
 
 Every noise source has its own random stream spawned from one seed (`numpy.random.SeedSequence`,
 PCG64), so turning the fix on or off does not change the IMU's noise, and a seed reproduces a run.
@@ -124,6 +126,9 @@ class BodySensorConfig:
     # Multiplies every IMU noise and bias (1: the data sheet; 0: ideal readings, for tests).
     imu_noise_scale: float = 1.0
     quantize_joints: bool = True
+    # Tell the estimator which feet touch the ground (DART's contacts: an ideal binary foot contact
+    # sensor, no delay or threshold); off: the FMU's contact inputs stay −1 and it uses its gait schedule.
+    contact_sensor: bool = False
 
     def validate(self) -> None:
         if not (isinstance(self.seed, int) and self.seed >= 0):

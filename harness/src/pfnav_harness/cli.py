@@ -119,6 +119,11 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fix-rate", type=float, default=0.0, help="kalman: absolute position fixes per second (default 0 = none)")
     p.add_argument("--fix-noise", type=float, default=0.02, help="kalman: standard deviation of each fix coordinate, m (default 0.02)")
     p.add_argument("--sensor-seed", type=int, default=0, help="kalman: seed of the IMU, encoder and fix noise (default 0)")
+    p.add_argument(
+        "--contact-sensor",
+        action="store_true",
+        help="kalman: tell the estimator which feet touch the ground (DART's contacts, an ideal sensor; default: it trusts its gait schedule)",
+    )
     p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
 
 
@@ -168,9 +173,9 @@ def _body_sensors(args: argparse.Namespace) -> BodySensorConfig:
     from .body_sensors import BodySensorConfig
     from .errors import SimulationError
 
-    if args.estimator != "kalman" and (args.fix_rate != 0.0 or args.sensor_seed != 0):
-        raise HarnessError("--fix-rate and --sensor-seed feed the estimator: add --estimator kalman")
-    config = BodySensorConfig(seed=args.sensor_seed, fix_rate=args.fix_rate, fix_noise=args.fix_noise)
+    if args.estimator != "kalman" and (args.fix_rate != 0.0 or args.sensor_seed != 0 or args.contact_sensor):
+        raise HarnessError("--fix-rate, --sensor-seed and --contact-sensor feed the estimator: add --estimator kalman")
+    config = BodySensorConfig(seed=args.sensor_seed, fix_rate=args.fix_rate, fix_noise=args.fix_noise, contact_sensor=args.contact_sensor)
     try:
         config.validate()
     except SimulationError as err:
@@ -373,6 +378,7 @@ def execute(args: argparse.Namespace) -> int:
             f"State estimate in the loop (kalman): {config.body_sensors.imu.name} IMU, {config.body_sensors.encoder.name} "
             f"{config.body_sensors.encoder.bits}-bit joint encoders, position fixes "
             + (f"at {config.body_sensors.fix_rate:g} Hz, σ {config.body_sensors.fix_noise:g} m" if config.body_sensors.fix_rate > 0 else "off")
+            + f", foot contact {'from DART (ideal sensor)' if config.body_sensors.contact_sensor else 'from the gait schedule'}"
             + f", sensor seed {config.body_sensors.seed}."
             if config.estimator == "kalman"
             else "The controller runs on the simulated body's exact state (estimator groundTruth)."

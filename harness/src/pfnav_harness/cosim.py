@@ -240,7 +240,7 @@ class CoSimulation:
         contacts_view = fmu.contacts_array
         perf = time.perf_counter
 
-        estimator = EstimatorInTheLoop(fmu, c, n_steps) if c.estimator == "kalman" else None
+        estimator = EstimatorInTheLoop(fmu, world, c, n_steps) if c.estimator == "kalman" else None
         fmu.initialize(0.0)
         stop_reason = "completed"
         fall_step: int | None = None
@@ -383,8 +383,9 @@ class EstimatorInTheLoop:
     Joint angles reach the FMU as the encoders read them; the log keeps the DART truth.
     """
 
-    def __init__(self, fmu: fr.ControllerFmu, config: CoSimConfig, n_steps: int) -> None:
+    def __init__(self, fmu: fr.ControllerFmu, world: QuadrupedWorld, config: CoSimConfig, n_steps: int) -> None:
         self.config = config
+        self.world = world
         self.io = fmu.enable_estimation(config.estimator)
         self.sensors = BodySensors(config.body_sensors, config.comm_step)
         self.joint_q = fmu.inputs.view(fr.JOINT_Q)
@@ -403,6 +404,9 @@ class EstimatorInTheLoop:
         io.fix_valid[0] = int(readings.fix_valid)
         self._new_fix = readings.fix_valid
         self.joint_q[:] = readings.joint_q
+        if self.config.body_sensors.contact_sensor:
+            # The last physics step's collision check: the contacts of the state just read.
+            io.contact[:] = self.world.foot_contacts()
 
     def log_step(self, k: int) -> None:
         io = self.io
@@ -433,6 +437,7 @@ class EstimatorInTheLoop:
             "sensor_seed": np.array(sensors.seed),
             "imu_model": np.array(sensors.imu.name),
             "encoder_model": np.array(sensors.encoder.name),
+            "contact_sensor": np.array(sensors.contact_sensor),
         }
 
 

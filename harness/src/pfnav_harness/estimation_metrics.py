@@ -50,6 +50,8 @@ class EstimationRun(Protocol):
 @dataclass
 class EstimationMetrics:
     estimator: str
+    # Last time measured: the end of the run, or the fall (what follows a fall says nothing).
+    measured_until: float
     fix_rate: float
     fix_noise: float
     sensor_seed: int
@@ -76,9 +78,11 @@ def has_estimate(log: dict[str, Any]) -> bool:
     return all(key in log for key in ESTIMATE_KEYS)
 
 
-def _walking(log: dict[str, Any]) -> NDArray[np.bool_]:
+def _walking(log: dict[str, Any], until: float | None = None) -> NDArray[np.bool_]:
     t = np.asarray(log["t"])
     walking = t >= float(log.get("walk_start", 0.0))
+    if until is not None:
+        walking &= t <= until
     return walking if np.any(walking) else np.ones_like(t, dtype=bool)
 
 
@@ -96,12 +100,13 @@ def _rms(values: FloatArray) -> float:
     return float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
 
 
-def compute_estimation_metrics(log: dict[str, Any]) -> EstimationMetrics:
-    """The metrics of one run log with an estimate (see `has_estimate`)."""
+def compute_estimation_metrics(log: dict[str, Any], until: float | None = None) -> EstimationMetrics:
+    """The metrics of one run log with an estimate (see `has_estimate`), over the walk up to `until`
+    (the fall time of a run that fell; None: to the end)."""
     missing = [key for key in ESTIMATE_KEYS if key not in log]
     if missing:
         raise KeyError(f"the run log has no estimate ({', '.join(missing)} missing): was it run in kalman mode?")
-    walking = _walking(log)
+    walking = _walking(log, until)
     errors = estimation_errors(log)
     pos_err = errors["pos"][walking]
     vel_err = errors["vel"][walking]
@@ -117,6 +122,7 @@ def compute_estimation_metrics(log: dict[str, Any]) -> EstimationMetrics:
     fix_valid = np.asarray(log.get("fix_valid", np.zeros(0, dtype=bool)), dtype=bool)
     return EstimationMetrics(
         estimator=str(log.get("estimator", "kalman")),
+        measured_until=float(np.asarray(log["t"])[walking][-1]),
         fix_rate=float(log.get("fix_rate", 0.0)),
         fix_noise=float(log.get("fix_noise", 0.0)),
         sensor_seed=int(log.get("sensor_seed", 0)),
@@ -199,9 +205,11 @@ def estimation_section(runs: dict[str, Sequence[EstimationRun]], out_dir: Path) 
         "where stated, noisy position fixes; the truth is the DART trunk. Measured while walking. Drift: horizontal "
         "position error accrued during the walk over the length walked. Tracking: the true position against the plan.",
         "",
-        "| scenario | run | fixes [Hz / m] | velocity RMS 3-D / horiz. [m/s] | RMS vx / vy / vz [m/s] | drift [% of m] | "
+        "A run that fell is measured up to its fall (column 'until').",
+        "",
+        "| scenario | run | until [s] | fixes [Hz / m] | velocity RMS 3-D / horiz. [m/s] | RMS vx / vy / vz [m/s] | drift [% of m] | "
         "position err final / max / RMS [m] | height err RMS [m] | yaw err final / max [°] | tracking RMS [m] | status bits |",
-        "|" + "---|" * 11,
+        "|" + "---|" * 12,
     ]
     for name, rec in estimated:
         e = rec.estimation
@@ -209,7 +217,8 @@ def estimation_section(runs: dict[str, Sequence[EstimationRun]], out_dir: Path) 
         fixes = "none" if e.fix_rate <= 0.0 else f"{e.fix_rate:g} / {e.fix_noise:g}"
         vx, vy, vz = e.velocity_rms_axes
         lines.append(
-            f"| {name} | {rec.metrics.method} | {fixes} | {_fmt(e.velocity_rms)} / {_fmt(e.velocity_rms_horizontal)} | "
+            f"| {name} | {rec.metrics.method} | {e.measured_until:.1f}{' (fell)' if rec.metrics.fell else ''} | {fixes} | "
+            f"{_fmt(e.velocity_rms)} / {_fmt(e.velocity_rms_horizontal)} | "
             f"{_fmt(vx)} / {_fmt(vy)} / {_fmt(vz)} | {_fmt(e.drift_percent, 2)} of {_fmt(e.path_length, 1)} | "
             f"{_fmt(e.position_error_final)} / {_fmt(e.position_error_max)} / {_fmt(e.position_rms)} | {_fmt(e.height_error_rms)} | "
             f"{_fmt(math.degrees(e.yaw_error_final), 2)} / {_fmt(math.degrees(e.yaw_error_max), 2)} | {_fmt(e.tracking_rms)} | "

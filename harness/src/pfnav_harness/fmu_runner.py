@@ -88,12 +88,13 @@ USED_VARIABLES: dict[str, str] = (
 
 # State estimation (issue 18): body sensor inputs, the estimate, the mode parameter. Needed only
 # when a run asks for the estimator (kalman mode); an FMU without them still runs on ground truth.
-# The FMU's `contact[k]` inputs (measured contact, −1 = use the gait schedule) keep their start value:
-# no foot contact sensor is modelled.
 IMU_GYRO = tuple(f"imu.gyro[{i}]" for i in range(1, 4))
 IMU_ACC = tuple(f"imu.acc[{i}]" for i in range(1, 4))
 FIX_POS = tuple(f"fix.pos[{i}]" for i in range(1, 4))
 FIX_VALID = "fix.valid"
+# Measured foot contact per leg: −1 = unknown (the estimator uses the gait schedule), 0, 1.
+CONTACT_INPUTS = tuple(f"contact[{k}]" for k in range(1, 5))
+CONTACT_UNKNOWN = -1
 ESTIMATION_REAL_INPUTS = IMU_GYRO + IMU_ACC + FIX_POS
 EST_POS = tuple(f"est.pos[{i}]" for i in range(1, 4))
 EST_VEL = tuple(f"est.vel[{i}]" for i in range(1, 4))
@@ -104,7 +105,7 @@ ESTIMATOR_PARAMETER = "estimator"
 # Estimator modes by item name; the codes are read from the parameter's enumeration type.
 ESTIMATOR_MODES = ("groundTruth", "kalman")
 ESTIMATION_VARIABLES: dict[str, str] = (
-    {name: "input" for name in (*ESTIMATION_REAL_INPUTS, FIX_VALID)}
+    {name: "input" for name in (*ESTIMATION_REAL_INPUTS, FIX_VALID, *CONTACT_INPUTS)}
     | {name: "output" for name in (*ESTIMATION_REAL_OUTPUTS, EST_STATUS)}
     | {ESTIMATOR_PARAMETER: "parameter"}
 )
@@ -237,6 +238,7 @@ class EstimationIo:
     acc: NDArray[np.float64]
     fix_pos: NDArray[np.float64]
     fix_valid: NDArray[np.int32]
+    contact: NDArray[np.int32]
     est_pos: NDArray[np.float64]
     est_vel: NDArray[np.float64]
     est_rpy: NDArray[np.float64]
@@ -371,11 +373,13 @@ class ControllerFmu:
         in_val = (ctypes.c_double * len(ESTIMATION_REAL_INPUTS))()
         valid_vr = (ctypes.c_uint * 1)(*vrs([FIX_VALID]))
         valid_val = (ctypes.c_int * 1)()
+        contact_vr = (ctypes.c_uint * len(CONTACT_INPUTS))(*vrs(CONTACT_INPUTS))
+        contact_val = (ctypes.c_int * len(CONTACT_INPUTS))(*([CONTACT_UNKNOWN] * len(CONTACT_INPUTS)))
         out_vr = (ctypes.c_uint * len(ESTIMATION_REAL_OUTPUTS))(*vrs(ESTIMATION_REAL_OUTPUTS))
         out_val = (ctypes.c_double * len(ESTIMATION_REAL_OUTPUTS))()
         status_vr = (ctypes.c_uint * 1)(*vrs([EST_STATUS]))
         status_val = (ctypes.c_int * 1)()
-        self._estimation = (in_vr, in_val, valid_vr, valid_val, out_vr, out_val, status_vr, status_val)
+        self._estimation = (in_vr, in_val, valid_vr, valid_val, contact_vr, contact_val, out_vr, out_val, status_vr, status_val)
         inputs = NamedVector(ESTIMATION_REAL_INPUTS, np.ctypeslib.as_array(in_val))
         outputs = NamedVector(ESTIMATION_REAL_OUTPUTS, np.ctypeslib.as_array(out_val))
         self.estimation = EstimationIo(
@@ -383,6 +387,7 @@ class ControllerFmu:
             acc=inputs.view(IMU_ACC),
             fix_pos=inputs.view(FIX_POS),
             fix_valid=np.ctypeslib.as_array(valid_val),
+            contact=np.ctypeslib.as_array(contact_val),
             est_pos=outputs.view(EST_POS),
             est_vel=outputs.view(EST_VEL),
             est_rpy=outputs.view(EST_RPY),
@@ -409,9 +414,10 @@ class ControllerFmu:
         self._mode_val[0] = mode
         self._check(self._set_integer(self._component, self._mode_vr, 1, self._mode_val), "fmi2SetInteger")
         if self._estimation is not None:
-            in_vr, in_val, valid_vr, valid_val = self._estimation[:4]
+            in_vr, in_val, valid_vr, valid_val, contact_vr, contact_val = self._estimation[:6]
             self._check(self._set_real(self._component, in_vr, len(in_vr), in_val), "fmi2SetReal (estimator inputs)")
             self._check(self._set_boolean(self._component, valid_vr, 1, valid_val), "fmi2SetBoolean (fix.valid)")
+            self._check(self._set_integer(self._component, contact_vr, len(contact_vr), contact_val), "fmi2SetInteger (contact)")
 
     def do_step(self, time: float, step: float) -> None:
         self._check(self._do_step(self._component, time, step, 1), f"fmi2DoStep(t={time:.4f}, h={step})")
@@ -423,7 +429,7 @@ class ControllerFmu:
         self._check(self._get_boolean(self._component, self._contact_vr, n_contacts, self._contact_val), "fmi2GetBoolean")
         self._check(self._get_integer(self._component, self._fsm_vr, 1, self._fsm_val), "fmi2GetInteger")
         if self._estimation is not None:
-            out_vr, out_val, status_vr, status_val = self._estimation[4:]
+            out_vr, out_val, status_vr, status_val = self._estimation[6:]
             self._check(self._get_real(self._component, out_vr, len(out_vr), out_val), "fmi2GetReal (estimate)")
             self._check(self._get_integer(self._component, status_vr, 1, status_val), "fmi2GetInteger (est.status)")
 

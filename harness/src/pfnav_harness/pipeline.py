@@ -122,7 +122,7 @@ def simulate(
         config.fall,
         planner_cost=plan.metrics.get("cost"),
     )
-    estimation = compute_estimation_metrics(result.log) if has_estimate(result.log) else None
+    estimation = compute_estimation_metrics(result.log, until=metrics.fall_time) if has_estimate(result.log) else None
     if log_path is not None:
         save_log(result, log_path)
     if lcm_log_path is not None:
