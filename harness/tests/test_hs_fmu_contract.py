@@ -51,7 +51,7 @@ def test_enumerations_come_from_the_model_description(model_description: Any) ->
         assert variables[name].declaredType.name == type_name
 
 
-@pytest.mark.parametrize("name", ["ref.z", "terrain.dzdy", "fsm.state", "cmd.mode", "joint.dq[12]", "contact[4]"])
+@pytest.mark.parametrize("name", ["ref.z", "terrain.dzdy", "fsm.state", "cmd.mode", "joint.dq[12]", "stance[4]"])
 def test_an_fmu_without_a_used_variable_is_refused_at_load(model_description: Any, name: str) -> None:
     md = copy.copy(model_description)
     md.modelVariables = [v for v in model_description.modelVariables if v.name != name]
