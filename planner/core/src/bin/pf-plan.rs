@@ -15,7 +15,7 @@ use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
 use pf_planner::import::{
-    factor, import_map, numbers, scenario_from, stem_name, Crop, DemFormat, ImportOptions,
+    counts, factor, import_map, numbers, scenario_from, stem_name, Crop, DemFormat, ImportOptions,
     Placement, Resolution,
 };
 use pf_planner::io::{
@@ -254,14 +254,14 @@ struct ImportArgs {
     #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = numbers::<4>, allow_negative_numbers = true)]
     crop: Option<[f64; 4]>,
     /// Keep these source cells (ends exclusive; row 0 = the file's first, northern row).
-    #[arg(long, value_name = "C0,R0,C1,R1", value_parser = numbers::<4>, conflicts_with = "crop")]
-    crop_cells: Option<[f64; 4]>,
+    #[arg(long, value_name = "C0,R0,C1,R1", value_parser = counts::<4>, conflicts_with = "crop")]
+    crop_cells: Option<[usize; 4]>,
     /// Cell size of the written map, metres (after --scale); default: the source's.
     #[arg(long, value_name = "M", allow_negative_numbers = true)]
     cell_size: Option<f64>,
     /// Fit the crop in NX x NY square cells instead of --cell-size.
-    #[arg(long, value_name = "NX,NY", value_parser = numbers::<2>, conflicts_with = "cell_size")]
-    size: Option<[f64; 2]>,
+    #[arg(long, value_name = "NX,NY", value_parser = counts::<2>, conflicts_with = "cell_size")]
+    size: Option<[usize; 2]>,
     /// Multiply cell size and heights by F (slopes kept), e.g. 1/50 for a 1 m DEM at robot scale.
     #[arg(long, value_name = "F", default_value = "1", value_parser = factor, allow_negative_numbers = true)]
     scale: f64,
@@ -403,32 +403,21 @@ fn run_path_cost(args: &PathCostArgs) -> Result<()> {
 }
 
 fn run_import(args: &ImportArgs) -> Result<()> {
-    let whole = |v: f64, what: &str| {
-        if v >= 0.0 && v.fract() == 0.0 && v <= usize::MAX as f64 {
-            Ok(v as usize)
-        } else {
-            Err(anyhow::anyhow!("{what}: {v} is not a whole number >= 0"))
-        }
-    };
-    let crop = match (args.crop, args.crop_cells) {
-        (Some([x0, y0, x1, y1]), _) => Some(Crop::World {
-            min: [x0, y0],
-            max: [x1, y1],
-        }),
-        (None, Some([c0, r0, c1, r1])) => Some(Crop::Cells {
-            column0: whole(c0, "--crop-cells")?,
-            row0: whole(r0, "--crop-cells")?,
-            column1: whole(c1, "--crop-cells")?,
-            row1: whole(r1, "--crop-cells")?,
-        }),
-        (None, None) => None,
-    };
+    let world = args.crop.map(|[x0, y0, x1, y1]| Crop::World {
+        min: [x0, y0],
+        max: [x1, y1],
+    });
+    let cells = args
+        .crop_cells
+        .map(|[column0, row0, column1, row1]| Crop::Cells {
+            column0,
+            row0,
+            column1,
+            row1,
+        });
     let resolution = match (args.cell_size, args.size) {
         (Some(size), _) => Resolution::CellSize(size),
-        (None, Some([nx, ny])) => Resolution::Size {
-            columns: whole(nx, "--size")?,
-            rows: whole(ny, "--size")?,
-        },
+        (None, Some([columns, rows])) => Resolution::Size { columns, rows },
         (None, None) => Resolution::Source,
     };
     let options = ImportOptions {
@@ -436,7 +425,7 @@ fn run_import(args: &ImportArgs) -> Result<()> {
             FormatArg::Asc => DemFormat::EsriAscii,
             FormatArg::Tif => DemFormat::GeoTiff,
         }),
-        crop,
+        crop: world.or(cells),
         resolution,
         scale: args.scale,
         keep_elevation: args.keep_elevation,

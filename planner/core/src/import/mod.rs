@@ -474,6 +474,24 @@ pub fn numbers<const N: usize>(text: &str) -> Result<[f64; N], String> {
     Ok(out)
 }
 
+/// `N` comma-separated whole numbers ("0,10,64,80"), as flags give cell windows and sizes.
+pub fn counts<const N: usize>(text: &str) -> Result<[usize; N], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let values: Vec<usize> = parts
+        .iter()
+        .map(|part| {
+            part.parse::<usize>()
+                .map_err(|_| format!("{text:?}: {part:?} is not a whole number >= 0"))
+        })
+        .collect::<Result<_, _>>()?;
+    values.try_into().map_err(|v: Vec<usize>| {
+        format!(
+            "{text:?}: expected {N} comma-separated whole numbers, got {}",
+            v.len()
+        )
+    })
+}
+
 /// A positive factor written as a number ("0.02") or a fraction ("1/50").
 pub fn factor(text: &str) -> Result<f64, String> {
     let value = match text.split_once('/') {

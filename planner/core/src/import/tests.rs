@@ -157,3 +157,24 @@ fn the_format_comes_from_the_extension() {
     let err = DemFormat::from_path(Path::new("x.dem")).expect_err("unknown");
     assert!(err.to_string().contains("--format"), "{err}");
 }
+
+#[test]
+fn flag_values_parse_or_say_why_not() {
+    assert_eq!(numbers::<2>(" 1.5, -2").expect("two"), [1.5, -2.0]);
+    assert!(numbers::<2>("1,2,3")
+        .expect_err("three")
+        .contains("expected 2"));
+    assert!(numbers::<2>("1,inf").expect_err("inf").contains("finite"));
+    assert_eq!(counts::<4>("0,10,64,80").expect("four"), [0, 10, 64, 80]);
+    assert!(counts::<2>("3,-1")
+        .expect_err("negative")
+        .contains("whole number"));
+    assert!(counts::<2>("3").expect_err("one").contains("expected 2"));
+    assert_eq!(factor("1/50").expect("fraction"), 0.02);
+    assert_eq!(factor("0.5").expect("number"), 0.5);
+    for bad in ["0", "-1", "1/0", "x", "nan", "1/-2"] {
+        assert!(factor(bad).is_err(), "{bad}");
+    }
+    assert_eq!(stem_name(Path::new("dir/hill dem.v2.asc")), "hill_dem_v2");
+    assert_eq!(stem_name(Path::new("/")), "terrain");
+}
