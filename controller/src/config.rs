@@ -446,7 +446,7 @@ controller_config! {
             fmi "estimator", range EstimatorKind::ALL, unit "",
             "State estimator: groundTruth (the base.* inputs) or kalman (IMU + leg kinematics; base.pos/base.quat read at the first tick only)";
         /// Gyro white-noise density (angle random walk), rad/s/√Hz.
-        est_gyro_noise: f64 = 1e-3,
+        est_gyro_noise: f64 = 3e-4,
             fmi "est.gyroNoise", range limits::EST_GYRO_NOISE, unit "rad/s/sqrt(Hz)",
             "Gyro white-noise density (angle random walk) of the orientation filter";
         /// Gyro bias random-walk density, rad/s²/√Hz.
@@ -455,7 +455,7 @@ controller_config! {
             "Gyro bias random-walk density of the orientation filter";
         /// Standard deviation of the accelerometer as a gravity-direction reference, m/s² (sensor
         /// noise plus the trunk's own accelerations while walking).
-        est_acc_tilt_noise: f64 = 0.5,
+        est_acc_tilt_noise: f64 = 3.0,
             fmi "est.accTiltNoise", range limits::EST_ACC_TILT_NOISE, unit "m/s2",
             "Accelerometer noise as a gravity-direction (tilt) reference, walking accelerations included";
         /// Accelerometer noise density driving the Kalman filter's velocity, m/s²/√Hz (sensor

@@ -1,8 +1,8 @@
 //! Attitude and gyro bias from gyro + accelerometer: a multiplicative error-state Kalman filter
 //! (6 error states: attitude error in the body frame, gyro bias). The gyro drives the prediction;
 //! the accelerometer corrects roll and pitch (and the bias of the axes it sees) only while the
-//! specific force is close to g, because while walking it measures the trunk's accelerations
-//! too. Yaw is not observable from these two sensors: its error grows with the yaw bias.
+//! specific force is close to g and its innovation is plausible, because while walking it
+//! measures the trunk's accelerations too (several m/s² for tens of ms when a trot starts). Yaw is not observable from these two sensors: its error grows with the yaw bias.
 
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
@@ -13,6 +13,10 @@ type Vector6 = SVector<f64, 6>;
 
 /// The accelerometer is a gravity reference only while `| |f| − g | ≤ ACC_GATE · g`.
 pub const ACC_GATE: f64 = 0.1;
+/// An accelerometer sample whose innovation has a squared Mahalanobis distance beyond this is
+/// not used (3 dof, P ≈ 10⁻³ for a consistent filter): a sustained trunk acceleration (start of a
+/// trot, an impact) passes the norm gate but is no gravity reference.
+pub const ACC_INNOVATION_GATE_CHI2: f64 = 16.27;
 /// Initial attitude standard deviation, rad (the start pose is given).
 const INITIAL_ATTITUDE_SIGMA: f64 = 0.01;
 /// Initial gyro-bias standard deviation, rad/s (typical MEMS turn-on bias).
@@ -121,6 +125,17 @@ impl OrientationFilter {
             .inverse_transform_vector(&Vector3::new(0.0, 0.0, GRAVITY));
         let jacobian = skew(&predicted);
         let variance = self.noise.acc_tilt.powi(2);
+        let attitude_covariance = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+        let innovation_covariance =
+            jacobian * attitude_covariance * jacobian.transpose() + Matrix3::identity() * variance;
+        let innovation = acc - predicted;
+        let within_gate = innovation_covariance
+            .try_inverse()
+            .map(|inverse| innovation.dot(&(inverse * innovation)))
+            .is_some_and(|d2| d2 <= ACC_INNOVATION_GATE_CHI2);
+        if !within_gate {
+            return false;
+        }
         let mut error = Vector6::zeros();
         // Diagonal measurement noise: three sequential scalar updates equal the batch update.
         for axis in 0..3 {
