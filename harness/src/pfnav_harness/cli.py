@@ -133,8 +133,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Plans with pf-planner-service over LCM and walks the plans with the controller FMU on a DART body model.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="one scenario, one method")
-    run.add_argument("--scenario", required=True, help="scenario name (`pf-plan scenario list` lists the paper's)")
+    run = sub.add_parser("run", help="one scenario or map, one method")
+    source = run.add_mutually_exclusive_group(required=True)
+    source.add_argument("--scenario", help="scenario name (`pf-plan scenario list` lists the paper's)")
+    source.add_argument("--map", type=Path, help="map file: the JSON sidecar `pf-plan import` or `pf-plan scenario export` writes")
+    run.add_argument("--start", help="with --map: start X,Y in map coordinates, m (default: the sidecar's)")
+    run.add_argument("--goal", help="with --map: goal centre X,Y in map coordinates, m (default: the sidecar's; radius from the sidecar)")
     run.add_argument("--method", default="pf", choices=METHODS, help="planning method (default pf)")
     _add_common(run)
     demo = sub.add_parser("demo", help="all scenarios × {P-F, A*}; writes OUT/report.md with PNGs")
@@ -289,12 +293,28 @@ def _estimation_summary(rec: RunRecord) -> str:
     )
 
 
+def _map_request(args: argparse.Namespace) -> tuple[Path | None, tuple[float, float] | None, tuple[float, float] | None]:
+    """`run --map FILE [--start X,Y] [--goal X,Y]`, parsed before any work starts."""
+    from .map_input import parse_point
+
+    if args.map is None:
+        if args.start is not None or args.goal is not None:
+            raise HarnessError("--start and --goal place the robot on a --map file; a --scenario has its own")
+        return None, None, None
+    start = None if args.start is None else parse_point(args.start, "--start")
+    goal = None if args.goal is None else parse_point(args.goal, "--goal")
+    return Path(args.map), start, goal
+
+
 def execute(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     out: Path = args.out
+    map_file: Path | None = None
+    map_start = map_goal = None
     if args.command == "run":
-        names = [args.scenario]
+        names = [] if args.scenario is None else [args.scenario]
         methods = [args.method]
+        map_file, map_start, map_goal = _map_request(args)
     else:
         methods = [m.strip() for m in (args.methods or ("pf" if args.online else "pf,astar")).split(",") if m.strip()]
         unknown = [m for m in methods if m not in METHODS]
@@ -322,6 +342,11 @@ def execute(args: argparse.Namespace) -> int:
         raise HarnessError("feedback mode follows the P-F feedback field: use --method pf (graph planners give only a path)")
     online_config = _online_config(args) if args.online else None
     scenarios = {name: export_scenario(pf_plan, name, out / "scenarios") for name in names}
+    if map_file is not None:
+        from .map_input import load_map_scenario
+
+        map_scenario = load_map_scenario(map_file, map_start, map_goal)
+        scenarios[map_scenario.name] = map_scenario
     if not args.connect:
         # ∫p ds on the field the started service plans with (a running service's is unknown).
         for scenario in scenarios.values():
