@@ -47,7 +47,7 @@ fn bench_estimator(c: &mut Criterion) {
             estimator: kind,
             ..ControllerConfig::default()
         };
-        let mut estimator = StateEstimator::new(&config);
+        let mut estimator = StateEstimator::new(&model, &config);
         estimator.update(&model, &state, &sensors, &plan, 0.001);
         c.bench_function(name, |b| {
             b.iter(|| {

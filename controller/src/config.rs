@@ -454,8 +454,11 @@ controller_config! {
             fmi "est.gyroBiasWalk", range limits::EST_GYRO_BIAS_WALK, unit "rad/s2/sqrt(Hz)",
             "Gyro bias random-walk density of the orientation filter";
         /// Standard deviation of the accelerometer as a gravity-direction reference, m/s² (sensor
-        /// noise plus the trunk's own accelerations while walking).
-        est_acc_tilt_noise: f64 = 3.0,
+        /// noise plus the trunk's own accelerations while walking). Large on purpose: the trot's
+        /// accelerations are several m/s² and the samples the norm gate lets through are not
+        /// zero-mean, so the tilt correction must average over minutes, not seconds (with the
+        /// default gyro noise its time constant is about 100 s at 1 kHz; see docs/estimation.md).
+        est_acc_tilt_noise: f64 = 10.0,
             fmi "est.accTiltNoise", range limits::EST_ACC_TILT_NOISE, unit "m/s2",
             "Accelerometer noise as a gravity-direction (tilt) reference, walking accelerations included";
         /// Accelerometer noise density driving the Kalman filter's velocity, m/s²/√Hz (sensor
@@ -486,6 +489,12 @@ controller_config! {
         est_swing_noise_factor: f64 = 100.0,
             fmi "est.swingNoiseFactor", range limits::EST_SWING_NOISE_FACTOR, unit "",
             "Factor on the leg-kinematics noise variances of a swing foot (ramped around touch-down)";
+        /// How far a stance foot's sphere rolls, as a share of its radius: 1 = it rolls without
+        /// slipping (rubber feet, the simulated body), so its centre moves at ω_foot × r·ẑ while
+        /// the contact point stands still; 0 = the foot centre itself stands still (point feet).
+        est_foot_rolling: f64 = 1.0,
+            fmi "est.footRolling", range limits::EST_FOOT_ROLLING, unit "",
+            "Share of the foot radius a stance foot rolls over (1 = rolls without slipping, 0 = point foot)";
         /// Gyro full-scale range, rad/s: a reading at or beyond it is saturated.
         est_gyro_limit: f64 = 34.9,
             fmi "est.gyroLimit", range limits::EST_GYRO_LIMIT, unit "rad/s",
@@ -551,7 +560,7 @@ mod tests {
                 .iter()
                 .map(|f| f.len)
                 .sum::<usize>(),
-            54
+            55
         );
     }
 

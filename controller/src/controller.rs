@@ -76,7 +76,7 @@ impl Controller {
             legs: LegControl::new(&model, &config, stand_joint_positions),
         };
         Ok(Controller {
-            estimator: StateEstimator::new(&config),
+            estimator: StateEstimator::new(&model, &config),
             fsm: Fsm::new(&config),
             last_transition: None,
             stages,

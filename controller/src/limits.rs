@@ -68,5 +68,7 @@ pub const EST_FOOT_DRIFT: RangeInclusive<f64> = 1e-6..=1.0;
 pub const EST_FIX_NOISE: RangeInclusive<f64> = 1e-4..=100.0;
 /// `est_swing_noise_factor`.
 pub const EST_SWING_NOISE_FACTOR: RangeInclusive<f64> = 1.0..=1e6;
+/// `est_foot_rolling` (share of the foot radius).
+pub const EST_FOOT_ROLLING: RangeInclusive<f64> = 0.0..=1.0;
 /// `est_gyro_limit`, rad/s (±2000 °/s is the usual largest MEMS range).
 pub const EST_GYRO_LIMIT: RangeInclusive<f64> = 1.0..=100.0;

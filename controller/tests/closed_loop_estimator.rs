@@ -18,6 +18,8 @@ fn kalman_mode_trots_on_its_own_estimate() {
     let model = common::model();
     let config = ControllerConfig {
         estimator: EstimatorKind::Kalman,
+        // This rigid-body simulation holds each stance foot's centre still (a point foot).
+        est_foot_rolling: 0.0,
         ..ControllerConfig::default()
     };
     let dt = config.control_dt;

@@ -59,6 +59,8 @@ struct LegNoise {
     foot_drift: f64,
     fix_sigma: f64,
     swing_factor: f64,
+    /// Rolling radius of a stance foot, m (foot radius × `est_foot_rolling`).
+    rolling_radius: f64,
 }
 
 /// The two filters, created at the first tick.
@@ -101,7 +103,7 @@ pub fn leg_trust(reading: ContactReading, planned: Option<f64>) -> f64 {
 
 impl StateEstimator {
     /// The estimator configured by `config` (nothing is estimated before the first tick).
-    pub fn new(config: &ControllerConfig) -> Self {
+    pub fn new(model: &RobotModel, config: &ControllerConfig) -> Self {
         let gait = Gait::new(config.gait, config.gait_period);
         StateEstimator {
             kind: config.estimator,
@@ -117,6 +119,7 @@ impl StateEstimator {
                 foot_drift: config.est_foot_drift,
                 fix_sigma: config.est_fix_noise,
                 swing_factor: config.est_swing_noise_factor,
+                rolling_radius: config.est_foot_rolling * model.foot_radius(),
             },
             gyro_limit: config.est_gyro_limit,
             contact_timeout: (CONTACT_TIMEOUT_SWINGS * gait.swing_time()).max(MIN_CONTACT_TIMEOUT),
@@ -263,11 +266,17 @@ impl StateEstimator {
             let l = leg.index();
             let q = leg_slice(&state.joint_positions, leg);
             let dq = Vector3::from(leg_slice(&state.joint_velocities, leg));
-            let (foot_body, jacobian) = model.foot_position_and_jacobian(leg, q);
+            let foot = model.foot_kinematics(leg, q);
+            let foot_body = foot.position;
             let relative = rotation * foot_body;
             let velocity = (trust[l] > 0.0).then(|| {
-                let foot_velocity_body = jacobian * dq + omega_body.cross(&foot_body);
-                -(rotation * foot_velocity_body)
+                let foot_velocity_body = foot.jacobian * dq + omega_body.cross(&foot_body);
+                // A sphere foot rolls while it stands: its contact point is still, its centre
+                // moves at ω_foot × r·ẑ (about 4 cm/s when trotting at 0.5 m/s, a 7 % bias on
+                // the trunk velocity if ignored).
+                let foot_rate_world = rotation * (omega_body + foot.angular_jacobian * dq);
+                let rolling = foot_rate_world.cross(&Vector3::new(0.0, 0.0, noise.rolling_radius));
+                rolling - rotation * foot_velocity_body
             });
             filters.kalman.update_leg(
                 l,

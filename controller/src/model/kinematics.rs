@@ -7,6 +7,18 @@ use super::{to_array3, to_array33, LegFrames, RobotModel, Transform};
 use crate::api::{Leg, ModelError};
 use crate::math::wrap_angle;
 
+/// One leg's foot kinematics in the base frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FootKinematics {
+    /// Foot (sphere centre) position, m.
+    pub position: Vector3<f64>,
+    /// ∂p_foot/∂q (row = Cartesian axis, column = joint).
+    pub jacobian: Matrix3<f64>,
+    /// ∂ω_foot/∂q̇: the joint axes (the foot link's angular velocity relative to the base is
+    /// `angular_jacobian · q̇`).
+    pub angular_jacobian: Matrix3<f64>,
+}
+
 /// Why an IK target was not reached (turned into [`ModelError::Unreachable`] on demand).
 #[derive(Clone, Copy, Debug)]
 enum IkFailure {
@@ -53,20 +65,32 @@ impl RobotModel {
         to_array33(&self.jacobian(leg, q_leg))
     }
 
-    /// Foot position (base frame, m) and foot Jacobian of one leg from one kinematics pass (the
-    /// estimator needs both every tick).
+    /// Foot position (base frame, m) and foot Jacobian of one leg from one kinematics pass.
     pub fn foot_position_and_jacobian(
         &self,
         leg: Leg,
         q_leg: [f64; 3],
     ) -> (Vector3<f64>, Matrix3<f64>) {
+        let kinematics = self.foot_kinematics(leg, q_leg);
+        (kinematics.position, kinematics.jacobian)
+    }
+
+    /// Foot position, linear and angular Jacobians of one leg from one kinematics pass (the
+    /// estimator needs all three every tick).
+    pub fn foot_kinematics(&self, leg: Leg, q_leg: [f64; 3]) -> FootKinematics {
         let frames = self.frames(leg, q_leg);
-        let mut jac = Matrix3::zeros();
+        let mut jacobian = Matrix3::zeros();
+        let mut angular_jacobian = Matrix3::zeros();
         for i in 0..3 {
             let column = frames.joint_axis[i].cross(&(frames.foot - frames.joint_origin[i]));
-            jac.set_column(i, &column);
+            jacobian.set_column(i, &column);
+            angular_jacobian.set_column(i, &frames.joint_axis[i]);
         }
-        (frames.foot, jac)
+        FootKinematics {
+            position: frames.foot,
+            jacobian,
+            angular_jacobian,
+        }
     }
 
     fn jacobian(&self, leg: Leg, q: [f64; 3]) -> Matrix3<f64> {

@@ -19,6 +19,8 @@
 
 mod dynamics;
 mod kinematics;
+
+pub use kinematics::FootKinematics;
 mod urdf;
 
 #[cfg(test)]
