@@ -132,17 +132,17 @@ def plan_for(
 ) -> Callable[[str, str], Plan]:
     """`plan_for(scenario, method)`: the service's plan, requested once per session (P-F solves take a while)."""
     cache: dict[tuple[str, str], Plan] = {}
-    map_seqs: dict[str, int] = {}
 
     def get(name: str, method: str) -> Plan:
         if (name, method) not in cache:
             scenario = paper_scenarios[name]
-            if name not in map_seqs:
-                map_seqs[name] = planner.publish_map(scenario.terrain)
+            # Published afresh for every request: the service keeps only its most recent maps and
+            # refuses an older sequence number, and other tests (online runs) publish many maps.
+            map_seq = planner.publish_map(scenario.terrain)
             cache[(name, method)] = planner.request_plan(
                 scenario,
                 method,
-                map_seqs[name],
+                map_seq,
                 timeout=300.0,
                 retries=2,
                 max_solve_time=240.0,

@@ -90,6 +90,10 @@ def test_real_dem_crop_plans_and_walks(
             "--no-progress",
             "--lcm-url",
             lcm_url,
+            # Channels of its own: the session's planner service (other tests) must not see this
+            # run's map publications, which would push its cached maps out.
+            "--channel-prefix",
+            "PFNAV_REALTERRAIN_",
             "--out",
             str(out),
         ],
