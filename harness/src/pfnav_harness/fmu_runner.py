@@ -157,13 +157,7 @@ class FmuContract:
     def __init__(self, md: Any, source: str) -> None:
         variables = {v.name: v for v in md.modelVariables}
         types = {t.name: t for t in md.typeDefinitions}
-        problems = []
-        for name, causality in USED_VARIABLES.items():
-            v = variables.get(name)
-            if v is None:
-                problems.append(f"no variable {name}")
-            elif v.causality != causality:
-                problems.append(f"{name} is {v.causality}, not {causality}")
+        problems = _variable_problems(variables, USED_VARIABLES)
         for type_name, items in USED_ENUMERATIONS.items():
             t = types.get(type_name)
             if t is None or t.type != "Enumeration":
@@ -184,7 +178,7 @@ class FmuContract:
         self.parameters = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
         self.fsm = enumeration(md, FSM_TYPE)
         self.mode = enumeration(md, MODE_TYPE)
-        self.estimation_problems = _estimation_problems(variables)
+        self.estimation_problems = _variable_problems(variables, ESTIMATION_VARIABLES)
         self.estimator_codes: dict[str, int] = {}
         if not self.estimation_problems:
             self.value_references |= {name: int(variables[name].valueReference) for name in ESTIMATION_VARIABLES}
@@ -210,9 +204,10 @@ class FmuContract:
         return [self.value_references[n] for n in names]
 
 
-def _estimation_problems(variables: dict[str, Any]) -> list[str]:
+def _variable_problems(variables: dict[str, Any], expected: dict[str, str]) -> list[str]:
+    """What is missing or of another causality among the `expected` variables (name → causality)."""
     problems = []
-    for name, causality in ESTIMATION_VARIABLES.items():
+    for name, causality in expected.items():
         v = variables.get(name)
         if v is None:
             problems.append(f"no variable {name}")
