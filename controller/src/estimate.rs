@@ -69,11 +69,19 @@ impl Estimate {
             velocity: Vector3::from(state.base_linear_velocity),
             angular_velocity: Vector3::from(state.base_angular_velocity),
         };
-        Estimate::from_base(model, &base, state)
+        let feet_body = Leg::ALL.map(|leg| {
+            Vector3::from(model.foot_position_body(leg, leg_slice(&state.joint_positions, leg)))
+        });
+        Estimate::from_base(&base, state, &feet_body)
     }
 
-    /// The estimate around `base` with the joints of `state` (its base fields are not read).
-    pub fn from_base(model: &RobotModel, base: &BaseState, state: &RobotState) -> Estimate {
+    /// The estimate around `base` with the joints of `state` (its base fields are not read) and
+    /// the feet at `feet_body` (base frame, the forward kinematics of those joints).
+    pub fn from_base(
+        base: &BaseState,
+        state: &RobotState,
+        feet_body: &[Vector3<f64>; NUM_LEGS],
+    ) -> Estimate {
         let rotation = *base.attitude.to_rotation_matrix().matrix();
         let mut q = [[0.0; 3]; NUM_LEGS];
         let mut dq = [[0.0; 3]; NUM_LEGS];
@@ -82,8 +90,7 @@ impl Estimate {
             let l = leg.index();
             q[l] = leg_slice(&state.joint_positions, leg);
             dq[l] = leg_slice(&state.joint_velocities, leg);
-            let foot = Vector3::from(model.foot_position_body(leg, q[l]));
-            feet_world[l] = base.position + rotation * foot;
+            feet_world[l] = base.position + rotation * feet_body[l];
         }
         let gravity = rotation.transpose() * Vector3::new(0.0, 0.0, -GRAVITY);
         Estimate {

@@ -24,7 +24,7 @@ fn foot(leg: usize) -> usize {
 }
 
 /// Initial standard deviations at the placed start: position and feet, m; velocity, m/s.
-const INITIAL_POSITION_SIGMA: f64 = 1e-3;
+pub const INITIAL_POSITION_SIGMA: f64 = 1e-3;
 const INITIAL_VELOCITY_SIGMA: f64 = 0.05;
 const INITIAL_FOOT_SIGMA: f64 = 0.01;
 /// A covariance diagonal beyond this (m², (m/s)²) means the filter has run away.
@@ -48,12 +48,17 @@ pub enum FixOutcome {
 
 impl LegKalman {
     /// A filter at rest at `position` with feet at `feet` (world frame).
-    pub fn new(position: Vector3<f64>, feet: &[Vector3<f64>; NUM_LEGS]) -> Self {
+    pub fn new(
+        position: Vector3<f64>,
+        velocity: Vector3<f64>,
+        feet: &[Vector3<f64>; NUM_LEGS],
+        position_sigma: f64,
+    ) -> Self {
         let mut filter = LegKalman {
             x: StateVector::zeros(),
             p: StateMatrix::zeros(),
         };
-        filter.reset(position, Vector3::zeros(), feet, INITIAL_POSITION_SIGMA);
+        filter.reset(position, velocity, feet, position_sigma);
         filter
     }
 

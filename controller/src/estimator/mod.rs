@@ -182,23 +182,29 @@ impl StateEstimator {
     }
 
     /// The filters placed at the measured base pose, at rest.
-    fn start_filters(&self, model: &RobotModel, state: &RobotState) -> Filters {
+    fn start_filters(&self, state: &RobotState, feet_body: &[Vector3<f64>; NUM_LEGS]) -> Filters {
         let o = state.base_orientation;
-        let attitude = UnitQuaternion::from_quaternion(Quaternion::new(o[0], o[1], o[2], o[3]));
-        let position = Vector3::from(state.base_position);
-        let feet = Leg::ALL.map(|leg| {
-            let q = leg_slice(&state.joint_positions, leg);
-            position + attitude * Vector3::from(model.foot_position_body(leg, q))
-        });
+        let start = BaseState {
+            attitude: UnitQuaternion::from_quaternion(Quaternion::new(o[0], o[1], o[2], o[3])),
+            position: Vector3::from(state.base_position),
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+        };
+        self.filters_at(&start, feet_body, kalman::INITIAL_POSITION_SIGMA)
+    }
+
+    /// Filters at `base` with the feet at `feet_body` (base frame) and position σ `position_sigma`.
+    fn filters_at(
+        &self,
+        base: &BaseState,
+        feet_body: &[Vector3<f64>; NUM_LEGS],
+        position_sigma: f64,
+    ) -> Filters {
+        let feet = feet_body.map(|foot| base.position + base.attitude * foot);
         Filters {
-            orientation: OrientationFilter::new(attitude, self.orientation_noise),
-            kalman: LegKalman::new(position, &feet),
-            last_good: BaseState {
-                attitude,
-                position,
-                velocity: Vector3::zeros(),
-                angular_velocity: Vector3::zeros(),
-            },
+            orientation: OrientationFilter::new(base.attitude, self.orientation_noise),
+            kalman: LegKalman::new(base.position, base.velocity, &feet, position_sigma),
+            last_good: *base,
         }
     }
 
@@ -227,9 +233,12 @@ impl StateEstimator {
     ) -> (Estimate, EstimatorStatus) {
         let mut status = EstimatorStatus::HEALTHY;
         let gyro = self.checked_gyro(sensors.imu.gyro, &mut status);
+        let feet =
+            Leg::ALL.map(|leg| model.foot_kinematics(leg, leg_slice(&state.joint_positions, leg)));
+        let feet_body = feet.map(|foot| foot.position);
         let mut filters = match self.filters.take() {
             Some(filters) => filters,
-            None => self.start_filters(model, state),
+            None => self.start_filters(state, &feet_body),
         };
         let noise = self.leg_noise;
 
@@ -264,9 +273,8 @@ impl StateEstimator {
         let omega_body = body_rate;
         for leg in Leg::ALL {
             let l = leg.index();
-            let q = leg_slice(&state.joint_positions, leg);
             let dq = Vector3::from(leg_slice(&state.joint_velocities, leg));
-            let foot = model.foot_kinematics(leg, q);
+            let foot = &feet[l];
             let foot_body = foot.position;
             let relative = rotation * foot_body;
             let velocity = (trust[l] > 0.0).then(|| {
@@ -315,9 +323,10 @@ impl StateEstimator {
         } else {
             status.set(StatusFlag::CovarianceReset);
             tracing::warn!("estimator diverged: restarting from the last healthy state");
-            filters = self.restart(model, state, &filters.last_good);
+            // Restarted with the velocity it had and a position as uncertain as a fix.
+            filters = self.filters_at(&filters.last_good, &feet_body, self.leg_noise.fix_sigma);
         }
-        let estimate = Estimate::from_base(model, &filters.last_good, state);
+        let estimate = Estimate::from_base(&filters.last_good, state, &feet_body);
         self.filters = Some(filters);
         (estimate, status)
     }
@@ -349,28 +358,6 @@ impl StateEstimator {
                     );
                 }
             }
-        }
-    }
-
-    /// Filters restarted at `last_good` with the feet where the encoders put them.
-    fn restart(&self, model: &RobotModel, state: &RobotState, last_good: &BaseState) -> Filters {
-        let feet = Leg::ALL.map(|leg| {
-            let q = leg_slice(&state.joint_positions, leg);
-            last_good.position
-                + last_good.attitude * Vector3::from(model.foot_position_body(leg, q))
-        });
-        let mut kalman = LegKalman::new(last_good.position, &feet);
-        // Restarted with the velocity it had and a position as uncertain as a fix.
-        kalman.reset(
-            last_good.position,
-            last_good.velocity,
-            &feet,
-            self.leg_noise.fix_sigma,
-        );
-        Filters {
-            orientation: OrientationFilter::new(last_good.attitude, self.orientation_noise),
-            kalman,
-            last_good: *last_good,
         }
     }
 

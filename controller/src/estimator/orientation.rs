@@ -47,10 +47,6 @@ pub struct OrientationFilter {
     noise: OrientationNoise,
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
 impl OrientationFilter {
     /// A filter at `attitude` with zero bias.
     pub fn new(attitude: UnitQuaternion<f64>, noise: OrientationNoise) -> Self {
@@ -98,7 +94,7 @@ impl OrientationFilter {
         self.attitude *= UnitQuaternion::from_scaled_axis(rate * dt);
         // Error dynamics: δθ' = −[ω]× δθ − δb, δb' = noise; first-order transition matrix.
         let mut f = Matrix6::identity();
-        let rotation_step = Matrix3::identity() - skew(&(rate * dt));
+        let rotation_step = Matrix3::identity() - (rate * dt).cross_matrix();
         f.fixed_view_mut::<3, 3>(0, 0).copy_from(&rotation_step);
         f.fixed_view_mut::<3, 3>(0, 3)
             .copy_from(&(-Matrix3::identity() * dt));
@@ -123,7 +119,7 @@ impl OrientationFilter {
         let predicted = self
             .attitude
             .inverse_transform_vector(&Vector3::new(0.0, 0.0, GRAVITY));
-        let jacobian = skew(&predicted);
+        let jacobian = predicted.cross_matrix();
         let variance = self.noise.acc_tilt.powi(2);
         let attitude_covariance = self.covariance.fixed_view::<3, 3>(0, 0).into_owned();
         let innovation_covariance =
