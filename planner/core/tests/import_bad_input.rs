@@ -113,7 +113,7 @@ fn broken_ascii_grids_are_refused_with_the_reason() {
         (
             "inf_corner.asc",
             HEADER.replace("xllcorner 0", "xllcorner inf") + "1 2 3\n4 5 6\n",
-            "",
+            "is not finite",
         ),
         (
             "long_token.asc",
@@ -123,7 +123,7 @@ fn broken_ascii_grids_are_refused_with_the_reason() {
         (
             "binary.asc",
             "ncols \u{0}\u{1}".to_string() + "\u{fffd}",
-            "",
+            "ends inside the header",
         ),
         ("empty.asc", String::new(), "ends inside the header"),
     ];
@@ -179,7 +179,7 @@ fn broken_geotiffs_are_refused_with_the_reason() {
     assert!(import_map(&write(d, "good.tif", &good), &ImportOptions::default()).is_ok());
 
     let truncated = error_of(d, "truncated.tif", &good[..good.len() / 2]);
-    assert!(!truncated.is_empty());
+    assert!(truncated.contains("not a readable TIFF"), "{truncated}");
     let message = error_of(d, "not_tiff.tif", b"GIF89a this is not a tiff at all");
     assert!(message.contains("not a readable TIFF"), "{message}");
     let rgb = geotiff_bytes::<colortype::RGB8>(8, 6, &[7u8; 8 * 6 * 3], &tags);
