@@ -113,7 +113,10 @@ def test_sensor_noise_seed_reaches_the_run_config_with_the_estimator() -> None:
     task = run_tasks(spec, set())[3]
     config = run_config(task)
     assert config.estimator == "kalman"
-    assert config.body_sensors.seed == task.factors["sensor_noise_seed"] == spec.run_factors(3)["sensor_noise_seed"]
+    seed = config.body_sensors.seed
+    assert seed == task.factors["sensor_noise_seed"]
+    assert isinstance(seed, int) and 0 <= seed <= 1000
+    assert {run_config(t).body_sensors.seed for t in run_tasks(spec, set())[:4]} != {seed}, "each run draws its own seed"
     assert run_config(run_tasks(parse_spec(BASE), set())[0]).estimator == "groundTruth"
 
 
