@@ -13,7 +13,6 @@ same whichever worker takes it, in whatever order, and adding a factor does not 
 from __future__ import annotations
 
 import hashlib
-import itertools
 import json
 import math
 import tomllib
@@ -169,13 +168,10 @@ class SweepSpec:
     def _grid_row(self, run_id: int) -> dict[str, float | str]:
         varied = [name for name in FACTORS if name in self.factors]
         axes = [self.factors[name].grid_points() for name in varied]
-        # Row-major over the factors in `FACTORS` order: the last factor changes fastest.
-        combination: tuple[float | str, ...] = ()
-        for k, combo in enumerate(itertools.product(*axes)):
-            if k == run_id:
-                combination = combo
-                break
-        chosen = dict(zip(varied, combination, strict=True))
+        # Row-major over the factors in `FACTORS` order: the last factor changes fastest
+        # (the order of itertools.product), indexed directly instead of enumerated.
+        indices = np.unravel_index(run_id, [len(axis) for axis in axes]) if axes else ()
+        chosen = {name: axis[int(i)] for name, axis, i in zip(varied, axes, indices, strict=True)}
         return {name: chosen.get(name, info.default) for name, info in FACTORS.items()}
 
     def grid_size(self) -> int:
