@@ -11,7 +11,7 @@ world that records foot positions and non-foot contacts):
   `STOOD_HEIGHT_FRACTION` of the nominal stand height above the ground and it has not fallen;
 - walked: horizontal displacement of the base along the walking direction, walk start → end (or
   → the fall);
-- fell: the harness's fall rule (`metrics.compute_metrics`: height, tilt, controller damping),
+- fell: the harness's fall rule (`metrics.judge_fall`: height, tilt, controller damping),
   extended to the stand-up (tilt and damping only: the base starts crouched);
 - slip: largest tangential displacement of the foot's material contact point during one stance
   (the point of the foot sphere that touched down, followed in the foot's frame, so rolling of
@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from . import fmu_runner as fr
 from .cosim import CoSimConfig, CoSimulation, RunResult
 from .errors import ScenarioError, SimulationError
-from .metrics import FallThresholds, TraversabilityField, compute_metrics, roll_pitch_yaw, terrain_pitch_roll
+from .metrics import FallThresholds, judge_fall, rms_tracking_error, roll_pitch_yaw, terrain_pitch_roll
 from .planner_client import Plan
 from .scenario import GoalRegion, Scenario, Terrain
 from .world import FOOT_NAMES, JOINT_NAMES, QuadrupedWorld
@@ -293,7 +293,6 @@ def evaluate(
     friction: float,
     angle_deg: float,
     direction: str,
-    field_model: TraversabilityField,
     placed_margin: float = math.nan,
 ) -> InclineOutcome:
     """Turns one run's log and probe records into an `InclineOutcome`."""
@@ -308,27 +307,20 @@ def evaluate(
     ground = terrain.height(pos[:, 0], pos[:, 1])
     heading = DIRECTIONS[direction]
 
-    thresholds = FallThresholds()
-    metrics = compute_metrics(log, terrain, scenario.goal, field_model, scenario.name, "straight", thresholds)
-    # The harness judges falls from the walk start on; a robot that tips over while standing up is
-    # judged here by the same tilt thresholds and the controller's damping verdict.
-    roll, pitch, yaw = roll_pitch_yaw(log["base_quat"])
+    # The harness's fall rule, with tilt and damping judged from t = 0: a robot that tips over
+    # while standing up has fallen too.
+    verdict = judge_fall(log, terrain, FallThresholds(), tilt_from=0.0)
+    fell, fall_time, fall_reason = verdict.fell, verdict.fall_time, verdict.reason
+    fell_before_walk = fall_time is not None and fall_time < t[k_walk]
+    if fell_before_walk:
+        fall_reason = "before the walk: " + fall_reason
     height = pos[:, 2] - ground
-    tilted = (np.abs(roll) > thresholds.max_roll) | (np.abs(pitch) > thresholds.max_pitch)
-    damping = log["fsm"] == log["fsm_damping"]
-    down_before_walk = np.nonzero((tilted | damping)[:k_walk])[0]
-    fell, fall_time, fall_reason = metrics.fell, metrics.fall_time, metrics.fall_reason
-    if len(down_before_walk):
-        k = int(down_before_walk[0])
-        reasons = [f"roll {math.degrees(roll[k]):.0f} deg"] if abs(roll[k]) > thresholds.max_roll else []
-        reasons += [f"pitch {math.degrees(pitch[k]):.0f} deg"] if abs(pitch[k]) > thresholds.max_pitch else []
-        reasons += ["controller entered damping"] if damping[k] else []
-        fell, fall_time, fall_reason = True, float(t[k]), "before the walk: " + ", ".join(reasons)
+    roll, pitch, yaw = roll_pitch_yaw(log["base_quat"])
     # The last step before the walk: the mode request switches to locomotion at the walk start.
     # (The base starts crouched, so its height is judged there only.)
     k_stood = max(k_walk - 1, 0)
     stand_height = float(height[k_stood])
-    stood_up = bool(int(log["fsm"][k_stood]) == stand_code and stand_height >= STOOD_HEIGHT_FRACTION * nominal_height and not len(down_before_walk))
+    stood_up = bool(int(log["fsm"][k_stood]) == stand_code and stand_height >= STOOD_HEIGHT_FRACTION * nominal_height and not fell_before_walk)
     stand_slide = float(np.hypot(*(pos[k_walk, :2] - pos[0, :2])))
 
     k_end = n - 1 if fall_time is None else min(round(fall_time / dt), n - 1)
@@ -376,7 +368,7 @@ def evaluate(
         fell=fell,
         fall_time=fall_time,
         fall_reason=fall_reason,
-        fell_before_walk=bool(len(down_before_walk)),
+        fell_before_walk=fell_before_walk,
         max_stance_slip=max((e.slip for e in walk_slips), default=0.0),
         stand_slip=max((e.slip for e in stand_slips), default=0.0),
         worst_slip=worst,
@@ -385,7 +377,7 @@ def evaluate(
         peak_torque_ratio=float(ratio[peak]) if ratio.size else 0.0,
         peak_torque_joint=JOINT_NAMES[int(peak[1])],
         torque_saturation=saturated,
-        rms_tracking_error=metrics.rms_error,
+        rms_tracking_error=rms_tracking_error(log),
         non_foot_contacts=dict(sorted(((name, times[0]) for name, times in probe.link_contacts.items()), key=lambda item: item[1])),
     )
 
@@ -437,7 +429,6 @@ def run_incline(
         begin = time.perf_counter()
         result = sim.run(progress)
         wall = time.perf_counter() - begin
-        field_model = TraversabilityField(scenario.terrain)
-        outcome = evaluate(scenario, result, probe, sim.world, nominal_height, stand_code, friction, angle_deg, direction, field_model, placed_margin)
+        outcome = evaluate(scenario, result, probe, sim.world, nominal_height, stand_code, friction, angle_deg, direction, placed_margin)
     outcome.wall_time = wall
     return InclineRun(outcome, result, scenario, plan)

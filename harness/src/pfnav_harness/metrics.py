@@ -196,6 +196,66 @@ class RunMetrics:
         return asdict(self)
 
 
+@dataclass
+class FallVerdict:
+    """Whether and when a run fell, and by which rule."""
+
+    fell: bool
+    fall_time: float | None
+    reason: str
+
+
+def walking_mask(log: dict[str, FloatArray]) -> NDArray[np.bool_]:
+    """The log rows from the walk start on (every row when the walk never started)."""
+    t = log["t"]
+    walking = t >= (float(log["walk_start"]) if "walk_start" in log else 0.0)
+    return walking if np.any(walking) else np.ones_like(t, dtype=bool)
+
+
+def judge_fall(log: dict[str, FloatArray], terrain: Terrain, thresholds: FallThresholds, tilt_from: float | None = None) -> FallVerdict:
+    """The harness's fall rule: the base too low, too much roll or pitch, or the controller in damping.
+
+    Height is judged from the walk start on (the robot starts crouched); tilt and damping from
+    `tilt_from` (default: the walk start too), so a caller can also judge the stand-up.
+    """
+    t = log["t"]
+    pos = log["base_pos"]
+    walking = walking_mask(log)
+    tilt_judged = walking if tilt_from is None else t >= tilt_from
+    roll, pitch, _ = roll_pitch_yaw(log["base_quat"])
+    base_height = pos[:, 2] - terrain.height(pos[:, 0], pos[:, 1])
+    too_low = (base_height < thresholds.min_base_height) & walking
+    # Absolute tilt: on rough ground the local slope under the base is too noisy a reference
+    # (±0.3 m windows on the scenario meshes reach 30°), and no walkable slope tilts a standing
+    # body anywhere near the thresholds.
+    too_rolled = (np.abs(roll) > thresholds.max_roll) & tilt_judged
+    too_pitched = (np.abs(pitch) > thresholds.max_pitch) & tilt_judged
+    # The controller's damping state is its own verdict that the robot is down (the log carries
+    # the FMU's code of that state, read from its modelDescription).
+    damping = ((log["fsm"] == log["fsm_damping"]) if "fsm" in log else np.zeros_like(too_low)) & tilt_judged
+    fallen = too_low | too_rolled | too_pitched | damping
+    if not np.any(fallen):
+        return FallVerdict(False, None, "")
+    k = int(np.nonzero(fallen)[0][0])
+    reasons = []
+    if too_low[k]:
+        reasons.append(f"base {base_height[k]:.3f} m above ground")
+    if too_rolled[k]:
+        reasons.append(f"roll {math.degrees(roll[k]):.0f} deg")
+    if too_pitched[k]:
+        reasons.append(f"pitch {math.degrees(pitch[k]):.0f} deg")
+    if damping[k]:
+        reasons.append("controller entered damping")
+    return FallVerdict(True, float(t[k]), ", ".join(reasons))
+
+
+def rms_tracking_error(log: dict[str, FloatArray]) -> float:
+    """Horizontal RMS distance of the base from the reference while walking, m."""
+    pos, ref = log["base_pos"], log["ref"]
+    err = np.hypot(pos[:, 0] - ref[:, 0], pos[:, 1] - ref[:, 1])[walking_mask(log)]
+    return float(np.sqrt(np.mean(err**2)))
+
+
 def compute_metrics(
     log: dict[str, FloatArray],
     terrain: Terrain,
@@ -213,12 +273,10 @@ def compute_metrics(
     quat = log["base_quat"]
     ref = log["ref"]  # columns x, y, z, yaw, vx, vy, yaw_rate
     walk_start = float(log["walk_start"]) if "walk_start" in log else 0.0
-    walking = t >= walk_start
-    if not np.any(walking):
-        walking = np.ones_like(t, dtype=bool)
+    walking = walking_mask(log)
 
     err = np.hypot(pos[:, 0] - ref[:, 0], pos[:, 1] - ref[:, 1])
-    roll, pitch, yaw = roll_pitch_yaw(quat)
+    _, _, yaw = roll_pitch_yaw(quat)
     heading_err = np.abs(wrap_angle(yaw - ref[:, 3]))
     e_walk = err[walking]
     h_walk = heading_err[walking]
@@ -228,35 +286,7 @@ def compute_metrics(
     goal_reached = bool(len(inside))
     time_to_goal = float(t[inside[0]] - walk_start) if goal_reached else None
 
-    ground = terrain.height(pos[:, 0], pos[:, 1])
-    base_height = pos[:, 2] - ground
-    too_low = base_height < thresholds.min_base_height
-    # Absolute tilt: on rough ground the local slope under the base is too noisy a reference
-    # (±0.3 m windows on the scenario meshes reach 30°), and no walkable slope tilts a standing
-    # body anywhere near the thresholds.
-    too_rolled = np.abs(roll) > thresholds.max_roll
-    too_pitched = np.abs(pitch) > thresholds.max_pitch
-    # The controller's damping state is its own verdict that the robot is down (the log carries
-    # the FMU's code of that state, read from its modelDescription).
-    damping = (log["fsm"] == log["fsm_damping"]) if "fsm" in log else np.zeros_like(too_low)
-    # Before the controller has stood up the base is legitimately low: only judge after walk start.
-    fallen = (too_low | too_rolled | too_pitched | damping) & walking
-    fell = bool(np.any(fallen))
-    fall_time = None
-    reason = ""
-    if fell:
-        k = int(np.nonzero(fallen)[0][0])
-        fall_time = float(t[k])
-        reasons = []
-        if too_low[k]:
-            reasons.append(f"base {base_height[k]:.3f} m above ground")
-        if too_rolled[k]:
-            reasons.append(f"roll {math.degrees(roll[k]):.0f} deg")
-        if too_pitched[k]:
-            reasons.append(f"pitch {math.degrees(pitch[k]):.0f} deg")
-        if damping[k]:
-            reasons.append("controller entered damping")
-        reason = ", ".join(reasons)
+    verdict = judge_fall(log, terrain, thresholds)
 
     tau = log["tau"]
     dt = np.diff(t, prepend=t[0] - (t[1] - t[0] if len(t) > 1 else 0.0))
@@ -271,16 +301,16 @@ def compute_metrics(
         method=method,
         duration=float(t[-1] - t[0]) if len(t) else 0.0,
         walk_start=walk_start,
-        rms_error=float(np.sqrt(np.mean(e_walk**2))),
+        rms_error=rms_tracking_error(log),
         max_error=float(np.max(e_walk)),
         rms_heading_error_deg=float(np.degrees(np.sqrt(np.mean(h_walk**2)))),
         max_heading_error_deg=float(np.degrees(np.max(h_walk))),
         final_distance_to_goal=float(goal_dist[-1]),
         goal_reached=goal_reached,
         time_to_goal=time_to_goal,
-        fell=fell,
-        fall_time=fall_time,
-        fall_reason=reason,
+        fell=verdict.fell,
+        fall_time=verdict.fall_time,
+        fall_reason=verdict.reason,
         effort=effort,
         executed_cost=executed_cost,
         executed_length=executed_length,
