@@ -678,14 +678,14 @@ fn check_name(name: &str) -> Result<(), PlanError> {
     }
 }
 
-fn io_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
+pub(crate) fn io_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
     PlanError::Io {
         path: path.display().to_string(),
         reason: e.to_string(),
     }
 }
 
-fn format_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
+pub(crate) fn format_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
     PlanError::Format {
         path: path.display().to_string(),
         reason: e.to_string(),

@@ -354,3 +354,28 @@ fn random_small_ascii_grids_never_panic() {
         )
         .expect("no panics, valid maps");
 }
+
+#[test]
+fn elevations_below_zero_are_refused_only_when_kept() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A shore: 4 m below sea level to 6 m above.
+    let dem = Dem::from_fn(6, 5, 0.0, 0.0, 1.0, |x, _| 2.0 * x - 4.0);
+    let path = dir.path().join("shore.asc");
+    dem.write_asc(&path, None);
+    let keep = ImportOptions {
+        keep_elevation: true,
+        ..ImportOptions::default()
+    };
+    let err = import_map(&path, &keep)
+        .map(|m| m.map.len())
+        .expect_err("kept below 0");
+    assert!(err.to_string().contains("below 0 m"), "{err}");
+    let shifted = import_map(&path, &ImportOptions::default()).expect("shifted to 0 m");
+    let lowest = shifted
+        .map
+        .heights
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(lowest, 0.0);
+}

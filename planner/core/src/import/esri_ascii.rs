@@ -10,10 +10,9 @@ use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
-use super::raster::{
-    elevation, format_error, io_error, CellWindow, Crop, Raster, RasterGeometry, WindowSink,
-};
+use super::raster::{elevation, CellWindow, Crop, Raster, RasterGeometry, WindowSink};
 use crate::error::PlanError;
+use crate::io::{format_error, io_error};
 
 /// Longest token accepted (a number with 17 significant digits and an exponent is ~25 bytes).
 const MAX_TOKEN_BYTES: usize = 64;

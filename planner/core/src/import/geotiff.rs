@@ -18,8 +18,9 @@ use tiff::tags::Tag;
 use tiff::TiffError;
 
 use super::raster::WindowSink;
-use super::raster::{elevation, format_error, io_error, CellWindow, Crop, Raster, RasterGeometry};
+use super::raster::{elevation, CellWindow, Crop, Raster, RasterGeometry};
 use crate::error::PlanError;
+use crate::io::{format_error, io_error};
 
 /// Largest strip or tile decoded at once, bytes.
 const MAX_CHUNK_BYTES: usize = 256 << 20;
@@ -239,16 +240,12 @@ fn georeference(
                     "--source-cell-size {size} replaces the file's cell size {dx} x {dy}"
                 ));
             }
-            let (cx, cy) = (west, north);
             dx = size;
             dy = size;
             if geographic || placed.is_none() {
                 // Degrees or no georeference: the raster starts at (0, 0).
                 west = 0.0;
                 north = rows as f64 * size;
-            } else {
-                west = cx;
-                north = cy;
             }
         }
         None if placed.is_none() => {

@@ -310,17 +310,24 @@ pub fn import_map(path: &Path, options: &ImportOptions) -> Result<ImportedMap, P
         reason: "every cell of the crop is nodata".into(),
     })?;
     let nodata_cells = nodata.iter().filter(|&&n| n).count();
-    let offset = if options.keep_elevation {
-        0.0
-    } else {
-        window
-            .values
-            .iter()
-            .zip(&nodata)
-            .filter(|(_, &n)| !n)
-            .map(|(&h, _)| h)
-            .fold(f64::INFINITY, f64::min)
-    };
+    let lowest = window
+        .values
+        .iter()
+        .zip(&nodata)
+        .filter(|(_, &n)| !n)
+        .map(|(&h, _)| h)
+        .fold(f64::INFINITY, f64::min);
+    // The planner's height term p = h/h_max needs h >= 0: refuse here rather than at plan time.
+    if options.keep_elevation && lowest < 0.0 {
+        return Err(PlanError::InvalidOption {
+            name: "--keep-elevation",
+            reason: format!(
+                "the crop goes down to {lowest} m, below 0 m (the planner needs heights >= 0); \
+                 leave out --keep-elevation to shift the lowest cell to 0 m"
+            ),
+        });
+    }
+    let offset = if options.keep_elevation { 0.0 } else { lowest };
     let heights: Vec<f64> = window.values.iter().map(|h| (h - offset) * scale).collect();
     let obstacles = (nodata_cells > 0).then_some(nodata);
     let map = GridMap::new(

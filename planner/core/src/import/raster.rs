@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use crate::error::PlanError;
+use crate::io::format_error;
 use crate::map::Point;
 
 /// Where a raster lies: cell counts, lower-left corner and cell sizes in the source's units.
@@ -325,18 +326,4 @@ pub(crate) fn elevation(
 
 fn describe_nodata(nodata: Option<f64>) -> String {
     nodata.map_or_else(|| "not declared".into(), |v| v.to_string())
-}
-
-pub(crate) fn format_error(path: &Path, reason: impl Into<String>) -> PlanError {
-    PlanError::Format {
-        path: path.display().to_string(),
-        reason: reason.into(),
-    }
-}
-
-pub(crate) fn io_error(path: &Path, e: impl std::fmt::Display) -> PlanError {
-    PlanError::Io {
-        path: path.display().to_string(),
-        reason: e.to_string(),
-    }
 }
