@@ -49,7 +49,8 @@ def in_private_network_namespace() -> bool:
     return interfaces == ["lo"]
 
 
-def _check_lcm_url(url: str, allow_host_network: bool) -> None:
+def check_lcm_url(url: str, allow_host_network: bool) -> None:
+    """Refuses udpm:// outside a private network namespace (the project's network rule)."""
     if url.startswith("udpm://") and not allow_host_network and not in_private_network_namespace():
         raise HarnessError(
             "LCM udpm:// is only used inside a private network namespace: run through `bash scripts/netns.sh ...` "
@@ -354,7 +355,7 @@ def execute(args: argparse.Namespace) -> int:
             max_slope = _max_slope_deg(args)
             if max_slope is not None:
                 scenario.traversability["max_slope_deg"] = max_slope
-    _check_lcm_url(args.lcm_url, args.allow_host_network)
+    check_lcm_url(args.lcm_url, args.allow_host_network)
     answers = {} if online_config is not None else _plan_all(args, scenarios, methods, out)
     plan_time = time.perf_counter() - started
 

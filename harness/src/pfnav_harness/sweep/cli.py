@@ -31,11 +31,10 @@ if TYPE_CHECKING:
 
 
 def _lcm_planner(lcm_url: str, allow_host_network: bool) -> Planner:
-    from ..cli import in_private_network_namespace
+    from ..cli import check_lcm_url
 
     def plan(scenario: Scenario, method: str) -> Plan:
-        if lcm_url.startswith("udpm://") and not allow_host_network and not in_private_network_namespace():
-            raise HarnessError("planning uses LCM udpm://, which only runs inside a private network namespace: run through `bash scripts/netns.sh ...`")
+        check_lcm_url(lcm_url, allow_host_network)
         return plan_scenario(scenario, [method], lcm_url, service_binary=paths.planner_service_path())[method]
 
     return plan

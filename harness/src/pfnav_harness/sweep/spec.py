@@ -84,10 +84,6 @@ class Factor:
     range: tuple[float, float] | None = None
     steps: int | None = None
 
-    @property
-    def is_range(self) -> bool:
-        return self.range is not None
-
     def grid_points(self) -> tuple[float | str, ...]:
         if self.range is None:
             return self.values
