@@ -26,8 +26,8 @@
 use nalgebra::Vector3;
 
 use crate::api::{
-    Command, ControllerError, EstimateReport, FsmState, HeightMap, Leg, Reference, RobotState,
-    SensorReadings, NUM_JOINTS, NUM_LEGS,
+    Command, ControllerError, FsmState, HeightMap, Leg, Reference, RobotState, SensorReadings,
+    NUM_JOINTS, NUM_LEGS,
 };
 use crate::config::ControllerConfig;
 use crate::estimator::StateEstimator;
@@ -124,16 +124,6 @@ impl Controller {
         }
         self.stages.legs.set_input_period(seconds);
         Ok(())
-    }
-
-    /// The estimate of the last tick and the estimator's status (all zero before the first tick).
-    pub fn estimate(&self) -> EstimateReport {
-        self.estimator.report()
-    }
-
-    /// The estimator stage (its kind, gyro bias).
-    pub fn estimator(&self) -> &StateEstimator {
-        &self.estimator
     }
 
     /// The robot model.

@@ -131,11 +131,6 @@ impl StateEstimator {
         }
     }
 
-    /// Which estimator runs.
-    pub fn kind(&self) -> EstimatorKind {
-        self.kind
-    }
-
     /// Whether this tick reads the base pose/twist of the measured state (ground truth always,
     /// Kalman only at its first tick).
     pub fn reads_base_state(&self) -> bool {

@@ -82,27 +82,8 @@ impl EstimatorStatus {
         self.0 |= flag.bit();
     }
 
-    /// Whether `flag` is set.
-    pub fn contains(self, flag: StatusFlag) -> bool {
-        self.0 & flag.bit() != 0
-    }
-
     /// The bit mask.
     pub fn bits(self) -> u32 {
         self.0
-    }
-
-    /// Human-readable text of a status word, e.g. `gyroInvalid|fixRejected` (`ok` for 0).
-    pub fn describe(bits: u32) -> String {
-        let names: Vec<&str> = StatusFlag::ALL
-            .iter()
-            .filter(|(flag, ..)| bits & flag.bit() != 0)
-            .map(|&(_, name, _)| name)
-            .collect();
-        if names.is_empty() {
-            "ok".to_owned()
-        } else {
-            names.join("|")
-        }
     }
 }

@@ -433,6 +433,26 @@ fn kalman_mode_stands_on_its_estimate_and_survives_nan_imu_samples() {
     t += 0.01;
     assert_eq!(estimator_status(&i), 0);
 
+    // A fix 5 m off, still valid for a 10-tick doStep: fused once (refused once, fixRejected
+    // alone); fused at every tick it would be refused three times and the filter would relocate
+    // to it (covarianceReset, and the estimate 5 m away).
+    i.set(
+        "fmi2SetReal",
+        &[vr("fix.pos[1]")],
+        &[Value::Real(truth[0] + 5.0)],
+    )
+    .unwrap();
+    i.do_step(t, 0.01).unwrap();
+    t += 0.01;
+    assert_eq!(estimator_status(&i), 16);
+    assert!((reals(&i, &ESTIMATE)[0] - truth[0]).abs() < 1e-3);
+    i.set(
+        "fmi2SetBoolean",
+        &[vr("fix.valid")],
+        &[Value::Boolean(false)],
+    )
+    .unwrap();
+
     // NaN gyro and accelerometer samples: accepted, reported, the torques stay finite.
     i.set(
         "fmi2SetReal",
