@@ -217,12 +217,9 @@ def _variable_problems(variables: dict[str, Any], expected: dict[str, str]) -> l
 
 
 def _estimator_codes(parameter: Any) -> dict[str, int]:
-    """Estimator mode name → code: the items of the parameter's enumeration type, else the mode's index."""
+    """Estimator mode name → code: the items of the parameter's enumeration type (none when it has no such type)."""
     declared = getattr(parameter, "declaredType", None)
-    items = getattr(declared, "items", None)
-    if items:
-        return {str(item.name): int(item.value) for item in items}
-    return {name: code for code, name in enumerate(ESTIMATOR_MODES)}
+    return {str(item.name): int(item.value) for item in getattr(declared, "items", None) or ()}
 
 
 @dataclass
