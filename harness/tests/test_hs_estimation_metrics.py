@@ -249,6 +249,7 @@ def test_an_unknown_estimator_mode_is_refused() -> None:
         (["--estimator", "kalman", "--sensor-seed", "-3"], "seed"),
         (["--fix-rate", "2"], "add --estimator kalman"),
         (["--contact-sensor"], "add --estimator kalman"),
+        (["--fix-noise", "0.05"], "add --estimator kalman"),
     ],
 )
 def test_bad_estimation_flags_give_a_clear_error(args: list[str], message: str) -> None:

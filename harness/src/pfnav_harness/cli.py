@@ -118,7 +118,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         "from a simulated IMU, joint encoders and optional position fixes; needs an FMU with the estimator)",
     )
     p.add_argument("--fix-rate", type=float, default=0.0, help="kalman: absolute position fixes per second (default 0 = none)")
-    p.add_argument("--fix-noise", type=float, default=0.02, help="kalman: standard deviation of each fix coordinate, m (default 0.02)")
+    p.add_argument("--fix-noise", type=float, default=None, help="kalman: standard deviation of each fix coordinate, m (default 0.02)")
     p.add_argument("--sensor-seed", type=int, default=0, help="kalman: seed of the IMU, encoder and fix noise (default 0)")
     p.add_argument(
         "--contact-sensor",
@@ -178,9 +178,10 @@ def _body_sensors(args: argparse.Namespace) -> BodySensorConfig:
     from .body_sensors import BodySensorConfig
     from .errors import SimulationError
 
-    if args.estimator != "kalman" and (args.fix_rate != 0.0 or args.sensor_seed != 0 or args.contact_sensor):
-        raise HarnessError("--fix-rate, --sensor-seed and --contact-sensor feed the estimator: add --estimator kalman")
-    config = BodySensorConfig(seed=args.sensor_seed, fix_rate=args.fix_rate, fix_noise=args.fix_noise, contact_sensor=args.contact_sensor)
+    if args.estimator != "kalman" and (args.fix_rate != 0.0 or args.fix_noise is not None or args.sensor_seed != 0 or args.contact_sensor):
+        raise HarnessError("--fix-rate, --fix-noise, --sensor-seed and --contact-sensor feed the estimator: add --estimator kalman")
+    fix_noise = BodySensorConfig.fix_noise if args.fix_noise is None else args.fix_noise
+    config = BodySensorConfig(seed=args.sensor_seed, fix_rate=args.fix_rate, fix_noise=fix_noise, contact_sensor=args.contact_sensor)
     try:
         config.validate()
     except SimulationError as err:
