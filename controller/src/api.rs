@@ -160,14 +160,41 @@ pub const HEIGHT_MAP_CELLS: usize = HEIGHT_MAP_SIZE * HEIGHT_MAP_SIZE;
 /// samples the surface is the triangle mesh through them, each cell split along its
 /// (ix, iy)–(ix+1, iy+1) diagonal (the triangulation of the simulated terrain mesh).
 /// `spacing` ≤ 0 means "no map": the controller then uses the [`TerrainPlane`] only.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HeightMap {
     /// World (x, y) of sample (0, 0), m.
     pub origin: [f64; 2],
     /// Distance between neighbouring samples, m (≤ 0: no map).
     pub spacing: f64,
     /// Heights, world z, m.
+    #[serde(with = "height_samples")]
     pub heights: [f64; HEIGHT_MAP_CELLS],
+}
+
+/// Serde of the height samples as a sequence (serde derives arrays of at most 32 elements); a
+/// sequence of any other length is refused.
+mod height_samples {
+    use serde::de::Error;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use super::HEIGHT_MAP_CELLS;
+
+    pub fn serialize<S: Serializer>(
+        heights: &[f64; HEIGHT_MAP_CELLS],
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        heights.as_slice().serialize(serializer)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(
+        deserializer: D,
+    ) -> Result<[f64; HEIGHT_MAP_CELLS], D::Error> {
+        let samples = Vec::<f64>::deserialize(deserializer)?;
+        let len = samples.len();
+        samples
+            .try_into()
+            .map_err(|_| D::Error::invalid_length(len, &"the height map's sample count"))
+    }
 }
 
 impl Default for HeightMap {

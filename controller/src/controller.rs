@@ -24,6 +24,7 @@
 //! (`Controller::set_height_map`) refines all of these (see `footholds`).
 
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 use crate::api::{
     Command, ControllerError, FsmState, HeightMap, Leg, Reference, RobotState, SensorReadings,
@@ -36,9 +37,22 @@ pub use crate::footholds::FOOTHOLD_SEARCH_RADIUS;
 use crate::fsm::{Fsm, FsmTransition, Stages};
 use crate::leg_control::LegControl;
 use crate::model::RobotModel;
-use crate::mpc_schedule::MpcScheduler;
+use crate::mpc_schedule::{MpcMemory, MpcScheduler};
 pub use crate::validation::validate_config;
 use crate::validation::{validate_reference, validate_state};
+
+/// Everything a controller carries from one tick to the next. Restored into a controller built
+/// from the same model and configuration, the controller continues bit for bit as the one it
+/// was taken from (an FMU state is this plus the FMU's own variables).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ControllerState {
+    estimator: StateEstimator,
+    fsm: Fsm,
+    footholds: FootholdPlanner,
+    mpc: MpcMemory,
+    legs: LegControl,
+    last_transition: Option<FsmTransition>,
+}
 
 /// The quadruped controller (see the crate docs for the API contract).
 pub struct Controller {
@@ -84,6 +98,46 @@ impl Controller {
             model,
             config,
         })
+    }
+
+    /// A copy of the controller's state between ticks.
+    pub fn save_state(&self) -> ControllerState {
+        ControllerState {
+            estimator: self.estimator.clone(),
+            fsm: self.fsm.clone(),
+            footholds: self.stages.footholds.clone(),
+            mpc: self.stages.mpc.memory(),
+            legs: self.stages.legs.clone(),
+            last_transition: self.last_transition.clone(),
+        }
+    }
+
+    /// Continues from `state`, saved by a controller of the same model and configuration. A
+    /// state that does not fit (another MPC horizon, a non-finite height map) is refused and
+    /// changes nothing.
+    pub fn restore_state(&mut self, state: ControllerState) -> Result<(), ControllerError> {
+        let ControllerState {
+            estimator,
+            fsm,
+            footholds,
+            mpc,
+            legs,
+            last_transition,
+        } = state;
+        footholds
+            .height_map()
+            .validate()
+            .map_err(ControllerError::InvalidState)?;
+        self.stages
+            .mpc
+            .restore(mpc)
+            .map_err(ControllerError::InvalidState)?;
+        self.estimator = estimator;
+        self.fsm = fsm;
+        self.stages.footholds = footholds;
+        self.stages.legs = legs;
+        self.last_transition = last_transition;
+        Ok(())
     }
 
     /// Sets the local terrain height map used from the next `step` on (a map with spacing ≤ 0

@@ -4,6 +4,7 @@
 //! from [`crate::estimator`] and the rest from the encoders ([`Estimate::from_base`]).
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::api::{Leg, RobotState, GRAVITY, NUM_LEGS};
 use crate::model::RobotModel;
@@ -47,7 +48,7 @@ pub fn rpy_of(rotation: &Matrix3<f64>) -> Vector3<f64> {
 }
 
 /// The base pose and twist an [`Estimate`] is built around.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct BaseState {
     /// Body → world attitude.
     pub attitude: UnitQuaternion<f64>,

@@ -11,6 +11,7 @@
 //! what made the robot fall on the scenario maps.
 
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 use crate::api::{HeightMap, Leg, Reference, GRAVITY, NUM_LEGS};
 use crate::config::ControllerConfig;
@@ -61,7 +62,7 @@ const MIN_NORMAL_SUM: f64 = 1e-9;
 const SWING_CLEARANCE_SAMPLES: std::ops::RangeInclusive<u32> = 2..=8;
 
 /// Base motion the MPC should follow.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct MotionTarget {
     /// Base xy, world frame, m.
     pub xy: [f64; 2],
@@ -123,6 +124,7 @@ pub fn terrain_normal(reference: &Reference) -> Vector3<f64> {
 }
 
 /// The foothold planner and the terrain knowledge behind it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FootholdPlanner {
     /// Nominal foot position under each hip, base frame (xy used for footholds).
     nominal_feet_body: [Vector3<f64>; NUM_LEGS],
@@ -134,6 +136,7 @@ pub struct FootholdPlanner {
     max_terrain_pitch: f64,
     height_map: HeightMap,
     /// Foothold search candidates, ring by ring (nearest first).
+    #[serde(skip, default = "foothold_candidates")]
     foothold_candidates: Vec<FootholdCandidate>,
 }
 

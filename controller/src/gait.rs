@@ -2,10 +2,11 @@
 //! the swing-foot trajectory.
 
 use crate::api::{GaitKind, Leg, NUM_LEGS};
+use serde::{Deserialize, Serialize};
 
 /// A periodic gait: each leg is in stance for the first `duty` fraction of its cycle, which starts
 /// at `offset[leg]` (fractions of the period).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Gait {
     /// Cycle period, s.
     pub period: f64,

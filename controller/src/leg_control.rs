@@ -7,6 +7,7 @@
 //! stand-up interpolation, joint damping, and the final clamp to the URDF effort limits.
 
 use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::api::{Leg, RobotState, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
@@ -25,6 +26,7 @@ const JDOT_STEP: f64 = 1e-6;
 const IK_PULL_IN: [f64; 5] = [1.0, 0.95, 0.9, 0.8, 0.7];
 
 /// The torque laws and their gains and limits.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LegControl {
     effort_limits: [f64; NUM_JOINTS],
     lower_limits: [f64; NUM_JOINTS],

@@ -51,7 +51,7 @@ mod validation;
 
 pub use api::*;
 pub use config::ControllerConfig;
-pub use controller::Controller;
+pub use controller::{Controller, ControllerState};
 pub use estimator::{EstimatorStatus, StatusFlag};
 pub use fsm::FsmTransition;
 pub use model::RobotModel;

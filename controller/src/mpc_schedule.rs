@@ -4,6 +4,7 @@
 //! forces held between solves (a static weight share when a solve fails).
 
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 use crate::api::{ControllerError, Leg, Reference, GRAVITY, NUM_LEGS};
 use crate::config::ControllerConfig;
@@ -41,7 +42,60 @@ pub struct MpcScheduler {
     offsets: Vec<[[f64; 3]; NUM_LEGS]>,
 }
 
+/// What the scheduler carries from one tick to the next (part of a saved controller state).
+/// The QP buffers and the solver cache are not in it: every solve rebuilds its QP from this and
+/// the tick's inputs, and a solver set up afresh solves it exactly as a cached one does
+/// (equilibration is off, so an update leaves no trace of earlier data).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct MpcMemory {
+    ticks_since_mpc: usize,
+    forces: [[f64; 3]; NUM_LEGS],
+    solved_contacts: [bool; NUM_LEGS],
+    solved: bool,
+    solve_time_s: f64,
+    schedule: Vec<[bool; NUM_LEGS]>,
+}
+
 impl MpcScheduler {
+    /// A copy of what the scheduler carries between ticks.
+    pub fn memory(&self) -> MpcMemory {
+        MpcMemory {
+            ticks_since_mpc: self.ticks_since_mpc,
+            forces: self.forces,
+            solved_contacts: self.solved_contacts,
+            solved: self.solved,
+            solve_time_s: self.solve_time_s,
+            schedule: self.schedule.clone(),
+        }
+    }
+
+    /// Continues from `memory` (taken from a scheduler of the same configuration); a memory
+    /// of another horizon is refused and changes nothing.
+    pub fn restore(&mut self, memory: MpcMemory) -> Result<(), String> {
+        if memory.schedule.len() != self.horizon {
+            return Err(format!(
+                "MPC schedule of {} steps, the horizon is {}",
+                memory.schedule.len(),
+                self.horizon
+            ));
+        }
+        let MpcMemory {
+            ticks_since_mpc,
+            forces,
+            solved_contacts,
+            solved,
+            solve_time_s,
+            schedule,
+        } = memory;
+        self.ticks_since_mpc = ticks_since_mpc;
+        self.forces = forces;
+        self.solved_contacts = solved_contacts;
+        self.solved = solved;
+        self.solve_time_s = solve_time_s;
+        self.schedule = schedule;
+        Ok(())
+    }
+
     /// The MPC of `config` for a robot of `mass` kg with body inertia `inertia_body` about its
     /// CoM, which sits at `com_offset_body` from the base origin (base frame).
     pub fn new(

@@ -9,6 +9,7 @@
 //! or inverting the 24×24 innovation covariance.
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::api::NUM_LEGS;
 
@@ -31,7 +32,7 @@ const INITIAL_FOOT_SIGMA: f64 = 0.01;
 const MAX_VARIANCE: f64 = 1e6;
 
 /// Trunk position/velocity and foot positions with their covariance.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LegKalman {
     x: StateVector,
     p: StateMatrix,

@@ -16,6 +16,7 @@ mod status;
 mod tests;
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 pub use status::{EstimatorStatus, StatusFlag};
 
@@ -51,7 +52,7 @@ pub const CONTACT_TIMEOUT_SWINGS: f64 = 3.0;
 pub const MIN_CONTACT_TIMEOUT: f64 = 1.0;
 
 /// Noise values of the Kalman filter (from [`ControllerConfig`]).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 struct LegNoise {
     acc_density: f64,
     leg_position_variance: f64,
@@ -64,7 +65,7 @@ struct LegNoise {
 }
 
 /// The two filters, created at the first tick.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 struct Filters {
     orientation: OrientationFilter,
     kalman: LegKalman,
@@ -73,7 +74,7 @@ struct Filters {
 }
 
 /// The estimator stage: ground truth or the filters, per [`EstimatorKind`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StateEstimator {
     kind: EstimatorKind,
     orientation_noise: OrientationNoise,

@@ -5,6 +5,7 @@
 //! measures the trunk's accelerations too (several m/s² for tens of ms when a trot starts). Yaw is not observable from these two sensors: its error grows with the yaw bias.
 
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::api::GRAVITY;
 
@@ -28,7 +29,7 @@ const MAX_VARIANCE: f64 = 1e3;
 const MAX_BIAS: f64 = 0.2;
 
 /// Noise model of the orientation filter.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct OrientationNoise {
     /// Gyro white-noise density, rad/s/√Hz.
     pub gyro: f64,
@@ -39,7 +40,7 @@ pub struct OrientationNoise {
 }
 
 /// Attitude (body → world) and gyro bias with their error covariance.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OrientationFilter {
     attitude: UnitQuaternion<f64>,
     bias: Vector3<f64>,

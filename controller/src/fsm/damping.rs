@@ -3,7 +3,9 @@
 
 use super::{measured_feet, Actuation, Stages, Tick};
 use crate::api::{FsmState, ModeRequest, NUM_LEGS};
+use serde::{Deserialize, Serialize};
 
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Damping;
 
 impl Damping {

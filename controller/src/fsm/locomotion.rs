@@ -3,6 +3,7 @@
 //! (stance `Jᵀ f`, swing trajectory tracking).
 
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 use super::{balancing_transition, Actuation, Stages, Tick};
 use crate::api::{FsmState, Leg, ModeRequest, Reference, NUM_JOINTS, NUM_LEGS};
@@ -12,6 +13,7 @@ use crate::estimator::StancePlan;
 use crate::footholds::{FootholdPlanner, MotionTarget};
 use crate::gait::{swing_trajectory, Gait, LegPhase};
 
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Locomotion {
     gait: Gait,
     mpc_dt: f64,

@@ -19,6 +19,7 @@ use crate::gait::Gait;
 use crate::leg_control::LegControl;
 use crate::model::RobotModel;
 use crate::mpc_schedule::MpcScheduler;
+use serde::{Deserialize, Serialize};
 
 use damping::Damping;
 use locomotion::Locomotion;
@@ -99,7 +100,7 @@ fn balancing_transition(
 }
 
 /// A change of state, with the fault that caused it when it is a drop to damping.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FsmTransition {
     /// State left.
     pub from: FsmState,
@@ -110,6 +111,7 @@ pub struct FsmTransition {
 }
 
 /// Tilt and joint-limit fault detection shared by the balancing states.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 struct FaultMonitor {
     max_tilt: f64,
     joint_limit_margin: f64,
@@ -146,6 +148,7 @@ impl FaultMonitor {
 }
 
 /// The state machine: the current state, how long it has run, and each state's own data.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Fsm {
     current: FsmState,
     /// Time since the current state was entered, s.

@@ -2,7 +2,9 @@
 
 use super::{Actuation, Stages};
 use crate::api::{FsmState, ModeRequest, NUM_JOINTS, NUM_LEGS};
+use serde::{Deserialize, Serialize};
 
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Passive;
 
 impl Passive {

@@ -4,7 +4,9 @@ use super::{balancing_transition, Actuation, Stages, Tick};
 use crate::api::{FsmState, Leg, ModeRequest, NUM_JOINTS, NUM_LEGS};
 use crate::estimate::Estimate;
 use crate::footholds::MotionTarget;
+use serde::{Deserialize, Serialize};
 
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Stand {
     /// Base pose held, taken on entry.
     hold: MotionTarget,

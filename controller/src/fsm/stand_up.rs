@@ -4,6 +4,7 @@
 use super::{balancing_transition, Actuation, Stages, Tick};
 use crate::api::{FsmState, ModeRequest, GRAVITY, NUM_JOINTS, NUM_LEGS};
 use crate::estimate::Estimate;
+use serde::{Deserialize, Serialize};
 
 /// 3s² − 2s³ on s clamped to [0, 1]: starts and ends the interpolation at zero joint velocity.
 fn smoothstep(s: f64) -> f64 {
@@ -11,6 +12,7 @@ fn smoothstep(s: f64) -> f64 {
     s * s * (3.0 - 2.0 * s)
 }
 
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StandUp {
     duration: f64,
     /// Joint angles at entry, index 3·leg + j, rad.
