@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -167,6 +168,24 @@ def quaternion_to_matrix(q: FloatArray) -> FloatArray:
     )
 
 
+@dataclass(frozen=True)
+class BodySensorsState:
+    """Everything a `BodySensors` carries from one sample to the next (copies; picklable).
+
+    The generators' bit-generator states, the drawn but unused noise block, the IMU bias, the last
+    velocity (for the next Δv) and the readings (the last fix is repeated until the next one).
+    """
+
+    imu_rng: dict[str, Any]
+    fix_rng: dict[str, Any]
+    noise: FloatArray
+    next_noise: int
+    bias: FloatArray
+    previous_velocity: FloatArray | None
+    fixes: int
+    readings: BodyReadings
+
+
 class BodySensors:
     """Seeded IMU, encoder and fix models, sampled every `sample_period` seconds."""
 
@@ -194,6 +213,36 @@ class BodySensors:
         self._next_noise = 0
         self._world_vectors = np.zeros((3, 2))
         self.readings = BodyReadings()
+
+    def save_state(self) -> BodySensorsState:
+        r = self.readings
+        return BodySensorsState(
+            imu_rng=self._imu_rng.bit_generator.state,
+            fix_rng=self._fix_rng.bit_generator.state,
+            noise=self._noise.copy(),
+            next_noise=self._next_noise,
+            bias=self.bias.copy(),
+            previous_velocity=None if self._previous_velocity is None else self._previous_velocity.copy(),
+            fixes=self._fixes,
+            readings=BodyReadings(r.gyro.copy(), r.acc.copy(), r.joint_q.copy(), r.joint_dq.copy(), r.fix_pos.copy(), r.fix_valid),
+        )
+
+    def restore_state(self, state: BodySensorsState) -> None:
+        """Continues from `state` (from `save_state` of sensors with the same configuration)."""
+        self._imu_rng.bit_generator.state = state.imu_rng
+        self._fix_rng.bit_generator.state = state.fix_rng
+        self._noise = state.noise.copy()
+        self._next_noise = state.next_noise
+        self.bias[:] = state.bias
+        self._previous_velocity = None if state.previous_velocity is None else state.previous_velocity.copy()
+        self._fixes = state.fixes
+        out, saved = self.readings, state.readings
+        out.gyro[:] = saved.gyro
+        out.acc[:] = saved.acc
+        out.joint_q[:] = saved.joint_q
+        out.joint_dq[:] = saved.joint_dq
+        out.fix_pos[:] = saved.fix_pos
+        out.fix_valid = saved.fix_valid
 
     def _imu_noise(self) -> FloatArray:
         if self._next_noise == len(self._noise):

@@ -4,10 +4,20 @@ Per communication point: DART state → FMU inputs (state, reference at plan tim
 mode request) → fmi2DoStep(h) → joint torques, held (zero-order) for the physics steps of h.
 The robot first stands (mode request "stand") for `stand_time`, then the plan clock starts and
 the mode request becomes "locomotion". Every physics step is logged.
+
+Forks: everything before the walk's first step (settle and stand-up) is the same for runs that
+differ only in what acts after it. `run_prefix()` runs that prefix once and returns a `ForkPoint`
+(DART state, the FMU's serialized state, the loop's own state and the prefix's log rows), and
+`run_from(fork)` continues it in a fresh world and FMU instance to the end, giving the same
+result and log as `run()`. The run's payload and friction are in its world from the fork on: the
+robot stands up unloaded at `PREFIX_FRICTION` and is loaded, and the ground changed, after it
+stood up. Pushes act on the walk clock only, so they never touch the prefix.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 import time
 from collections.abc import Callable
@@ -18,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import fmu_runner as fr
-from .body_sensors import BodySensorConfig, BodySensors
+from .body_sensors import BodySensorConfig, BodySensors, BodySensorsState
 from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
@@ -28,7 +38,7 @@ from .pushes import PushSchedule
 from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, X, Y
 from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
 from .scenario import Scenario
-from .world import NUM_JOINTS, Payload, QuadrupedWorld, quaternion_to_rpy
+from .world import NUM_JOINTS, Payload, QuadrupedWorld, WorldSnapshot, quaternion_to_rpy, terrain_digest
 
 Progress = Callable[[float], None]
 # FMU reference input ← column of a reference row. ref.z is the height of the local terrain plane
@@ -108,6 +118,37 @@ class CoSimConfig:
         self.body_sensors.validate()
 
 
+# Ground and foot friction of every fork prefix (CoSimConfig's default): a run's own friction
+# acts from the fork on.
+PREFIX_FRICTION = 0.8
+# Config fields a prefix does not depend on: applied at the fork point, or acting on the walk clock only.
+APPLIED_AT_FORK = ("pushes", "payload", "friction")
+# Config fields that only decide when a run ends (never before the walk starts).
+RUN_END_FIELDS = ("max_duration", "settle_time", "after_fall", "fall", "feedback_time_factor")
+
+
+def prefix_signature(config: CoSimConfig) -> str:
+    """The config fields a fork prefix depends on, as text: all but `APPLIED_AT_FORK` and `RUN_END_FIELDS`.
+
+    A field added to CoSimConfig later is part of it unless listed there (more prefixes, never a wrong fork).
+    """
+    skipped = APPLIED_AT_FORK + RUN_END_FIELDS
+    return ";".join(f"{f.name}={getattr(config, f.name)!r}" for f in dataclasses.fields(config) if f.name not in skipped)
+
+
+def walk_start_step(config: CoSimConfig) -> int:
+    """The first physics step of the walk (the first k with k·dt ≥ stand_time): where runs fork."""
+    k = max(0, math.ceil(config.stand_time / config.physics_dt) - 1)
+    while k * config.physics_dt < config.stand_time:
+        k += 1
+    return k
+
+
+def prefix_config(config: CoSimConfig) -> CoSimConfig:
+    """The configuration the fork prefix of runs with `config` is simulated in: no push, no payload, `PREFIX_FRICTION`."""
+    return dataclasses.replace(config, pushes=None, payload=None, friction=PREFIX_FRICTION)
+
+
 @dataclass
 class Timing:
     physics: float = 0.0
@@ -138,6 +179,63 @@ class RunResult:
     stop_reason: str
 
 
+@dataclass(frozen=True)
+class EstimatorLogState:
+    """The estimator's log rows before a fork and its body sensors' state there."""
+
+    rows: NDArray[np.float64]
+    status: NDArray[np.int32]
+    fix_valid: NDArray[np.bool_]
+    new_fix: bool
+    sensors: BodySensorsState
+
+
+@dataclass(frozen=True)
+class ForkPoint:
+    """A run stopped just before its walk's first step, to be continued by `CoSimulation.run_from` (picklable).
+
+    `key` names the prefix (`CoSimulation.fork_key`); `step` is the first step still to run; the
+    `log_*` arrays are the prefix's rows of the loop's logs; `fmu_io` holds the values the master
+    last exchanged with the FMU (held between communication points), `mode` the mode request last
+    sent; `timing` is the prefix's share of the run's timing.
+    """
+
+    key: str
+    step: int
+    world: WorldSnapshot
+    fmu_state: bytes
+    fmu_io: fr.FmuIoSnapshot
+    mode: int
+    friction: float
+    log_state: NDArray[np.float64]
+    log_outputs: NDArray[np.float64]
+    log_ref: NDArray[np.float64]
+    log_flags: NDArray[np.int8]
+    estimator: EstimatorLogState | None
+    timing: Timing
+
+
+@dataclass
+class _Loop:
+    """The master loop's state between calls of `CoSimulation._advance` (one run)."""
+
+    n_steps: int
+    state_names: fr.NamedVector
+    log_state: NDArray[np.float64]
+    log_outputs: NDArray[np.float64]
+    log_ref: NDArray[np.float64]
+    log_flags: NDArray[np.int8]
+    log_push: NDArray[np.float64] | None
+    estimator: EstimatorInTheLoop | None
+    timing: Timing
+    # The next step to simulate; after a stop, the number of logged rows.
+    k: int = 0
+    mode: int = 0
+    fall_step: int | None = None
+    goal_since: float | None = None
+    stop_reason: str | None = None
+
+
 class CoSimulation:
     """One run: one scenario, one plan (or an online navigator that replans), one FMU instance, one DART world."""
 
@@ -163,6 +261,7 @@ class CoSimulation:
         self.scenario = scenario
         self.plan = plan
         self.online = online
+        self.urdf = Path(urdf)
         c = self.config
         self.source: TrajectorySource | FieldSource
         if c.follow == "feedback":
@@ -199,25 +298,141 @@ class CoSimulation:
         total = c.stand_time + walk + c.settle_time
         return min(total, c.max_duration) if c.max_duration is not None else total
 
+    def walk_start_step(self) -> int:
+        return walk_start_step(self.config)
+
+    def fork_key(self) -> str:
+        """What the prefix up to `walk_start_step` depends on, as a digest: runs with equal keys share a fork.
+
+        Covers the FMU, the robot, the scenario's terrain and start, the plan and the config's
+        `prefix_signature`.
+        """
+        h = hashlib.sha256()
+        guid = getattr(getattr(self.fmu, "info", None), "guid", type(self.fmu).__name__)
+        h.update(f"fmu={guid};urdf={self.urdf};scenario={self.scenario.name};start_yaw={self.scenario.start_yaw!r};".encode())
+        h.update(terrain_digest(self.scenario.terrain).encode())
+        for name, values in self.plan.to_npz_dict().items():
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+        h.update(prefix_signature(self.config).encode())
+        return h.hexdigest()[:16]
+
     def run(self, progress: Progress | None = None) -> RunResult:
+        """The whole run from the robot's placement: stand-up, walk, settle."""
+        loop = self._start_loop()
+        self._advance(loop, loop.n_steps, progress)
+        return self._result(loop, progress)
+
+    def run_prefix(self) -> ForkPoint:
+        """Runs the common prefix (settle and stand-up, every step before `walk_start_step`) and returns its fork point.
+
+        The simulation must be set up like the prefix (`prefix_config`: no payload, the prefix
+        friction); its world and FMU are left at the fork point.
+        """
+        c = self.config
+        if c.payload is not None or c.friction != PREFIX_FRICTION:
+            raise SimulationError(
+                f"a fork prefix runs without payload and at friction {PREFIX_FRICTION} (the run's own are applied at the fork): "
+                f"build it with prefix_config(config), got payload {c.payload} and friction {c.friction}"
+            )
+        if self.online is not None:
+            raise SimulationError("runs with an online navigator cannot fork (its planner service is not part of the saved state)")
+        loop = self._start_loop()
+        end = self.walk_start_step()
+        if end >= loop.n_steps:
+            raise SimulationError(f"the run ends ({loop.n_steps} steps) before the walk starts (step {end}): there is nothing to fork")
+        self._advance(loop, end, None)
+        if loop.stop_reason is not None:
+            raise SimulationError(f"the prefix stopped before the walk: {loop.stop_reason}")
+        est = loop.estimator
+        return ForkPoint(
+            key=self.fork_key(),
+            step=end,
+            world=self.world.snapshot(),
+            fmu_state=self.fmu.save_state(),
+            fmu_io=self.fmu.io_snapshot(),
+            mode=loop.mode,
+            friction=c.friction,
+            log_state=loop.log_state[:end].copy(),
+            log_outputs=loop.log_outputs[:end].copy(),
+            log_ref=loop.log_ref[:end].copy(),
+            log_flags=loop.log_flags[:end].copy(),
+            estimator=None if est is None else est.save(end),
+            timing=dataclasses.replace(loop.timing),
+        )
+
+    def run_from(self, fork: ForkPoint, progress: Progress | None = None) -> RunResult:
+        """Continues `fork` to the end of this run; the result and log are laid out as `run()`'s (prefix rows included).
+
+        This simulation's payload and friction act from the fork on (the robot is loaded after it
+        stood up); its pushes, duration and end rules are its own. Its prefix must be the fork's
+        (equal `fork_key`).
+        """
+        key = self.fork_key()
+        if fork.key != key:
+            raise SimulationError(
+                f"fork {fork.key} was taken from another prefix than this run's ({key}): terrain, plan, FMU, communication step, "
+                "estimator, sensor seed or stand time differ"
+            )
+        if self.online is not None:
+            raise SimulationError("runs with an online navigator cannot fork (its planner service is not part of the saved state)")
+        loop = self._start_loop()
+        if fork.step >= loop.n_steps:
+            raise SimulationError(f"the run ends ({loop.n_steps} steps) before its fork point (step {fork.step}): run it from the start")
+        self.world.restore(fork.world)
+        self.fmu.restore_state(fork.fmu_state)
+        self.fmu.restore_io(fork.fmu_io)
+        k = fork.step
+        loop.log_state[:k] = fork.log_state
+        loop.log_outputs[:k] = fork.log_outputs
+        loop.log_ref[:k] = fork.log_ref
+        loop.log_flags[:k] = fork.log_flags
+        if (loop.estimator is None) != (fork.estimator is None):
+            raise SimulationError("the fork and this run differ in whether the estimator runs")
+        if loop.estimator is not None and fork.estimator is not None:
+            loop.estimator.restore(fork.estimator)
+        loop.k = k
+        loop.mode = fork.mode
+        loop.timing = dataclasses.replace(fork.timing)
+        self._advance(loop, loop.n_steps, progress)
+        return self._result(loop, progress)
+
+    def _start_loop(self) -> _Loop:
+        """The loop's logs (one row per physics step, preallocated) and the initialised FMU, at step 0."""
+        c = self.config
+        n_steps = max(1, round(self.duration() / c.physics_dt))
+        state_names = fr.NamedVector(fr.STATE_INPUTS)
+        loop = _Loop(
+            n_steps=n_steps,
+            state_names=state_names,
+            log_state=np.zeros((n_steps, len(state_names.names))),
+            log_outputs=np.zeros((n_steps, len(self.fmu.outputs.names))),
+            log_ref=np.zeros((n_steps, N_COLUMNS)),
+            # contacts scheduled (4), contacts actual (4), FSM state, mode request
+            log_flags=np.zeros((n_steps, 10), dtype=np.int8),
+            log_push=np.zeros((n_steps, 3)) if c.pushes is not None else None,
+            estimator=EstimatorInTheLoop(self.fmu, self.world, c, n_steps) if c.estimator == "kalman" else None,
+            timing=Timing(),
+        )
+        self.fmu.initialize(0.0)
+        return loop
+
+    def _advance(self, loop: _Loop, end: int, progress: Progress | None) -> None:
+        """Physics steps loop.k … end − 1, or until the run stops (sets loop.stop_reason).
+
+        The hot loop: everything it touches is looked up once per call, nothing is allocated per step.
+        """
         c = self.config
         dt = c.physics_dt
         ratio = round(c.comm_step / dt)
-        n_steps = max(1, round(self.duration() / dt))
+        n_steps = loop.n_steps
         walk_start = c.stand_time
 
-        # One row per physics step; wide per-step vectors are copied with one assignment each.
-        log_t = np.arange(n_steps) * dt
         fmu = self.fmu
         world = self.world
         fsm, modes = fmu.contract.fsm, fmu.contract.mode
         inputs, outputs = fmu.inputs, fmu.outputs
-        state_names = fr.NamedVector(fr.STATE_INPUTS)
-        log_state = np.zeros((n_steps, len(state_names.names)))
-        log_outputs = np.zeros((n_steps, len(outputs.names)))
-        log_ref = np.zeros((n_steps, N_COLUMNS))
-        # contacts scheduled (4), contacts actual (4), FSM state, mode request
-        log_flags = np.zeros((n_steps, 10), dtype=np.int8)
+        log_state, log_outputs, log_ref, log_flags, log_push = loop.log_state, loop.log_outputs, loop.log_ref, loop.log_flags, loop.log_push
         state = inputs.view(fr.STATE_INPUTS)
         ref_in = inputs.indices(list(REFERENCE_COLUMNS))
         ref_columns = np.array(list(REFERENCE_COLUMNS.values()), dtype=np.intp)
@@ -234,21 +449,19 @@ class CoSimulation:
         online = self.online
         pushes = c.pushes
         push_force = np.zeros(3)
-        log_push = np.zeros((n_steps, 3)) if pushes is not None else None
-        goal_since: float | None = None
-        timing = Timing()
+        goal_since = loop.goal_since
+        fall_step = loop.fall_step
+        mode = loop.mode
+        timing = loop.timing
         contacts_view = fmu.contacts_array
         perf = time.perf_counter
-
-        estimator = EstimatorInTheLoop(fmu, world, c, n_steps) if c.estimator == "kalman" else None
-        fmu.initialize(0.0)
-        stop_reason = "completed"
-        fall_step: int | None = None
+        estimator = loop.estimator
+        stop_reason: str | None = None
         min_height = c.fall.min_base_height
         progress_every = max(1, n_steps // 200)
         t_begin = perf()
-        k = 0
-        for k in range(n_steps):
+        k = loop.k
+        for k in range(loop.k, end):
             t = k * dt
             world.state_vector(state)
             if not math.isfinite(float(state.sum())):
@@ -327,45 +540,58 @@ class CoSimulation:
                 goal_since = None
             if progress is not None and k % progress_every == 0:
                 progress(t)
-        else:
-            k = n_steps
+        timing.total += perf() - t_begin
+        # Rows 0 … loop.k − 1 are the log: a stopped run keeps the step it stopped in.
+        loop.k = k + 1 if stop_reason is not None else max(end, loop.k)
+        loop.stop_reason = stop_reason
+        loop.mode = int(mode)
+        loop.fall_step = fall_step
+        loop.goal_since = goal_since
+
+    def _result(self, loop: _Loop, progress: Progress | None) -> RunResult:
+        c = self.config
+        dt = c.physics_dt
+        fmu = self.fmu
+        online = self.online
         if online is not None:
             online.finish()
-        if fall_step is not None and stop_reason.startswith("completed"):
-            stop_reason = f"fell at t={fall_step * dt:.2f} s"
-        n = min(k + 1, n_steps) if stop_reason != "completed" else n_steps
-        timing.total = perf() - t_begin
-        timing.simulated = n * dt
+        stop_reason = loop.stop_reason or "completed"
+        if loop.fall_step is not None and stop_reason.startswith("completed"):
+            stop_reason = f"fell at t={loop.fall_step * dt:.2f} s"
+        n = min(loop.k, loop.n_steps)
+        loop.timing.simulated = n * dt
         if progress is not None:
             progress(n * dt)
 
+        outputs, state_names = fmu.outputs, loop.state_names
+        log_outputs, log_flags = loop.log_outputs, loop.log_flags
         log = {
-            "t": log_t[:n],
-            **{key: log_state[:n, state_names.span(names)] for key, names in STATE_LOG.items()},
+            "t": np.arange(loop.n_steps)[:n] * dt,
+            **{key: loop.log_state[:n, state_names.span(names)] for key, names in STATE_LOG.items()},
             "tau": log_outputs[:n, outputs.span(fr.TORQUE_OUTPUTS)],
-            "ref": log_ref[:n],
+            "ref": loop.log_ref[:n],
             "forces": log_outputs[:n, outputs.span(fr.FORCE_OUTPUTS)],
             "contact_scheduled": log_flags[:n, 0:4],
             "contact_actual": log_flags[:n, 4:8],
             "fsm": log_flags[:n, 8],
             # The FMU's code of its damping state, so the log's FSM codes can be read without it.
-            "fsm_damping": np.array(int(fsm.Damping)),
+            "fsm_damping": np.array(int(fmu.contract.fsm.Damping)),
             "mpc_solve_time": log_outputs[:n, outputs.index(fr.SOLVE_TIME_OUTPUT)],
             "mode": log_flags[:n, 9],
-            "walk_start": np.array(walk_start),
+            "walk_start": np.array(c.stand_time),
             "comm_step": np.array(c.comm_step),
             "physics_dt": np.array(dt),
             "follow": np.array(c.follow),
             **self.plan.to_npz_dict(),
         }
-        if log_push is not None:
-            log["push_force"] = log_push[:n]
+        if loop.log_push is not None:
+            log["push_force"] = loop.log_push[:n]
         log["estimator"] = np.array(c.estimator)
-        if estimator is not None:
-            log.update(estimator.log(n))
+        if loop.estimator is not None:
+            log.update(loop.estimator.log(n))
         if online is not None:
             log.update(replan_log(online))
-        return RunResult(self.scenario.name, self.plan.method, log, timing, stop_reason)
+        return RunResult(self.scenario.name, self.plan.method, log, loop.timing, stop_reason)
 
     def _fallen(self, state: NDArray[np.float64], min_height: float) -> bool:
         """Cheap per-step fall check (absolute tilt and height); metrics apply the full rule later."""
@@ -420,6 +646,18 @@ class EstimatorInTheLoop:
         self._status[k] = io.est_status[0]
         self._fix_valid[k] = self._new_fix
         self._new_fix = False
+
+    def save(self, n: int) -> EstimatorLogState:
+        """The first `n` log rows and the sensors' state (a fork at step `n`)."""
+        return EstimatorLogState(self._log[:n].copy(), self._status[:n].copy(), self._fix_valid[:n].copy(), self._new_fix, self.sensors.save_state())
+
+    def restore(self, saved: EstimatorLogState) -> None:
+        n = len(saved.rows)
+        self._log[:n] = saved.rows
+        self._status[:n] = saved.status
+        self._fix_valid[:n] = saved.fix_valid
+        self._new_fix = saved.new_fix
+        self.sensors.restore_state(saved.sensors)
 
     def log(self, n: int) -> dict[str, NDArray[np.float64]]:
         sensors = self.config.body_sensors

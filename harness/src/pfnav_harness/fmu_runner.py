@@ -262,6 +262,24 @@ class FmuInfo:
     parameters: dict[str, str]
 
 
+@dataclass(frozen=True)
+class FmuIoSnapshot:
+    """The harness-side value buffers of a `ControllerFmu` (copies).
+
+    The FMU's own state (`save_state`) does not include what the master last wrote into it or read
+    from it; between communication points the master logs and applies those held values, so a fork
+    taken there needs them as well.
+    """
+
+    inputs: NDArray[np.float64]
+    outputs: NDArray[np.float64]
+    mode: int
+    contacts: NDArray[np.int32]
+    fsm: int
+    # The estimator's buffers in `enable_estimation` order (None without the estimator).
+    estimation: tuple[NDArray[Any], ...] | None
+
+
 def _fmi_status_ok(status: int) -> bool:
     return status <= 1  # fmi2OK or fmi2Warning
 
@@ -279,6 +297,9 @@ class ControllerFmu:
         if md.coSimulation is None:
             raise SimulationError(f"{fmu_path} is not a co-simulation FMU")
         self.contract = FmuContract(md, str(fmu_path))
+        self.path = Path(fmu_path)
+        # Both are needed: the fork's state travels between processes as bytes.
+        self.can_save_state = bool(md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate)
         self.info = FmuInfo(
             model_name=md.modelName,
             model_identifier=md.coSimulation.modelIdentifier,
@@ -424,6 +445,88 @@ class ControllerFmu:
             out_vr, out_val, status_vr, status_val = self._estimation[6:]
             self._check(self._get_real(self._component, out_vr, len(out_vr), out_val), "fmi2GetReal (estimate)")
             self._check(self._get_integer(self._component, status_vr, 1, status_val), "fmi2GetInteger (est.status)")
+
+    def _require_state_support(self, what: str) -> None:
+        if not self.can_save_state:
+            raise SimulationError(
+                f"{self.path} cannot {what} its state (modelDescription: canGetAndSetFMUstate and canSerializeFMUstate must both be true): "
+                "rebuild the FMU with FMU state support, or run without forks (`fork = false` in a sweep spec)"
+            )
+        if not self._initialized or self._terminated:
+            raise SimulationError(f"the FMU state can only be {what}d between initialisation and close")
+
+    def save_state(self) -> bytes:
+        """The FMU's complete internal state, serialized (fmi2GetFMUstate + fmi2SerializeFMUstate)."""
+        from fmpy.fmi1 import FMICallException
+
+        self._require_state_support("save")
+        try:
+            state = self._fmu.getFMUstate()
+        except FMICallException as err:
+            raise SimulationError(f"fmi2GetFMUstate failed: {err}") from err
+        try:
+            return bytes(self._fmu.serializeFMUstate(state))
+        except FMICallException as err:
+            raise SimulationError(f"fmi2SerializeFMUstate failed: {err}") from err
+        finally:
+            self._free_state(state)
+
+    def restore_state(self, blob: bytes) -> None:
+        """Puts the FMU back into a state from `save_state` (this instance or another of the same FMU).
+
+        A blob the FMU refuses (truncated, another FMU's, another version's) raises SimulationError.
+        """
+        from fmpy.fmi1 import FMICallException
+
+        self._require_state_support("restore")
+        if not isinstance(blob, bytes | bytearray):
+            raise SimulationError(f"an FMU state is a byte string, got {type(blob).__name__}")
+        if not blob:
+            raise SimulationError("an FMU state cannot be empty")
+        try:
+            state = self._fmu.deSerializeFMUstate(bytes(blob))
+        except FMICallException as err:
+            raise SimulationError(f"the FMU refused the serialized state ({len(blob)} bytes): {err}") from err
+        try:
+            self._fmu.setFMUstate(state)
+        except FMICallException as err:
+            raise SimulationError(f"fmi2SetFMUstate failed: {err}") from err
+        finally:
+            self._free_state(state)
+
+    def _free_state(self, state: Any) -> None:
+        from fmpy.fmi1 import FMICallException
+
+        try:
+            self._fmu.freeFMUstate(state)
+        except FMICallException as err:
+            raise SimulationError(f"fmi2FreeFMUstate failed: {err}") from err
+
+    def io_snapshot(self) -> FmuIoSnapshot:
+        """Copies of the value buffers last written to and read from the FMU."""
+        return FmuIoSnapshot(
+            inputs=self.inputs.values.copy(),
+            outputs=self.outputs.values.copy(),
+            mode=int(self._mode_val[0]),
+            contacts=self._contact_np.copy(),
+            fsm=int(self._fsm_val[0]),
+            estimation=None if self._estimation is None else tuple(np.ctypeslib.as_array(buffer).copy() for buffer in self._estimation[1::2]),
+        )
+
+    def restore_io(self, io: FmuIoSnapshot) -> None:
+        """Refills the value buffers from `io` (the live views stay the same objects)."""
+        if io.inputs.shape != self.inputs.values.shape or io.outputs.shape != self.outputs.values.shape:
+            raise SimulationError("the saved FMU inputs/outputs do not match this FMU's")
+        if (io.estimation is None) != (self._estimation is None):
+            raise SimulationError("the saved FMU values and this instance differ in whether the estimator is in use")
+        self.inputs.values[:] = io.inputs
+        self.outputs.values[:] = io.outputs
+        self._mode_val[0] = io.mode
+        self._contact_np[:] = io.contacts
+        self._fsm_val[0] = io.fsm
+        if io.estimation is not None and self._estimation is not None:
+            for buffer, saved in zip(self._estimation[1::2], io.estimation, strict=True):
+                np.ctypeslib.as_array(buffer)[:] = saved
 
     @property
     def torques(self) -> NDArray[np.float64]:

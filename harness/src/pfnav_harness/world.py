@@ -4,6 +4,13 @@ dartpy 6.20 facts this module relies on (see shared notes): the PyPI wheel has n
 binding, so the terrain is an OBJ mesh in a one-link URDF with a fixed root; ODE is the only
 detector that keeps spheres on meshes; FreeJoint velocities are world-frame; `setForces` is
 cleared by every `world.step()`, so torques are written every physics step.
+
+`WorldSnapshot` (fork a run after stand-up) holds everything that decides the world's future as
+plain arrays: every skeleton's generalized positions and velocities, the world time, the torques
+held for the next step, the contacts of the last collision check. DART keeps no other state from
+one step to the next that changes the physics: accelerations, constraint impulses and contacts are
+computed afresh in every `world.step()`, external forces are cleared by it. Restoring it into a
+fresh world gives the same trajectory bit for bit (test_hs_fork).
 """
 
 from __future__ import annotations
@@ -127,7 +134,7 @@ def write_terrain_obj(terrain: Terrain, path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def _terrain_digest(terrain: Terrain) -> str:
+def terrain_digest(terrain: Terrain) -> str:
     h = hashlib.sha256()
     h.update(np.asarray(terrain.origin, dtype=np.float64).tobytes())
     h.update(np.float64(terrain.resolution).tobytes())
@@ -136,7 +143,10 @@ def _terrain_digest(terrain: Terrain) -> str:
     return h.hexdigest()[:16]
 
 
-def _set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
+def set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
+    """Friction coefficient of every collision shape of `skeleton` (restitution 0)."""
+    if not (math.isfinite(mu) and mu > 0.0):
+        raise SimulationError(f"friction coefficient must be > 0, got {mu}")
     for i in range(skeleton.getNumBodyNodes()):
         body = skeleton.getBodyNode(i)
         for node in body.getShapeNodes():
@@ -152,7 +162,7 @@ def _set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
 def load_terrain_skeleton(terrain: Terrain, cache_dir: Path, friction: float) -> dart.dynamics.Skeleton:
     """The terrain as a fixed one-link skeleton whose collision shape is the map's triangle mesh."""
     cache_dir.mkdir(parents=True, exist_ok=True)
-    stem = f"terrain_{_terrain_digest(terrain)}"
+    stem = f"terrain_{terrain_digest(terrain)}"
     obj = cache_dir / f"{stem}.obj"
     urdf = cache_dir / f"{stem}.urdf"
     if not obj.is_file():
@@ -173,8 +183,26 @@ def load_terrain_skeleton(terrain: Terrain, cache_dir: Path, friction: float) ->
     if not any(node.getCollisionAspect() is not None for node in body.getShapeNodes()):
         raise SimulationError(f"the terrain mesh {obj} loaded without a collision shape")
     skeleton.setName("terrain")
-    _set_friction(skeleton, friction)
+    set_friction(skeleton, friction)
     return skeleton
+
+
+@dataclass(frozen=True)
+class WorldSnapshot:
+    """The state of a `QuadrupedWorld` from which its future follows, as plain (picklable) arrays.
+
+    `positions`/`velocities` per skeleton name (the fixed terrain has none), `held_torques` the
+    generalized forces `step()` applies until the next `apply_torques`, `contacts` what
+    `foot_contacts()` reported after the last step (the body sensors read it before the next one).
+    Mass properties (payload) and friction are not part of it: they belong to the world a snapshot
+    is restored into.
+    """
+
+    time: float
+    positions: dict[str, NDArray[np.float64]]
+    velocities: dict[str, NDArray[np.float64]]
+    held_torques: NDArray[np.float64]
+    contacts: NDArray[np.bool_]
 
 
 class QuadrupedWorld:
@@ -224,10 +252,12 @@ class QuadrupedWorld:
         self.trunk_mass = float(self.base.getMass())
         if payload is not None:
             add_payload(self.base, payload)
-        _set_friction(robot, friction)
+        set_friction(robot, friction)
         self.world.addSkeleton(robot)
         self.effort_limits = np.array([robot.getJoint(n).getForceUpperLimit(0) for n in JOINT_NAMES])
         self._forces = np.zeros(robot.getNumDofs())
+        # Contacts restored from a snapshot, reported until the first step of this world.
+        self._restored_contacts: NDArray[np.bool_] | None = None
 
     def _foot_radius(self) -> float:
         for node in self.feet[0].getShapeNodes():
@@ -326,6 +356,52 @@ class QuadrupedWorld:
         # DART clears the generalized forces in every step, so they are written again each time.
         self.robot.setForces(self._forces)
         self.world.step()
+        self._restored_contacts = None
+
+    def _skeletons(self) -> list[dart.dynamics.Skeleton]:
+        return [self.world.getSkeleton(i) for i in range(self.world.getNumSkeletons())]
+
+    def snapshot(self) -> WorldSnapshot:
+        """The world's state now (copies; see `WorldSnapshot`)."""
+        skeletons = [s for s in self._skeletons() if s.getNumDofs() > 0]
+        return WorldSnapshot(
+            time=self.time,
+            positions={s.getName(): np.array(s.getPositions(), dtype=np.float64) for s in skeletons},
+            velocities={s.getName(): np.array(s.getVelocities(), dtype=np.float64) for s in skeletons},
+            held_torques=self._forces.copy(),
+            contacts=self.foot_contacts(),
+        )
+
+    def restore(self, snapshot: WorldSnapshot) -> None:
+        """Puts the world in the state of `snapshot` (taken in this world or in one built the same way).
+
+        Pending external forces (pushes) are cleared; this world's own payload and friction stay.
+        """
+        skeletons = {s.getName(): s for s in self._skeletons() if s.getNumDofs() > 0}
+        if set(skeletons) != set(snapshot.positions) or set(skeletons) != set(snapshot.velocities):
+            raise SimulationError(f"the snapshot holds skeletons {sorted(snapshot.positions)}, this world has {sorted(skeletons)}")
+        for name, skeleton in skeletons.items():
+            q, dq = snapshot.positions[name], snapshot.velocities[name]
+            n = skeleton.getNumDofs()
+            if q.shape != (n,) or dq.shape != (n,):
+                raise SimulationError(f"snapshot of skeleton '{name}' has {q.shape[0]} positions and {dq.shape[0]} velocities, the skeleton {n} dofs")
+            if not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+                raise SimulationError(f"snapshot of skeleton '{name}' is not finite")
+            skeleton.setPositions(q)
+            skeleton.setVelocities(dq)
+            skeleton.clearExternalForces()
+            skeleton.clearInternalForces()
+        if snapshot.held_torques.shape != self._forces.shape or snapshot.contacts.shape != (len(self.feet),):
+            raise SimulationError("the snapshot's torques or contacts do not fit this robot")
+        self._forces[:] = snapshot.held_torques
+        self._trunk_force_applied = False
+        self._restored_contacts = snapshot.contacts.copy()
+        self.world.setTime(snapshot.time)
+
+    def set_friction(self, mu: float) -> None:
+        """Ground and foot friction coefficient from now on."""
+        set_friction(self.terrain_skeleton, mu)
+        set_friction(self.robot, mu)
 
     # Whether the trunk carries a force from `apply_trunk_force` that has not been cleared yet.
     _trunk_force_applied = False
@@ -357,6 +433,8 @@ class QuadrupedWorld:
 
     def foot_contacts(self) -> NDArray[np.bool_]:
         """Which feet touch anything, from the last collision check of the physics step."""
+        if self._restored_contacts is not None:
+            return self._restored_contacts.copy()
         touching = np.zeros(len(self.feet), dtype=bool)
         result = self.world.getLastCollisionResult()
         for i, foot in enumerate(self.feet):
