@@ -2,11 +2,13 @@
 //! Everything here is safe Rust; `exports.rs` only converts the C arguments.
 
 use quad_controller::{Command, Controller, ControllerConfig, FsmTransition};
+use serde::{Deserialize, Serialize};
 
 use crate::budget::max_ticks_per_step;
 use crate::ffi::Fmi2Status;
 use crate::logger::Logger;
 use crate::resources::Resources;
+use crate::saved_state::InstanceState;
 use crate::variables::{
     check_value, initial_command, initial_inputs, read_input, read_output, read_parameter, table,
     write_input, write_parameter, Binding, Causality, Inputs, ScalarType, Value,
@@ -14,7 +16,7 @@ use crate::variables::{
 use crate::FmuError;
 
 /// The FMI 2.0 Co-Simulation states this FMU distinguishes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Phase {
     /// After `fmi2Instantiate` or `fmi2Reset`.
     Instantiated,
@@ -128,6 +130,81 @@ impl Instance {
         let logger = self.logger.clone();
         let resources = self.resources.clone();
         *self = Instance::new(resources, logger);
+    }
+
+    /// CRC-32 of the robot description this instance runs (saved states carry it).
+    pub fn robot_crc(&self) -> u32 {
+        self.resources.robot_crc
+    }
+
+    /// `fmi2GetFMUstate`: everything the instance carries between calls. Allowed in every
+    /// phase.
+    pub fn save_state(&self) -> InstanceState {
+        InstanceState {
+            phase: self.phase,
+            config: self.config.clone(),
+            inputs: self.inputs,
+            command: self.command,
+            controller: self.controller.as_ref().map(Controller::save_state),
+            start_time: self.start_time,
+            stop_time: self.stop_time,
+            time: self.time,
+            ticks_done: self.ticks_done,
+            last_successful_time: self.last_successful_time,
+        }
+    }
+
+    /// `fmi2SetFMUstate`: continues from `state`. A state that is not consistent (a controller
+    /// before initialization or none after it, parameters the controller rejects, non-finite
+    /// times) is refused and the instance is left as it was.
+    pub fn restore_state(&mut self, state: &InstanceState) -> Result<(), FmuError> {
+        let refuse = |reason: String| Err(FmuError::SavedState(reason));
+        let initialized = matches!(
+            state.phase,
+            Phase::StepComplete | Phase::StepFailed | Phase::Terminated
+        );
+        if initialized != state.controller.is_some() {
+            return refuse(format!(
+                "phase {} {} a controller state",
+                state.phase.name(),
+                if initialized { "without" } else { "with" }
+            ));
+        }
+        let times = [state.start_time, state.time, state.last_successful_time];
+        if !times.iter().chain(&state.stop_time).all(|t| t.is_finite()) {
+            return refuse("non-finite time".to_owned());
+        }
+        crate::variables::check_parameters(&state.config)
+            .map_err(|e| FmuError::SavedState(format!("parameters: {e}")))?;
+        let controller = match &state.controller {
+            Some(saved) => {
+                let mut controller =
+                    Controller::new(self.resources.model.clone(), state.config.clone())
+                        .map_err(|e| FmuError::SavedState(format!("parameters: {e}")))?;
+                controller
+                    .restore_state(saved.clone())
+                    .map_err(|e| FmuError::SavedState(e.to_string()))?;
+                Some(controller)
+            }
+            None => None,
+        };
+        // The tick budget follows from the parameters; a saved value is not trusted.
+        self.max_ticks_per_step = if controller.is_some() {
+            max_ticks_per_step(&state.config)
+        } else {
+            0
+        };
+        self.controller = controller;
+        self.phase = state.phase;
+        self.config = state.config.clone();
+        self.inputs = state.inputs;
+        self.command = state.command;
+        self.start_time = state.start_time;
+        self.stop_time = state.stop_time;
+        self.time = state.time;
+        self.ticks_done = state.ticks_done;
+        self.last_successful_time = state.last_successful_time;
+        Ok(())
     }
 
     /// `fmi2SetupExperiment`.
@@ -423,5 +500,7 @@ fn lookup(vr: u32, expected: ScalarType) -> Result<&'static crate::variables::Va
         .ok_or(FmuError::UnknownValueReference { vr, expected })
 }
 
+#[cfg(test)]
+mod state_tests;
 #[cfg(test)]
 mod tests;

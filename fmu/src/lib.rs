@@ -14,6 +14,7 @@
 //!   1 s whatever the parameters and step size).
 //! * [`resources`] — `fmuResourceLocation` (file URI) → `resources/quadruped.urdf` and
 //!   `resources/controller.json`.
+//! * [`saved_state`] — FMU states (`fmi2GetFMUstate` & co.) and their serialized form.
 //! * [`bundle`] — writes `QuadController.fmu` (used by the `bundle-fmu` binary).
 //!
 //! # Timing
@@ -27,6 +28,7 @@ pub mod instance;
 pub mod logger;
 pub mod model_description;
 pub mod resources;
+pub mod saved_state;
 pub mod variables;
 
 use thiserror::Error;
@@ -141,6 +143,9 @@ pub enum FmuError {
         /// The capability flag in modelDescription.xml that says so.
         capability: &'static str,
     },
+    /// A saved or serialized FMU state that this instance cannot take.
+    #[error("FMU state: {0}")]
+    SavedState(String),
     /// A broken invariant inside the FMU (a bug); reported instead of panicking.
     #[error("internal error: {0}")]
     Internal(String),

@@ -134,7 +134,7 @@ pub fn model_description_xml() -> String {
          canHandleVariableCommunicationStepSize=\"true\" canInterpolateInputs=\"false\" \
          maxOutputDerivativeOrder=\"0\" canRunAsynchronuously=\"false\" \
          canBeInstantiatedOnlyOncePerProcess=\"false\" canNotUseMemoryManagementFunctions=\"true\" \
-         canGetAndSetFMUstate=\"false\" canSerializeFMUstate=\"false\" providesDirectionalDerivative=\"false\"/>"
+         canGetAndSetFMUstate=\"true\" canSerializeFMUstate=\"true\" providesDirectionalDerivative=\"false\"/>"
     );
 
     let units: BTreeSet<_> = table().iter().filter_map(|v| v.unit).collect();

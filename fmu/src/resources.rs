@@ -221,6 +221,8 @@ pub struct Resources {
     pub model: RobotModel,
     /// The configuration from `controller.json`.
     pub config: ControllerConfig,
+    /// CRC-32 of `quadruped.urdf` (saved FMU states name the robot they were taken with).
+    pub robot_crc: u32,
 }
 
 /// Loads and checks `quadruped.urdf` and `controller.json` from `dir`.
@@ -243,7 +245,11 @@ pub fn load(dir: &Path) -> Result<Resources, FmuError> {
         .map_err(|e| FmuError::Resources(format!("{CONFIG_FILE}: {e}")))?;
     crate::variables::check_parameters(&config)
         .map_err(|e| FmuError::Resources(format!("{CONFIG_FILE}: {e}")))?;
-    Ok(Resources { model, config })
+    Ok(Resources {
+        model,
+        config,
+        robot_crc: crc32fast::hash(urdf.as_bytes()),
+    })
 }
 
 #[cfg(test)]

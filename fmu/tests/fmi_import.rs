@@ -5,10 +5,10 @@ mod support;
 
 use fmi::fmi2::import::Fmi2Import;
 use fmi::fmi2::instance::{CoSimulation, Common, InstanceCS};
-use fmi::traits::FmiImport;
+use fmi::traits::{FmiImport, FmiStatus};
 use quad_controller::{Command, Reference, RobotState, NUM_JOINTS};
 use support::{
-    direct_controller, fmu_path, install_logger, log_mark, logged_since, shared_library,
+    direct_controller, errors_of, fmu_path, install_logger, log_mark, logged_since, shared_library,
     stand_reference, standing_state, vr,
 };
 
@@ -335,4 +335,65 @@ fn misuse_through_the_fmi_crate_is_rejected_with_a_logged_reason() {
         .get_real(&[vr("joint.dq[2]")], &mut dq)
         .expect("get");
     assert_eq!(dq[0], 0.0);
+}
+
+/// Torques and forces after each of `steps` doSteps of 20 ms from `t`, the robot walking in place
+/// with a reference that moves, as bits.
+fn walk(instance: &mut InstanceCS, t: f64, steps: usize) -> Vec<Vec<u64>> {
+    (0..steps)
+        .map(|k| {
+            let t = t + k as f64 * 0.02;
+            let state = standing_state(0.01 * t, 0.0);
+            let reference = Reference {
+                vx: 0.2,
+                mode: quad_controller::ModeRequest::Locomotion,
+                ..stand_reference(&state, 0.0)
+            };
+            set_inputs(instance, &state, &reference);
+            instance.do_step(t, 0.02, true).expect("doStep");
+            let mut bits: Vec<u64> = torques(instance).iter().map(|v| v.to_bits()).collect();
+            bits.extend(forces(instance).iter().map(|v| v.to_bits()));
+            bits.push(fsm(instance) as u64);
+            bits
+        })
+        .collect()
+}
+
+#[test]
+fn fmu_state_get_set_and_serialize_through_the_c_api() {
+    install_logger();
+    let import: Fmi2Import = fmi::import::from_path(fmu_path()).expect("importing the FMU");
+    let mut first = initialised(&import, "state-a");
+    walk(&mut first, 0.0, 100);
+    let saved = first.get_fmu_state().expect("fmi2GetFMUstate at t = 2 s");
+    let run_1 = walk(&mut first, 2.0, 50);
+    first.set_fmu_state(&saved).ok().expect("fmi2SetFMUstate");
+    let run_2 = walk(&mut first, 2.0, 50);
+    assert!(run_1 == run_2, "after fmi2SetFMUstate the outputs differ");
+
+    let blob = first.serialize_fmu_state(&saved).expect("serialize");
+    let mut second = import
+        .instantiate_cs("state-b", false, true)
+        .expect("fmi2Instantiate");
+    let restored = second.deserialize_fmu_state(&blob).expect("deserialize");
+    second
+        .set_fmu_state(&restored)
+        .ok()
+        .expect("set in a second instance");
+    let run_3 = walk(&mut second, 2.0, 50);
+    assert!(
+        run_1 == run_3,
+        "a deserialized state in another instance differs"
+    );
+
+    let mut truncated = blob.clone();
+    truncated.truncate(blob.len() / 2);
+    assert!(second.deserialize_fmu_state(&truncated).is_err());
+    let errors = errors_of("state-b");
+    assert!(
+        errors
+            .iter()
+            .any(|e| e.contains("fmi2DeSerializeFMUstate") && e.contains("truncated")),
+        "{errors:?}"
+    );
 }

@@ -149,6 +149,7 @@ pub unsafe extern "C" fn fmi2FreeInstance(c: Fmi2Component) {
     if removed {
         // Dropping runs no user code that could panic, but keep the FFI boundary panic-free.
         let _ = catch_unwind(AssertUnwindSafe(|| {
+            super::fmu_state::free_states_of(c);
             // SAFETY: the pointer came from Box::into_raw in fmi2Instantiate and was live.
             drop(Box::from_raw(c as *mut Instance));
         }));

@@ -3,12 +3,13 @@ use crate::bundle::repo_root;
 use crate::variables::by_name;
 use quad_controller::{FsmState, RobotModel};
 
-fn instance() -> Instance {
-    let model = RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))
+pub(super) fn instance() -> Instance {
+    let urdf = std::fs::read_to_string(repo_root().join("robot").join("quadruped.urdf"))
         .expect("robot/quadruped.urdf");
     let resources = Resources {
-        model,
+        model: RobotModel::from_urdf_str(&urdf).expect("robot/quadruped.urdf"),
         config: ControllerConfig::default(),
+        robot_crc: crc32fast::hash(urdf.as_bytes()),
     };
     Instance::new(
         resources,
@@ -24,7 +25,7 @@ fn running() -> Instance {
     i
 }
 
-fn vr(name: &str) -> u32 {
+pub(super) fn vr(name: &str) -> u32 {
     by_name(name).unwrap().value_reference
 }
 

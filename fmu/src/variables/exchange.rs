@@ -7,6 +7,7 @@ use quad_controller::{
     Command, ContactReading, ControllerConfig, EstimatorKind, GaitKind, HeightMap, ModeRequest,
     Reference, RobotState, SensorReadings,
 };
+use serde::{Deserialize, Serialize};
 
 use super::{table, Binding, Value, Variable};
 use crate::FmuError;
@@ -86,7 +87,7 @@ pub fn check_parameters(config: &ControllerConfig) -> Result<(), FmuError> {
 }
 
 /// The inputs of an instance, as the controller takes them.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Inputs {
     /// Measured state (ground-truth base pose and twist, joint encoders).
     pub state: RobotState,
