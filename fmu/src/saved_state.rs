@@ -11,7 +11,7 @@
 //! |---|---|
 //! | 8 | magic `PFNAVFMU` |
 //! | 4 | format version ([`FORMAT_VERSION`]) |
-//! | 40 | the FMU's GUID (ASCII, `{…}`) |
+//! | 38 | the FMU's GUID (ASCII, `{…}`) |
 //! | 4 | CRC-32 of the robot description (URDF) the state was taken with |
 //! | 8 | payload length n |
 //! | 4 | CRC-32 of the payload |
