@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
-"""Sweep throughput: runs per minute on a LocalCluster of 1 worker and of 2, side by side.
+"""Sweep throughput: runs per minute on LocalClusters of 1 and 2 workers, with and without forks, side by side.
 
-Plans the spec's terrain once (planner service over LCM), then runs the same runs on each cluster
-into a fresh store and prints a table (machine, date, load) with runs/minute and the speedup. The
-cluster start is timed apart: it is paid once per sweep, not per run. The rows of both clusters are
-compared as well (they must be the same; wall time aside).
+Plans the spec's terrain once (planner service over LCM), then runs the same runs in each
+configuration (cluster size × forks on/off) into a fresh store and prints a table (machine, date,
+load) with runs/minute and the speedup over the first configuration, and per cluster size the
+time forks save per run. The cluster start is timed apart: it is paid once per sweep, not per run.
+Rows of the same fork setting are compared across cluster sizes (they must be the same; wall time
+aside). Forked and unforked rows differ wherever a run has a payload or a friction other than the
+prefix's (they act from the fork on), so those are not compared.
 
 Usage (planning uses LCM udpm://, so inside the private network namespace):
-    bash scripts/netns.sh .venv/bin/python scripts/bench_sweep.py [--spec sweeps/tiny.toml] [--runs 12]
+    bash scripts/netns.sh .venv/bin/python scripts/bench_sweep.py [--spec sweeps/tiny.toml] [--runs 12] [--workers 1,2] [--fork on,off]
 """
 
 from __future__ import annotations
@@ -48,14 +51,19 @@ def main() -> int:
     parser.add_argument("--spec", type=Path, default=paths.repo_root() / "sweeps" / "tiny.toml")
     parser.add_argument("--runs", type=int, default=12, help="runs per cluster (default 12; overrides the spec's)")
     parser.add_argument("--workers", default="1,2", help="cluster sizes to compare (default 1,2)")
+    parser.add_argument("--fork", default="on,off", help="fork settings to compare: on, off or both (default on,off)")
     parser.add_argument("--lcm-url", default=DEFAULT_LCM_URL)
     args = parser.parse_args()
     try:
         sizes = [int(v) for v in args.workers.split(",")]
-        if args.runs < 1 or not sizes or min(sizes) < 1:
+        forks = [{"on": True, "off": False}[v.strip()] for v in args.fork.split(",")]
+        if args.runs < 1 or not sizes or min(sizes) < 1 or not forks:
             raise ValueError
-    except ValueError:
-        print(f"bench_sweep: error: --runs must be >= 1 and --workers a comma-separated list of sizes >= 1, got {args.runs}, {args.workers!r}", file=sys.stderr)
+    except (ValueError, KeyError):
+        print(
+            f"bench_sweep: error: --runs must be >= 1, --workers a comma-separated list of sizes >= 1 and --fork of on/off, got {args.runs}, {args.workers!r}, {args.fork!r}",
+            file=sys.stderr,
+        )
         return 2
     try:
         spec = dataclasses.replace(load_spec(args.spec), runs=args.runs)
@@ -66,18 +74,21 @@ def main() -> int:
             courses = prepare_courses(spec, planned, artifacts.pf_plan or paths.pf_plan_path(), _lcm_planner(args.lcm_url, False), work / "scenarios")
             load_before = os.getloadavg()
             results = []
-            tables = []
+            tables: dict[bool, list[list[dict[str, object]]]] = {fork: [] for fork in forks}
             for n in sizes:
-                store = SweepStore.create(work / f"workers_{n}", spec)
-                t0 = time.perf_counter()
-                with dask_client(workers=n) as client:
-                    startup = time.perf_counter() - t0
-                    summary = run_sweep(spec, store, courses, artifacts, client, show_progress=True)
-                table = store.table()
-                tables.append(deterministic_rows(table))
-                wall = sum(table["wall_time"].to_pylist()) / table.num_rows
-                cpu = sum(table["cpu_time"].to_pylist()) / table.num_rows
-                results.append((n, startup, summary, wall, cpu))
+                for fork in forks:
+                    variant = dataclasses.replace(spec, fork=fork)
+                    store = SweepStore.create(work / f"workers_{n}_fork_{fork}", variant)
+                    t0 = time.perf_counter()
+                    with dask_client(workers=n) as client:
+                        startup = time.perf_counter() - t0
+                        summary = run_sweep(variant, store, courses, artifacts, client, show_progress=True)
+                    table = store.table()
+                    tables[fork].append(deterministic_rows(table))
+                    wall = sum(table["wall_time"].to_pylist()) / table.num_rows
+                    cpu = sum(table["cpu_time"].to_pylist()) / table.num_rows
+                    forked = sum(bool(v) for v in table["forked"].to_pylist())
+                    results.append((n, fork, startup, summary, wall, cpu, forked))
             load_after = os.getloadavg()
     except HarnessError as err:
         print(f"bench_sweep: error: {err}", file=sys.stderr)
@@ -86,22 +97,35 @@ def main() -> int:
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     print()
     print(f"pfnav-sweep throughput, {now}, {platform.node()}: {cpu_model()}, {os.cpu_count()} cores")
-    print(f"spec {args.spec.name} ({spec.scenario}, {spec.duration:g} simulated s per run), {spec.runs} runs per cluster")
+    print(f"spec {args.spec.name} ({spec.scenario}, {spec.duration:g} simulated s per run, stand-up {spec.stand_time:g} s), {spec.runs} runs per cluster")
     print(f"load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after (other work on the machine slows both columns)")
     print()
     # CPU share: how much of a core a worker's run got (1.0 on an idle machine; less when others load it).
-    print("| workers | cluster start (s) | sweep wall (s) | runs/min | speedup | mean run wall (s) | mean run CPU (s) | CPU share |")
-    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
-    base = results[0][2].runs_per_minute
-    for n, startup, summary, wall, cpu in results:
+    # Sweep wall includes the fork prefixes (a task per group); the per-run wall and CPU columns do not.
+    print("| workers | forks | forked runs | cluster start (s) | sweep wall (s) | runs/min | speedup | mean run wall (s) | mean run CPU (s) | CPU share |")
+    print("| ---: | :---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    base = results[0][3].runs_per_minute
+    for n, fork, startup, summary, wall, cpu, forked in results:
         speedup = summary.runs_per_minute / base if base > 0 else float("nan")
         print(
-            f"| {n} | {startup:.1f} | {summary.wall_seconds:.1f} | {summary.runs_per_minute:.1f} | {speedup:.2f}x | {wall:.2f} | {cpu:.2f} | {cpu / wall:.2f} |"
+            f"| {n} | {'on' if fork else 'off'} | {forked} | {startup:.1f} | {summary.wall_seconds:.1f} | {summary.runs_per_minute:.1f} | {speedup:.2f}x "
+            f"| {wall:.2f} | {cpu:.2f} | {cpu / wall:.2f} |"
         )
-    errors = sum(r[2].errors for r in results)
-    same = all(t == tables[0] for t in tables[1:])
+    if len(forks) == 2:
+        print()
+        for n in sizes:
+            on, off = (next(r for r in results if r[0] == n and r[1] == fork) for fork in (True, False))
+            per_run_on, per_run_off = on[3].wall_seconds / on[3].ran, off[3].wall_seconds / off[3].ran
+            saved_wall = per_run_off - per_run_on
+            saved_cpu = off[5] - on[5]
+            print(
+                f"{n} worker(s): forks save {saved_wall:.2f} s of sweep wall per run ({100 * saved_wall / per_run_off:.0f} %) "
+                f"and {saved_cpu:.2f} s of CPU per run ({100 * saved_cpu / off[5]:.0f} %, prefixes aside)"
+            )
+    errors = sum(r[3].errors for r in results)
+    same = all(t == group[0] for group in tables.values() for t in group[1:])
     print()
-    print(f"rows identical across cluster sizes (wall time aside): {'yes' if same else 'NO'}; runs with errors: {errors}")
+    print(f"rows identical across cluster sizes for each fork setting (wall time aside): {'yes' if same else 'NO'}; runs with errors: {errors}")
     return 0 if same and errors == 0 else 1
 
 

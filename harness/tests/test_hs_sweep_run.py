@@ -1,5 +1,7 @@
 """A tiny sweep (sweeps/tiny.toml: 4 runs of 3.5 simulated s) on Dask: the same rows on 2 workers and on 1, resume, CLI.
 
+The runs start from their group's fork (the spec's default), made once per sweep.
+
 The plan comes from the planner service over LCM udpm:// (run inside scripts/netns.sh, as
 scripts/test.sh does); it is made once for the module and shipped to the workers, which only
 co-simulate with the real controller FMU.
@@ -84,6 +86,8 @@ def test_two_workers_give_the_same_rows_as_one(
     # The runs really ran: stood up, walked on, tracked the plan.
     assert all(r["simulated_time"] == pytest.approx(tiny_spec.duration, abs=0.002) or r["outcome"] == "fell" for r in rows)
     assert all(0.0 < r["rms_tracking_error"] < 0.5 and r["path_length"] > 0.0 and r["wall_time"] > 0.0 for r in rows)
+    # Every run continued from the sweep's one post-stand-up fork (one terrain, one communication step).
+    assert all(r["forked"] for r in rows)
     # Factor values from the spec, row for row.
     assert [r["push_magnitude"] for r in rows] == [tiny_spec.run_factors(i)["push_magnitude"] for i in range(4)]
     assert deterministic_rows(two) == deterministic_rows(one)

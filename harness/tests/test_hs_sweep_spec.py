@@ -9,7 +9,7 @@ import pytest
 
 from pfnav_harness import paths
 from pfnav_harness.sweep.driver import run_tasks
-from pfnav_harness.sweep.runner import run_config
+from pfnav_harness.sweep.runner import fork_group, forkable, run_config
 from pfnav_harness.sweep.spec import FACTORS, SpecError, load_spec, parse_spec
 from pfnav_harness.world import Payload
 
@@ -38,6 +38,7 @@ def spec_with(**changes: Any) -> dict[str, Any]:
         (spec_with(duration=0), "`duration`"),
         (spec_with(sampling="sobol"), "`sampling` must be one of random, grid"),
         (spec_with(colour="red"), "unknown key(s) colour"),
+        (spec_with(fork="yes"), "`fork` must be true or false"),
         ({"scenario": "pits", "duration": 2.0}, "missing `seed`"),
         (spec_with(sampling="grid", factors={"friction": {"range": [0.5, 1.0]}}), "grid sampling needs `steps`"),
         (spec_with(sampling="grid", runs=5, factors={"friction": {"values": [0.5, 1.0]}}), "grid sampling has 2 combinations"),
@@ -132,3 +133,30 @@ def test_run_config_carries_push_payload_and_friction() -> None:
     # No push, no payload by default.
     plain = run_config(run_tasks(parse_spec(BASE), set())[0])
     assert plain.pushes is None and plain.payload is None
+
+
+def test_forks_are_on_by_default_and_group_runs_by_their_prefix() -> None:
+    data = spec_with(
+        estimator="kalman",
+        factors={
+            "push_magnitude": {"range": [0, 100]},
+            "payload_mass": {"range": [-0.2, 0.2]},
+            "friction": {"range": [0.5, 1.0]},
+            "comm_step": {"values": [0.001, 0.002]},
+            "sensor_noise_seed": {"values": [1, 2]},
+        },
+    )
+    spec = parse_spec(data)
+    assert spec.fork and spec.as_json()["fork"] is True
+    unforked = parse_spec({**data, "fork": False})
+    assert unforked.hash != spec.hash
+    tasks = run_tasks(spec, set())
+    assert all(forkable(t) for t in tasks) and not any(forkable(t) for t in run_tasks(unforked, set()))
+    # Push, payload and friction act after the fork; the communication step and the sensor seed shape the prefix.
+    groups: dict[str, set[tuple[object, object]]] = {}
+    for task in tasks:
+        groups.setdefault(fork_group(task), set()).add((task.factors["comm_step"], task.factors["sensor_noise_seed"]))
+    distinct = {(t.factors["comm_step"], t.factors["sensor_noise_seed"]) for t in tasks}
+    assert len(distinct) >= 3 and len(groups) == len(distinct) and all(len(keys) == 1 for keys in groups.values())
+    # A run that ends before the walk starts has nothing to fork.
+    assert not any(forkable(t) for t in run_tasks(parse_spec({**data, "duration": 1.5}), set()))

@@ -366,7 +366,7 @@ class CoSimulation:
 
         This simulation's payload and friction act from the fork on (the robot is loaded after it
         stood up); its pushes, duration and end rules are its own. Its prefix must be the fork's
-        (equal `fork_key`).
+        (equal `fork_key`). The result's timing includes the prefix's (as measured when it ran).
         """
         key = self.fork_key()
         if fork.key != key:

@@ -19,7 +19,7 @@ from tqdm import tqdm
 from ..pipeline import export_scenario
 from ..planner_client import METHODS, Plan
 from ..scenario import Scenario
-from .runner import Artifacts, Course, RunTask, result_row, run_one
+from .runner import Artifacts, Course, RunTask, fork_group, forkable, make_fork, result_row, run_one
 from .spec import SpecError, SweepSpec
 from .store import SweepStore
 
@@ -69,7 +69,7 @@ def prepare_courses(spec: SweepSpec, store: SweepStore, pf_plan: Path, planner: 
 
 def run_tasks(spec: SweepSpec, done: set[int]) -> list[RunTask]:
     return [
-        RunTask(run_id, spec.run_factors(run_id), spec.duration, spec.stand_time, spec.hash, spec.estimator)
+        RunTask(run_id, spec.run_factors(run_id), spec.duration, spec.stand_time, spec.hash, spec.estimator, spec.fork)
         for run_id in range(spec.runs)
         if run_id not in done
     ]
@@ -97,9 +97,18 @@ def run_sweep(
     futures = {}
     # Keys unique per call: a resumed sweep on the same client must run again, not find an old result.
     token = uuid.uuid4().hex[:8]
+    # One prefix per group and sweep, a task of its own: its runs wait for it, Dask ships the fork
+    # (a few MB) to each worker that runs one of them, once.
+    forks: dict[str, Any] = {}
     for task in tasks:
         seed = int(task.factors["terrain_seed"])
-        future = client.submit(run_one, task, shipped[seed], artifacts, key=f"pfnav-run-{spec.hash}-{task.run_id}-{token}", pure=False)
+        fork = None
+        if forkable(task):
+            group = fork_group(task)
+            if group not in forks:
+                forks[group] = client.submit(make_fork, task, shipped[seed], artifacts, key=f"pfnav-fork-{spec.hash}-{group}-{token}", pure=False)
+            fork = forks[group]
+        future = client.submit(run_one, task, shipped[seed], artifacts, fork, key=f"pfnav-run-{spec.hash}-{task.run_id}-{token}", pure=False)
         futures[future] = task
     pending: list[dict[str, Any]] = []
     last_flush = time.perf_counter()
@@ -126,6 +135,6 @@ def run_sweep(
         # Also on Ctrl-C: what finished is kept, a re-run continues from there.
         store.append(pending)
         bar.close()
-        for future in futures:
+        for future in [*futures, *forks.values()]:
             future.cancel()
     return SweepSummary(spec.runs, skipped, ran, errors, time.perf_counter() - begin)

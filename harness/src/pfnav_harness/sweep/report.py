@@ -73,6 +73,16 @@ def plot_tracking_errors(table: pa.Table, path: Path) -> bool:
     return True
 
 
+def _fork_note(table: pa.Table) -> str:
+    forked = sum(bool(f) and o != "error" for f, o in zip(table["forked"].to_pylist(), table["outcome"].to_pylist(), strict=True))
+    if not any(table["forked"].to_pylist()):
+        return "Every run stood up by itself (no forks)."
+    return (
+        f"{forked} of {table.num_rows} runs continued from their group's saved post-stand-up state (fork): "
+        "the robot stood up unloaded at the prefix friction, its payload and friction act from the walk's start (docs/sweeps.md)."
+    )
+
+
 def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
     """Writes REPORT.md and its PNG plots into `out_dir` (default: the store folder); returns the markdown path."""
     out_dir = out_dir or store.folder
@@ -87,6 +97,8 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         "",
         f"Spec hash `{stored.get('hash', '?')}`: {spec.get('runs', '?')} runs ({spec.get('sampling', '?')} sampling, seed {spec.get('seed', '?')}), "
         f"{spec.get('duration', '?')} simulated s each, method {spec.get('method', '?')}. Stored rows: {table.num_rows}.",
+        "",
+        _fork_note(table),
         "",
         "Outcomes: " + ", ".join(f"{name} {count}" for name, count in counts.items()) + ".",
         "A run is a trial unless it ended in an error; 'timeout' = neither fell nor reached the goal within the duration.",

@@ -4,10 +4,15 @@ Workers only co-simulate: the scenario and its plan arrive ready-made from the d
 per terrain seed). Each run builds its own DART world and FMU instance and closes them at its end;
 with one thread per worker process no two runs ever share an FMU (FMUs are not thread-safe). Any
 exception in a run becomes a row with outcome "error" and the reason; the sweep goes on.
+
+Forks: runs whose prefix (settle and stand-up) is the same form a group (`fork_group`); the
+group's prefix runs once per sweep (`make_fork`, a task of its own) and its runs continue from the
+saved state (`run_one` with the fork), each in a fresh world and FMU instance.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import tempfile
@@ -20,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..body_sensors import BodySensorConfig
-from ..cosim import CoSimConfig, CoSimulation
+from ..cosim import CoSimConfig, CoSimulation, ForkPoint, prefix_config, prefix_signature, walk_start_step
 from ..metrics import RunMetrics, TraversabilityField, compute_metrics
 from ..planner_client import Plan
 from ..pushes import HEADING_DIRECTIONS, PushSchedule, horizontal_push
@@ -56,6 +61,15 @@ class RunTask:
     stand_time: float
     spec_hash: str
     estimator: str = "groundTruth"
+    # Start from the group's fork when the run is long enough to have one (`forkable`).
+    fork: bool = False
+
+
+@dataclass(frozen=True)
+class PrefixFailure:
+    """A fork prefix that could not be made: its runs become error rows with this reason."""
+
+    reason: str
 
 
 def push_schedule(factors: dict[str, float | str]) -> PushSchedule | None:
@@ -86,14 +100,36 @@ def run_config(task: RunTask) -> CoSimConfig:
     )
 
 
+def forkable(task: RunTask) -> bool:
+    """Whether the run starts from its group's fork: asked for, and the run lasts beyond the stand-up."""
+    if not task.fork:
+        return False
+    config = run_config(task)
+    return round(task.duration / config.physics_dt) > walk_start_step(config)
+
+
+def fork_group(task: RunTask) -> str:
+    """Runs with the same group share a prefix: the terrain and the prefix's configuration."""
+    signature = prefix_signature(prefix_config(run_config(task)))
+    return f"{int(task.factors['terrain_seed'])}-{hashlib.sha256(signature.encode()).hexdigest()[:12]}"
+
+
 def start_run(course: Course, artifacts: Artifacts, config: CoSimConfig, cache_dir: Path) -> CoSimulation:
     """The run's starting point: a fresh world and FMU instance with the robot placed at the plan's start.
 
-    Every run stands up from scratch today. Once the FMU can save and restore its state (issue 20,
-    parts 1-2) this is the one place to restore a saved post-stand-up state of body and controller
-    instead, so runs skip the common prefix.
+    A forked run is continued from its fork in it (`CoSimulation.run_from`), with the run's own
+    payload and friction in the world.
     """
     return CoSimulation(course.scenario, course.plan, artifacts.fmu, artifacts.urdf, cache_dir, config)
+
+
+def make_fork(task: RunTask, course: Course, artifacts: Artifacts) -> ForkPoint | PrefixFailure:
+    """The prefix of `task`'s group, simulated once (without payload, at the prefix friction); never raises."""
+    try:
+        with start_run(course, artifacts, prefix_config(run_config(task)), _worker_cache_dir()) as sim:
+            return sim.run_prefix()
+    except Exception as err:  # every run of the group reports it instead
+        return PrefixFailure(f"fork prefix failed: {_reason(err)}")
 
 
 # Per worker process: the terrain mesh cache and pf-plan's traversability field of each terrain
@@ -145,6 +181,7 @@ def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
         "friction": float(f["friction"]),
         "comm_step": float(f["comm_step"]),
         "sensor_noise_seed": int(f["sensor_noise_seed"]),
+        "forked": forkable(task),
         "outcome": "error",
         "fall_time": math.nan,
         "rms_tracking_error": math.nan,
@@ -161,14 +198,22 @@ def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
     return row
 
 
-def run_one(task: RunTask, course: Course, artifacts: Artifacts) -> dict[str, Any]:
-    """Co-simulates one run and returns its result row; never raises for a failed run."""
+def _reason(err: BaseException) -> str:
+    where = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
+    location = f" ({Path(where.filename).name}:{where.lineno})" if where else ""
+    return f"{type(err).__name__}: {err}{location}"
+
+
+def run_one(task: RunTask, course: Course, artifacts: Artifacts, fork: ForkPoint | PrefixFailure | None = None) -> dict[str, Any]:
+    """Co-simulates one run (from `fork` when given) and returns its result row; never raises for a failed run."""
     start = time.perf_counter()
     cpu_start = time.process_time()
+    if isinstance(fork, PrefixFailure):
+        return result_row(task, course, forked=True, failure_reason=fork.reason)
     try:
         config = run_config(task)
         with start_run(course, artifacts, config, _worker_cache_dir()) as sim:
-            result = sim.run()
+            result = sim.run() if fork is None else sim.run_from(fork)
         metrics = compute_metrics(
             result.log, course.scenario.terrain, course.scenario.goal, _field(course, artifacts), course.scenario.name, course.plan.method, config.fall
         )
@@ -185,11 +230,11 @@ def run_one(task: RunTask, course: Course, artifacts: Artifacts) -> dict[str, An
             path_length=metrics.executed_length,
             simulated_time=float(np.round(result.timing.simulated, 6)),
             stop_reason=result.stop_reason,
+            forked=fork is not None,
             wall_time=time.perf_counter() - start,
             cpu_time=time.process_time() - cpu_start,
         )
     except Exception as err:  # a failed run is a row, never the end of the sweep
-        where = traceback.extract_tb(err.__traceback__)[-1] if err.__traceback__ else None
-        location = f" ({Path(where.filename).name}:{where.lineno})" if where else ""
-        reason = f"{type(err).__name__}: {err}{location}"
-        return result_row(task, course, failure_reason=reason, wall_time=time.perf_counter() - start, cpu_time=time.process_time() - cpu_start)
+        return result_row(
+            task, course, forked=fork is not None, failure_reason=_reason(err), wall_time=time.perf_counter() - start, cpu_time=time.process_time() - cpu_start
+        )

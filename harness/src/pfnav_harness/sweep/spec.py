@@ -27,7 +27,7 @@ from ..fmu_runner import ESTIMATOR_MODES
 from ..pushes import HEADING_DIRECTIONS
 
 SAMPLINGS = ("random", "grid")
-SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "factors")
+SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "fork", "factors")
 
 
 class SpecError(HarnessError, ValueError):
@@ -124,6 +124,8 @@ class SweepSpec:
     source: Path | None = None
     # What the controller runs on: "groundTruth" (the simulator's state) or "kalman" (its estimator on the body sensors).
     estimator: str = "groundTruth"
+    # Start runs from their group's saved post-stand-up state (docs/sweeps.md, "Forks"); off: every run stands up itself.
+    fork: bool = True
 
     def as_json(self) -> dict[str, Any]:
         """The spec's content (what the hash covers): no file name, no comments, factors in canonical order."""
@@ -136,6 +138,8 @@ class SweepSpec:
             "method": self.method,
             "stand_time": self.stand_time,
             "estimator": self.estimator,
+            # Forked runs carry their payload and friction from the fork on: other rows than unforked ones.
+            "fork": self.fork,
             "factors": {name: self.factors[name].as_json() for name in FACTORS if name in self.factors},
         }
 
@@ -272,6 +276,9 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     estimator = data.get("estimator", "groundTruth")
     if estimator not in ESTIMATOR_MODES:
         raise SpecError(f"{where}`estimator` must be one of {', '.join(ESTIMATOR_MODES)}, got {estimator!r}")
+    fork = data.get("fork", True)
+    if not isinstance(fork, bool):
+        raise SpecError(f"{where}`fork` must be true or false, got {fork!r}")
     raw_factors = data.get("factors", {})
     if not isinstance(raw_factors, dict):
         raise SpecError(f"{where}`factors` must be a table")
@@ -285,7 +292,7 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
                 f"{where}factor '{name}' only acts with `estimator = \"kalman\"` (on ground truth the controller never reads the sensors); "
                 "set it, or leave the factor out"
             )
-    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source, estimator)
+    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source, estimator, fork)
     runs = data.get("runs")
     if sampling == "grid":
         size = spec_without_runs.grid_size()
@@ -296,7 +303,7 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
         raise SpecError(f"{where}missing `runs` (random sampling)")
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise SpecError(f"{where}`runs` must be an integer >= 1, got {runs!r}")
-    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator)
+    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator, fork)
 
 
 def load_spec(path: Path) -> SweepSpec:

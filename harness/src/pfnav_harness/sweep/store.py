@@ -44,6 +44,8 @@ ROW_SCHEMA = pa.schema(
         ("friction", pa.float64()),
         ("comm_step", pa.float64()),
         ("sensor_noise_seed", pa.int64()),
+        # Started from its group's saved post-stand-up state (payload and friction from there on).
+        ("forked", pa.bool_()),
         ("outcome", pa.string()),
         ("fall_time", pa.float64()),
         ("rms_tracking_error", pa.float64()),
