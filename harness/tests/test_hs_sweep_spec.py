@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +12,7 @@ from pfnav_harness import paths
 from pfnav_harness.sweep.driver import run_tasks
 from pfnav_harness.sweep.runner import fork_group, forkable, run_config
 from pfnav_harness.sweep.spec import FACTORS, SpecError, load_spec, parse_spec
+from pfnav_harness.sweep.store import StoreError, SweepStore
 from pfnav_harness.world import Payload
 
 BASE: dict[str, Any] = {"scenario": "mountain_pass", "duration": 4.0, "seed": 3, "runs": 20}
@@ -150,6 +152,8 @@ def test_forks_are_on_by_default_and_group_runs_by_their_prefix() -> None:
     assert spec.fork and spec.as_json()["fork"] is True
     unforked = parse_spec({**data, "fork": False})
     assert unforked.hash != spec.hash
+    # An unforked spec hashes as before forks existed: stores written then resume with `fork = false`.
+    assert "fork" not in unforked.as_json()
     tasks = run_tasks(spec, set())
     assert all(forkable(t) for t in tasks) and not any(forkable(t) for t in run_tasks(unforked, set()))
     # Push, payload and friction act after the fork; the communication step and the sensor seed shape the prefix.
@@ -160,3 +164,11 @@ def test_forks_are_on_by_default_and_group_runs_by_their_prefix() -> None:
     assert len(distinct) >= 3 and len(groups) == len(distinct) and all(len(keys) == 1 for keys in groups.values())
     # A run that ends before the walk starts has nothing to fork.
     assert not any(forkable(t) for t in run_tasks(parse_spec({**data, "duration": 1.5}), set()))
+
+
+def test_a_store_of_unforked_runs_is_not_continued_with_forks(tmp_path: Path) -> None:
+    spec = parse_spec(spec_with())
+    SweepStore.create(tmp_path / "store", dataclasses.replace(spec, fork=False))
+    with pytest.raises(StoreError, match="resume it with `fork = false`"):
+        SweepStore.create(tmp_path / "store", spec)
+    assert SweepStore.create(tmp_path / "store", dataclasses.replace(spec, fork=False)).done_ids() == set()

@@ -11,6 +11,7 @@ Planning talks LCM udpm://, so `plan` and a first `run` go through `bash scripts
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import tempfile
@@ -50,7 +51,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     spec = load_spec(args.spec)
     seeds = spec.terrain_seeds()
     print(f"{args.spec}: {spec.runs} runs of '{spec.scenario}' ({spec.sampling} sampling, seed {spec.seed}), {spec.duration:g} simulated s each")
-    print(f"spec hash {spec.hash}")
+    forks = "on (runs continue their group's post-stand-up state)" if spec.fork else "off"
+    print(f"spec hash {spec.hash}; forks {forks}")
     print(f"terrain seeds: {', '.join('scenario default' if s is None else str(s) for s in seeds)}")
     varied = [name for name in FACTORS if name in spec.factors]
     print(f"factors: {', '.join(varied) or 'none (every run the same)'}")
@@ -76,6 +78,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .runner import Artifacts
 
     spec = load_spec(args.spec)
+    if args.no_fork:
+        spec = dataclasses.replace(spec, fork=False)
     store = SweepStore.create(args.out, spec)
     artifacts = Artifacts(paths.fmu_path(), paths.urdf_path(), paths.pf_plan_path())
     # The exported scenarios live on while the workers run (a shared folder for remote workers).
@@ -121,6 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
                 "--scheduler", default=None, metavar="ADDRESS", help="use the Dask scheduler at ADDRESS (e.g. tcp://host:8786) instead of a local cluster"
             )
             p.add_argument("--no-progress", action="store_true", help="no progress bar")
+            p.add_argument("--no-fork", action="store_true", help="every run stands up by itself (as `fork = false` in the spec)")
             p.add_argument("--no-report", action="store_true", help="do not write the report at the end")
     report = sub.add_parser("report", help="write the report of a store folder")
     report.add_argument("store", type=Path)

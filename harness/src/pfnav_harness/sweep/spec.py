@@ -138,9 +138,11 @@ class SweepSpec:
             "method": self.method,
             "stand_time": self.stand_time,
             "estimator": self.estimator,
-            # Forked runs carry their payload and friction from the fork on: other rows than unforked ones.
-            "fork": self.fork,
             "factors": {name: self.factors[name].as_json() for name in FACTORS if name in self.factors},
+            # Forked runs carry their payload and friction from the fork on: other rows than unforked
+            # ones. Only a forking spec says so, so an unforked spec keeps the hash it had before forks
+            # existed and resumes the stores written then.
+            **({"fork": True} if self.fork else {}),
         }
 
     @property

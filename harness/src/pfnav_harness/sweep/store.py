@@ -10,6 +10,7 @@ re-running skips the run ids already stored.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -90,10 +91,13 @@ class SweepStore:
         store = cls(folder)
         stored = store.stored_spec()
         if stored is not None and stored.get("hash") != spec.hash:
-            raise StoreError(
-                f"{folder} holds the rows of another sweep spec (hash {stored.get('hash')}, this spec {spec.hash}): "
-                "use another --out folder, or delete it to start over"
+            unforked = dataclasses.replace(spec, fork=False)
+            hint = (
+                "its runs stood up by themselves: resume it with `fork = false` in the spec (or `pfnav-sweep run --no-fork`)"
+                if spec.fork and stored.get("hash") == unforked.hash
+                else "use another --out folder, or delete it to start over"
             )
+            raise StoreError(f"{folder} holds the rows of another sweep spec (hash {stored.get('hash')}, this spec {spec.hash}): {hint}")
         store.rows_dir.mkdir(parents=True, exist_ok=True)
         store.plans_dir.mkdir(parents=True, exist_ok=True)
         if stored is None:
