@@ -23,6 +23,7 @@
 //! then keeps about r away from it instead of putting the uphill feet on the flank. Hard
 //! obstacle cells count as p = 1 within the footprint (a foot in a pit is the worst case), so
 //! paths also keep r off pit rims where there is room; the obstacle constraint is unchanged.
+//! Cells beyond the map edge count as p = 1 too: the ground (known or simulated) ends there.
 //!
 //! **Walkable slope** (`max_slope_deg`, default none = the paper's model): p is a cost, and a
 //! cost alone never forbids anything — a ridge whose flanks no legged robot can climb is merely
@@ -275,7 +276,7 @@ impl TraversabilityField {
                     }
                 }
             }
-            let dilated = disc_max_filter(&worst, map.width, map.height, radius_cells);
+            let dilated = footprint_max(&worst, map.width, map.height, radius_cells);
             // Obstacle cells keep their own p (they are never entered anyway).
             match &obstacles {
                 Some(mask) => dilated
@@ -326,6 +327,30 @@ impl TraversabilityField {
         let top = v(x0, y1) * (1.0 - tx) + v(x1, y1) * tx;
         bottom * (1.0 - ty) + top * ty
     }
+}
+
+/// Largest value within `radius_cells` of each cell centre, where cells beyond the map edge
+/// count as p = 1: nothing is known there, and on a real terrain tile or a simulated world the
+/// ground ends at the edge, so a foot there is the worst case and paths keep the footprint on
+/// the map where there is room.
+fn footprint_max(values: &[f64], width: usize, height: usize, radius_cells: f64) -> Vec<f64> {
+    let pad = (radius_cells + 1e-9).floor() as usize;
+    if pad == 0 {
+        return disc_max_filter(values, width, height, radius_cells);
+    }
+    let (padded_width, padded_height) = (width + 2 * pad, height + 2 * pad);
+    let mut padded = vec![1.0; padded_width * padded_height];
+    for (row, source) in values.chunks_exact(width).enumerate() {
+        let start = (row + pad) * padded_width + pad;
+        padded[start..start + width].copy_from_slice(source);
+    }
+    let dilated = disc_max_filter(&padded, padded_width, padded_height, radius_cells);
+    (0..height)
+        .flat_map(|row| {
+            let start = (row + pad) * padded_width + pad;
+            dilated[start..start + width].iter().copied()
+        })
+        .collect()
 }
 
 /// Largest value among the cells whose centres lie within `radius_cells` (cell units) of each
@@ -540,16 +565,25 @@ mod tests {
                 ..Default::default()
             };
             let f = TraversabilityField::from_map(&map, &params).expect("field");
-            // Brute force: the max over all cells within the radius (centre distances).
+            // Brute force: the max over all cells within the radius (centre distances), cells
+            // beyond the edge at p = 1.
+            let (wi, hi) = (w as i64, h as i64);
             for iy in 0..h {
                 for ix in 0..w {
                     let mut expected: f64 = 0.0;
-                    for sy in 0..h {
-                        for sx in 0..w {
+                    for sy in -hi..2 * hi {
+                        for sx in -wi..2 * wi {
                             let d = (ix as f64 - sx as f64).hypot(iy as f64 - sy as f64) * 0.5;
-                            if d <= radius + 1e-12 {
-                                expected = expected.max(point.values[sy * w + sx]);
+                            if d > radius + 1e-12 {
+                                continue;
                             }
+                            let inside = (0..wi).contains(&sx) && (0..hi).contains(&sy);
+                            let p = if inside {
+                                point.values[(sy * wi + sx) as usize]
+                            } else {
+                                1.0
+                            };
+                            expected = expected.max(p);
                         }
                     }
                     assert_eq!(
@@ -578,7 +612,8 @@ mod tests {
         for iy in 0..h {
             for ix in 0..w {
                 let near = (ix as f64 - 3.0).hypot(iy as f64 - 2.0) <= 1.0 && (ix, iy) != (3, 2);
-                let expected = if near { 1.0 } else { 0.5 };
+                let on_edge = ix == 0 || iy == 0 || ix == w - 1 || iy == h - 1;
+                let expected = if near || on_edge { 1.0 } else { 0.5 };
                 assert_eq!(f.values[iy * w + ix], expected, "cell ({ix}, {iy})");
             }
         }
@@ -656,15 +691,27 @@ mod tests {
         assert!(
             TraversabilityField::from_partial_map(&negative, Some(&knowledge), &params).is_ok()
         );
-        // The footprint ignores the unknown cell's obstacle flag (no p = 1 spread from it).
+        // The footprint ignores an unknown cell's obstacle flag (no p = 1 spread from it): a
+        // flagged unknown cell amid known flat ground, on a map wide enough that the cells
+        // next to it are more than the footprint away from the map edge.
+        let (w, h) = (7, 7);
+        let centre = 3 * w + 3;
+        let mut flags = vec![false; w * h];
+        flags[centre] = true;
+        let flat = GridMap::new([0.0, 0.0], 1.0, w, h, vec![1.0; w * h], Some(flags)).expect("map");
+        let mut seen = vec![true; w * h];
+        seen[centre] = false;
+        let knowledge = MapKnowledge::new(&flat, seen, 0.3).expect("knowledge");
         let footprint = TraversabilityParams {
             footprint_radius_m: 1.0,
             h_max: Some(10.0),
             ..Default::default()
         };
-        let f = TraversabilityField::from_partial_map(&map, Some(&knowledge), &footprint)
+        let f = TraversabilityField::from_partial_map(&flat, Some(&knowledge), &footprint)
             .expect("field");
-        assert!(f.values.iter().all(|&p| p < 1.0), "{:?}", f.values);
+        for neighbour in [centre - 1, centre + 1, centre - w, centre + w] {
+            assert!(f.values[neighbour] < 1.0, "{:?}", f.values);
+        }
         // Without knowledge the same call is from_map.
         assert_eq!(
             TraversabilityField::from_partial_map(&map, None, &params).expect("field"),
