@@ -150,17 +150,7 @@ class EstimatingStandIn(PdStandIn):
 
     def enable_estimation(self, mode: str) -> fr.EstimationIo:
         self.estimator_mode = mode
-        self.estimation = fr.EstimationIo(
-            gyro=np.zeros(3),
-            acc=np.zeros(3),
-            fix_pos=np.zeros(3),
-            fix_valid=np.zeros(1, dtype=np.int32),
-            contact=np.full(4, -1, dtype=np.int32),
-            est_pos=np.zeros(3),
-            est_vel=np.zeros(3),
-            est_rpy=np.zeros(3),
-            est_status=np.zeros(1, dtype=np.int32),
-        )
+        self.estimation = fr.EstimationIo.detached()
         return self.estimation
 
     def do_step(self, time: float, step: float) -> None:

@@ -236,6 +236,21 @@ class EstimationIo:
     est_rpy: NDArray[np.float64]
     est_status: NDArray[np.int32]
 
+    @classmethod
+    def detached(cls) -> EstimationIo:
+        """Arrays of the right shapes bound to no FMU (for stand-ins of the controller FMU)."""
+        return cls(
+            gyro=np.zeros(3),
+            acc=np.zeros(3),
+            fix_pos=np.zeros(3),
+            fix_valid=np.zeros(1, dtype=np.int32),
+            contact=np.full(4, -1, dtype=np.int32),
+            est_pos=np.zeros(3),
+            est_vel=np.zeros(3),
+            est_rpy=np.zeros(3),
+            est_status=np.zeros(1, dtype=np.int32),
+        )
+
 
 def _read_model_description(fmu_path: Path) -> Any:
     try:
