@@ -24,7 +24,8 @@ FAKE_PF_PLAN = textwrap.dedent(
     np.save(out / "ramp.heights.npy", np.zeros((10, 20)))
     meta = {"name": "ramp", "seed": 1, "origin": [0, 0], "resolution": 0.1, "width": 20, "height": 10,
             "heights": "ramp.heights.npy", "obstacles": None, "start": [0.5, 0.5], "start_yaw": 0.0,
-            "goal": {"center": [1.5, 0.5], "radius": 0.2}, "traversability": {}}
+            "goal": {"center": [1.5, 0.5], "radius": 0.2},
+            "traversability": {"height_weight": 1.0, "slope_weight": 0.0, "p_floor": 0.05}}
     (out / "ramp.json").write_text(json.dumps(meta))
     """
 )
@@ -101,6 +102,10 @@ def test_bad_arguments(fake_tools: dict[str, str], tmp_path: Path) -> None:
     ("args", "code", "message"),
     [
         (("--max-slope-deg", "95"), 1, "--max-slope-deg must lie in (0, 90)"),
+        (("--traversability", "slope_weight"), 1, "--traversability takes FIELD=VALUE"),
+        (("--traversability", "slope_weight=steep"), 1, "--traversability takes FIELD=VALUE"),
+        (("--traversability", "max_slope_deg=20"), 1, "use --max-slope-deg"),
+        (("--traversability", "slope_wieght=1"), 1, "no field slope_wieght in the planner's model"),
         (("--online", "--bad-map-updates", "nan,garbage"), 1, "unknown bad map update kind(s) garbage"),
         (("--online", "--sensor-range", "0"), 1, "sensor range must be a positive number"),
         (("--online", "--unknown-traversability", "1.5"), 1, "traversability of unknown cells must lie in (0, 1]"),
@@ -113,3 +118,19 @@ def test_bad_arguments(fake_tools: dict[str, str], tmp_path: Path) -> None:
 def test_bad_online_and_push_arguments(fake_tools: dict[str, str], tmp_path: Path, args: tuple[str, ...], code: int, message: str) -> None:
     proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--out", str(tmp_path / "out"), *args, cwd=tmp_path)
     assert_clean_failure(proc, code, message)
+
+
+def test_traversability_fields_reach_the_started_service(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    """The service is started with the cost model the metrics use (its argv, from a stand-in that records it)."""
+    recorded = tmp_path / "service_argv"
+    service = tmp_path / "recording-service"
+    service.write_text(f'#!/bin/sh\nprintf "%s\\n" "$@" > {recorded}\nexec sleep 30\n')
+    service.chmod(0o755)
+    env = {**fake_tools, "PFNAV_PLANNER_SERVICE": str(service)}
+    proc = run_cli(
+        env, "run", "--scenario", "ramp", "--lcm-url", "memq://", "--service-timeout", "1",
+        "--traversability", "height_weight=2", "--out", str(tmp_path / "out"), cwd=tmp_path,
+    )
+    assert_clean_failure(proc, 4, "published no status")
+    argv = recorded.read_text().splitlines()
+    assert '--traversability={"height_weight": 2.0}' in argv, argv

@@ -81,6 +81,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         f"(default: none offline, as in the paper; {ONLINE_MAX_SLOPE_DEG:g} online, where unseen ground is priced at the prior "
         "and a ridge's cost alone would not keep the robot off it)",
     )
+    p.add_argument(
+        "--traversability",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="a field of the planner's traversability model for the started service and the ∫p ds metrics, e.g. "
+        "slope_weight=1 or roughness_weight=0.5 (repeatable; field names as in `pf-plan scenario list --json`; "
+        "--footprint-radius and --max-slope-deg set their own two)",
+    )
     p.add_argument("--plan-timeout", type=float, default=300.0, help="seconds to wait for each plan reply (default 300)")
     p.add_argument("--max-solve-time", type=float, default=240.0, help="solver time limit asked of the service, s (default 240)")
     p.add_argument("--service-timeout", type=float, default=15.0, help="seconds to wait for the started service's first status (default 15)")
@@ -162,6 +171,7 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
         raise HarnessError(f"--footprint-radius must be finite and >= 0, got {args.footprint_radius}")
     if args.max_slope_deg is not None and not (0.0 < args.max_slope_deg < 90.0):
         raise HarnessError(f"--max-slope-deg must lie in (0, 90) degrees, got {args.max_slope_deg}")
+    _traversability_overrides(args)
     follow = args.follow or ("feedback" if args.online else "trajectory")
     return CoSimConfig(
         comm_step=args.comm_step,
@@ -237,10 +247,30 @@ def _client(args: argparse.Namespace, out: Path) -> PlannerClient:
         startup_timeout=args.service_timeout,
         footprint_radius=args.footprint_radius,
         max_slope_deg=_max_slope_deg(args),
+        traversability=_traversability_overrides(args),
     )
     if args.connect:
         client.wait_for_service(timeout=args.service_timeout)
     return client
+
+
+def _traversability_overrides(args: argparse.Namespace) -> dict[str, float]:
+    """The --traversability FIELD=VALUE pairs (names are checked against the planner's model where
+    the scenarios are known, values must be finite numbers)."""
+    overrides: dict[str, float] = {}
+    for item in args.traversability:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not sep or not name or not math.isfinite(value):
+            raise HarnessError(f"--traversability takes FIELD=VALUE with a finite number, got {item!r}")
+        if name in ("footprint_radius_m", "max_slope_deg"):
+            raise HarnessError(f"--traversability {name}: use --{name.removesuffix('_m').replace('_', '-')} for it")
+        overrides[name] = value
+    return overrides
 
 
 def _max_slope_deg(args: argparse.Namespace) -> float | None:
@@ -351,7 +381,14 @@ def execute(args: argparse.Namespace) -> int:
         scenarios[map_scenario.name] = map_scenario
     if not args.connect:
         # ∫p ds on the field the started service plans with (a running service's is unknown).
+        overrides = _traversability_overrides(args)
         for scenario in scenarios.values():
+            # A map that declares its model names the fields; the service refuses unknown ones too.
+            unknown = sorted(set(overrides) - set(scenario.traversability))
+            if scenario.traversability and unknown:
+                known = ", ".join(sorted(scenario.traversability))
+                raise HarnessError(f"--traversability: no field {', '.join(unknown)} in the planner's model ({known})")
+            scenario.traversability.update(overrides)
             scenario.traversability["footprint_radius_m"] = args.footprint_radius
             max_slope = _max_slope_deg(args)
             if max_slope is not None:

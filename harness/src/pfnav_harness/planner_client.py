@@ -8,6 +8,7 @@ process that is terminated on `close`) or be one that is already running on the 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import select
 import signal
@@ -217,11 +218,15 @@ class PlannerClient:
         startup_timeout: float = 10.0,
         footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
         max_slope_deg: float | None = None,
+        traversability: dict[str, float] | None = None,
     ) -> None:
-        """`footprint_radius` and `max_slope_deg` (None: no limit) configure a started service's cost model."""
+        """`footprint_radius`, `max_slope_deg` (None: no limit) and further fields of the planner's
+        traversability model (`traversability`, e.g. {"slope_weight": 1.0}) configure a started
+        service's cost model."""
         self._pfnav = _import_types()
         self.footprint_radius = footprint_radius
         self.max_slope_deg = max_slope_deg
+        self.traversability = dict(traversability or {})
         lcm = _import_lcm()
         self.lcm_url = lcm_url
         self.prefix = channel_prefix
@@ -292,6 +297,8 @@ class PlannerClient:
         args = [str(binary), "--lcm-url", self.lcm_url, "--channel-prefix", self.prefix, f"--footprint-radius={self.footprint_radius!r}"]
         if self.max_slope_deg is not None:
             args.append(f"--max-slope-deg={self.max_slope_deg!r}")
+        if self.traversability:
+            args.append(f"--traversability={json.dumps(self.traversability)}")
         if self._service_log_path is not None:
             self._service_log_path.parent.mkdir(parents=True, exist_ok=True)
             self._service_log = open(self._service_log_path, "wb")  # noqa: SIM115 (closed in close())

@@ -7,6 +7,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Parser;
 use lcm_transport::Lcm;
+use pf_planner::traversability::TraversabilityParams;
 use pf_planner_service::{ServiceConfig, DEFAULT_CHANNEL_PREFIX};
 use tracing_subscriber::EnvFilter;
 
@@ -50,14 +51,46 @@ struct Args {
     /// Default solve-time limit in seconds for requests that leave options.max_solve_time at 0.
     #[arg(long, default_value_t = 30.0)]
     max_solve_time: f64,
+    /// The traversability (cost) model as JSON, fields as in the planner's
+    /// `TraversabilityParams` (height_weight, slope_weight, roughness_weight, slope_ref_deg,
+    /// roughness_ref_m, p_floor, h_max, footprint_radius_m, max_slope_deg); fields left out keep
+    /// their defaults (the paper's p = h/h_max), unknown fields are refused.
+    #[arg(long)]
+    traversability: Option<String>,
     /// Robot footprint radius in metres: each cell costs the largest traversability p within
-    /// it, so paths keep that far from steep ground (0 = the paper's point robot).
-    #[arg(long, default_value_t = 0.0)]
-    footprint_radius: f64,
+    /// it, so paths keep that far from steep ground (default 0 = the paper's point robot;
+    /// overrides `footprint_radius_m` of --traversability).
+    #[arg(long)]
+    footprint_radius: Option<f64>,
     /// Steepest walkable slope in degrees: known cells steeper than this are hard obstacles
-    /// (unset: no limit, the paper's cost-only model).
+    /// (unset: no limit, the paper's cost-only model; overrides `max_slope_deg` of
+    /// --traversability).
     #[arg(long)]
     max_slope_deg: Option<f64>,
+}
+
+/// The traversability model of --traversability with --footprint-radius and --max-slope-deg
+/// applied on top, validated.
+fn cost_model(args: &Args) -> anyhow::Result<TraversabilityParams> {
+    let mut params = match &args.traversability {
+        Some(json) => serde_json::from_str::<TraversabilityParams>(json)
+            .with_context(|| format!("--traversability {json}"))?,
+        None => TraversabilityParams::default(),
+    };
+    if let Some(radius) = args.footprint_radius {
+        anyhow::ensure!(
+            radius.is_finite() && radius >= 0.0,
+            "--footprint-radius (traversability.footprint_radius_m) must be finite and >= 0, got {radius}"
+        );
+        params.footprint_radius_m = radius;
+    }
+    if args.max_slope_deg.is_some() {
+        params.max_slope_deg = args.max_slope_deg;
+    }
+    params
+        .validate()
+        .context("--traversability / --max-slope-deg / --footprint-radius")?;
+    Ok(params)
 }
 
 fn main() -> anyhow::Result<()> {
@@ -76,11 +109,6 @@ fn main() -> anyhow::Result<()> {
         args.max_solve_time.is_finite() && args.max_solve_time > 0.0,
         "--max-solve-time must be finite and > 0"
     );
-    anyhow::ensure!(
-        args.footprint_radius.is_finite() && args.footprint_radius >= 0.0,
-        "--footprint-radius (traversability.footprint_radius_m) must be finite and >= 0, got {}",
-        args.footprint_radius
-    );
     let mut config = ServiceConfig::with_prefix(&args.channel_prefix)?;
     config.max_map_cells = args.max_map_cells;
     config.workers = args.workers;
@@ -90,12 +118,7 @@ fn main() -> anyhow::Result<()> {
     config.stored_maps = args.stored_maps;
     config.status_period = Duration::from_secs_f64(args.status_period);
     config.defaults.max_solve_time = args.max_solve_time;
-    config.traversability.footprint_radius_m = args.footprint_radius;
-    config.traversability.max_slope_deg = args.max_slope_deg;
-    config
-        .traversability
-        .validate()
-        .context("--max-slope-deg / --footprint-radius")?;
+    config.traversability = cost_model(&args)?;
 
     let url = args.lcm_url.unwrap_or_else(lcm_transport::default_url);
     let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);
@@ -107,4 +130,63 @@ fn main() -> anyhow::Result<()> {
     }
     pf_planner_service::run(lcm, config, shutdown)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn model(flags: &[&str]) -> anyhow::Result<TraversabilityParams> {
+        let args = Args::try_parse_from(
+            std::iter::once("pf-planner-service").chain(flags.iter().copied()),
+        )?;
+        cost_model(&args)
+    }
+
+    #[test]
+    fn cost_model_from_json_and_flags() {
+        assert_eq!(model(&[]).unwrap(), TraversabilityParams::default());
+        let weighted = model(&[
+            r#"--traversability={"slope_weight": 1.5, "slope_ref_deg": 25, "footprint_radius_m": 0.3}"#,
+        ])
+        .unwrap();
+        assert_eq!(weighted.slope_weight, 1.5);
+        assert_eq!(weighted.slope_ref_deg, 25.0);
+        assert_eq!(weighted.footprint_radius_m, 0.3);
+        assert_eq!(
+            weighted.height_weight, 1.0,
+            "fields left out keep their defaults"
+        );
+        let overridden = model(&[
+            r#"--traversability={"footprint_radius_m": 0.3, "max_slope_deg": 30}"#,
+            "--footprint-radius=0.25",
+            "--max-slope-deg=20",
+        ])
+        .unwrap();
+        assert_eq!(overridden.footprint_radius_m, 0.25);
+        assert_eq!(overridden.max_slope_deg, Some(20.0));
+    }
+
+    #[test]
+    fn bad_cost_models_are_refused_with_the_reason() {
+        for (flags, reason) in [
+            (
+                vec![r#"--traversability={"slope_wieght": 1}"#],
+                "unknown field",
+            ),
+            (
+                vec![r#"--traversability={"slope_weight": -1}"#],
+                "slope_weight",
+            ),
+            (vec!["--traversability=not json"], "--traversability"),
+            (vec!["--footprint-radius=NaN"], "footprint"),
+            (vec!["--max-slope-deg=95"], "max_slope_deg"),
+        ] {
+            let error = model(&flags).expect_err(flags[0]);
+            assert!(
+                format!("{error:#}").contains(reason),
+                "{flags:?}: {error:#}"
+            );
+        }
+    }
 }
