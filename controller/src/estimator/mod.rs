@@ -88,6 +88,10 @@ pub struct StateEstimator {
     fix_rejections: u32,
     contact_detector: ContactDetector,
     contacts: [LegContact; NUM_LEGS],
+    /// Time since each leg's detected touch-down, s.
+    time_in_contact: [f64; NUM_LEGS],
+    /// Over how long after a detected touch-down the leg's trust ramps up, s.
+    settle_time: f64,
     report: EstimateReport,
 }
 
@@ -137,6 +141,9 @@ impl StateEstimator {
                 in_contact: true,
                 normal_force: None,
             }; NUM_LEGS],
+            // The robot starts standing, its feet settled.
+            time_in_contact: [TRUST_WINDOW * gait.stance_time(); NUM_LEGS],
+            settle_time: TRUST_WINDOW * gait.stance_time(),
             report: EstimateReport::default(),
         }
     }
@@ -297,10 +304,18 @@ impl StateEstimator {
             dt,
         );
         let detected = self.contacts;
+        for (time, contact) in self.time_in_contact.iter_mut().zip(&detected) {
+            *time = if contact.in_contact { *time + dt } else { 0.0 };
+        }
+        // A detected contact is trusted as much as it is probable, ramped in over the settling
+        // after its touch-down (whenever that came) and out towards a planned lift-off.
         let trust: [f64; NUM_LEGS] = std::array::from_fn(|l| match sensors.contacts[l] {
             ContactReading::Unknown if detected[l].normal_force.is_some() => {
                 if detected[l].in_contact {
-                    detected[l].probability
+                    let settled = (self.time_in_contact[l] / self.settle_time).min(1.0);
+                    let before_lift_off =
+                        plan[l].map_or(1.0, |s| ((1.0 - s) / TRUST_WINDOW).clamp(0.0, 1.0));
+                    detected[l].probability * settled * before_lift_off
                 } else {
                     0.0
                 }
