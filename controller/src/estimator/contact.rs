@@ -169,7 +169,6 @@ impl ContactDetector {
         previous_rates: &[f64; NUM_JOINTS],
         dt: f64,
     ) {
-        let gravity: [f64; 3] = inputs.effective_gravity_body.into();
         let blend = if self.primed {
             dt / (FORCE_FILTER_TIME + dt)
         } else {
@@ -180,10 +179,10 @@ impl ContactDetector {
             let q = leg_slice(inputs.joint_positions, leg);
             let dq = leg_slice(inputs.joint_rates, leg);
             let dq_before = leg_slice(previous_rates, leg);
-            let ddq = Vector3::from_fn(|j, _| (dq[j] - dq_before[j]) / dt);
-            let bias = Vector3::from(model.leg_bias(leg, q, dq, gravity));
-            let raw =
-                model.mass_matrix(leg, q) * ddq + bias - Vector3::from(leg_slice(torques, leg));
+            let ddq = std::array::from_fn(|j| (dq[j] - dq_before[j]) / dt);
+            // M(q)q̈ + h(q, q̇) in one Newton–Euler pass.
+            let raw = model.rnea(leg, q, dq, ddq, inputs.effective_gravity_body)
+                - Vector3::from(leg_slice(torques, leg));
             self.external_torque[l] += (raw - self.external_torque[l]) * blend;
         }
         self.primed = true;
