@@ -265,6 +265,7 @@ impl Controller {
             .fsm
             .run(&self.model, &mut self.stages, &estimate, reference, dt);
         let joint_torques = self.stages.legs.clamp_to_effort_limits(actuation.torques);
+        self.estimator.record_applied_torques(&joint_torques);
 
         Ok(Command {
             joint_torques,

@@ -9,6 +9,7 @@
 //! Bad sensor input never makes the estimate non-finite: it is held, clamped or skipped, and
 //! reported in the status word ([`StatusFlag`]).
 
+pub mod contact;
 pub mod kalman;
 pub mod orientation;
 mod status;
@@ -22,12 +23,13 @@ pub use status::{EstimatorStatus, StatusFlag};
 
 use crate::api::{
     ContactReading, EstimateReport, EstimatorKind, Leg, RobotState, SensorReadings, GRAVITY,
-    NUM_LEGS,
+    NUM_JOINTS, NUM_LEGS,
 };
 use crate::config::ControllerConfig;
 use crate::estimate::{leg_slice, BaseState, Estimate};
 use crate::gait::Gait;
 use crate::model::RobotModel;
+use contact::{ContactDetector, ContactInputs, LegContact};
 use kalman::{FixOutcome, LegKalman};
 use orientation::{OrientationFilter, OrientationNoise};
 
@@ -85,6 +87,12 @@ pub struct StateEstimator {
     last_gyro: Vector3<f64>,
     time_without_contact: [f64; NUM_LEGS],
     fix_rejections: u32,
+    contact_detector: ContactDetector,
+    contacts: [LegContact; NUM_LEGS],
+    /// Time since each leg's detected touch-down, s.
+    time_in_contact: [f64; NUM_LEGS],
+    /// Over how long after a detected touch-down the leg's trust ramps up, s.
+    settle_time: f64,
     report: EstimateReport,
 }
 
@@ -128,6 +136,15 @@ impl StateEstimator {
             last_gyro: Vector3::zeros(),
             time_without_contact: [0.0; NUM_LEGS],
             fix_rejections: 0,
+            contact_detector: ContactDetector::new(model.total_mass()),
+            contacts: [LegContact {
+                probability: 1.0,
+                in_contact: true,
+                normal_force: None,
+            }; NUM_LEGS],
+            // The robot starts standing, its feet settled.
+            time_in_contact: [TRUST_WINDOW * gait.stance_time(); NUM_LEGS],
+            settle_time: TRUST_WINDOW * gait.stance_time(),
             report: EstimateReport::default(),
         }
     }
@@ -141,6 +158,17 @@ impl StateEstimator {
     /// The estimate of the last tick, and the status it came with.
     pub fn report(&self) -> EstimateReport {
         self.report
+    }
+
+    /// Records the joint torques sent to the motors on this tick: the leg effort the contact
+    /// detector reads on the next tick.
+    pub fn record_applied_torques(&mut self, torques: &[f64; NUM_JOINTS]) {
+        self.contact_detector.record_applied_torques(torques);
+    }
+
+    /// The force-based contact detector's view of each leg on the last Kalman tick.
+    pub fn detected_contacts(&self) -> [LegContact; NUM_LEGS] {
+        self.contacts
     }
 
     /// Gyro bias estimate, body frame, rad/s (zero before the first Kalman tick or in
@@ -256,8 +284,45 @@ impl StateEstimator {
         } else {
             Vector3::zeros()
         };
-        let trust: [f64; NUM_LEGS] =
-            std::array::from_fn(|l| leg_trust(sensors.contacts[l], plan[l]));
+        // Contact: a sensor's reading when there is one, else the leg effort fused with the
+        // schedule (the schedule alone before the detector has torques to read).
+        let schedule_trust = plan.map(|planned| leg_trust(ContactReading::Unknown, planned));
+        let effective_gravity_body = if acc_valid {
+            -acc
+        } else {
+            rotation.transpose() * Vector3::new(0.0, 0.0, -GRAVITY)
+        };
+        self.contacts = self.contact_detector.update(
+            model,
+            &ContactInputs {
+                joint_positions: &state.joint_positions,
+                joint_rates: &state.joint_velocities,
+                effective_gravity_body,
+                rotation: &rotation,
+                feet: &feet,
+                schedule_trust,
+            },
+            dt,
+        );
+        let detected = self.contacts;
+        for (time, contact) in self.time_in_contact.iter_mut().zip(&detected) {
+            *time = if contact.in_contact { *time + dt } else { 0.0 };
+        }
+        // A detected contact is trusted as much as it is probable, ramped in over the settling
+        // after its touch-down (whenever that came) and out towards a planned lift-off.
+        let trust: [f64; NUM_LEGS] = std::array::from_fn(|l| match sensors.contacts[l] {
+            ContactReading::Unknown if detected[l].normal_force.is_some() => {
+                if detected[l].in_contact {
+                    let settled = (self.time_in_contact[l] / self.settle_time).min(1.0);
+                    let before_lift_off =
+                        plan[l].map_or(1.0, |s| ((1.0 - s) / TRUST_WINDOW).clamp(0.0, 1.0));
+                    detected[l].probability * settled * before_lift_off
+                } else {
+                    0.0
+                }
+            }
+            reading => leg_trust(reading, plan[l]),
+        });
         let suspicion = trust.map(|t| 1.0 + (1.0 - t) * noise.swing_factor);
         let foot_density = suspicion.map(|k| noise.foot_drift * k.sqrt());
         filters
@@ -305,7 +370,10 @@ impl StateEstimator {
         let in_contact: [bool; NUM_LEGS] = std::array::from_fn(|l| match sensors.contacts[l] {
             ContactReading::InContact => true,
             ContactReading::NoContact => false,
-            ContactReading::Unknown => plan[l].is_some(),
+            ContactReading::Unknown => match detected[l].normal_force {
+                Some(_) => detected[l].in_contact,
+                None => plan[l].is_some(),
+            },
         });
         self.track_contacts(&in_contact, dt, &mut status);
 

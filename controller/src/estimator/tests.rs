@@ -489,6 +489,16 @@ fn the_estimator_is_deterministic() {
                 ..SensorReadings::default()
             };
             estimator.update(&model, &state, &readings, &plan, DT);
+            // Leg effort for the contact detector: deterministic, loading and unloading feet.
+            let torques: [f64; NUM_JOINTS] =
+                std::array::from_fn(|j| 8.0 * (((k * 31 + j * 17) % 200) as f64 / 100.0 - 1.0));
+            estimator.record_applied_torques(&torques);
+            trace.extend(
+                estimator
+                    .detected_contacts()
+                    .iter()
+                    .map(|c| c.probability.to_bits()),
+            );
             let r = estimator.report();
             trace.extend(
                 r.position
@@ -534,4 +544,144 @@ fn the_controller_reads_the_base_pose_once_in_kalman_mode() {
     // Ground-truth mode refuses the same state.
     let mut ground_truth = Controller::new(model, ControllerConfig::default()).expect("controller");
     assert!(ground_truth.step(&state, &reference, DT).is_err());
+}
+
+/// The torques that make the fixed-base leg dynamics produce `next` from rates `rates_before`
+/// over one tick with `foot_forces_body[leg]` the ground reaction on each foot (base frame):
+/// `τ = M q̈ + h − Jᵀf`, what the contact detector inverts.
+fn torques_for(
+    model: &RobotModel,
+    next: &RobotState,
+    rates_before: &[f64; NUM_JOINTS],
+    gravity_body: Vector3<f64>,
+    foot_forces_body: &[Vector3<f64>; NUM_LEGS],
+) -> [f64; NUM_JOINTS] {
+    let mut torques = [0.0; NUM_JOINTS];
+    for leg in Leg::ALL {
+        let l = leg.index();
+        let q = leg_slice(&next.joint_positions, leg);
+        let dq = leg_slice(&next.joint_velocities, leg);
+        let before = leg_slice(rates_before, leg);
+        let ddq = Vector3::from_fn(|j, _| (dq[j] - before[j]) / DT);
+        let bias = Vector3::from(model.leg_bias(leg, q, dq, gravity_body.into()));
+        let jacobian = model.foot_kinematics(leg, q).jacobian;
+        let tau =
+            model.mass_matrix(leg, q) * ddq + bias - jacobian.transpose() * foot_forces_body[l];
+        torques[3 * l..3 * l + 3].copy_from_slice(tau.as_slice());
+    }
+    torques
+}
+
+/// A robot standing still, leg 0 waved in the air, every leg planned `plan`, the others carrying
+/// the weight, and the leg effort those motions imply recorded every tick when `with_effort`.
+/// Returns the estimator after 1.5 s and the worst position/velocity error after the first 10
+/// ticks.
+fn standing_with_a_waving_leg(plan: StancePlan, with_effort: bool) -> (StateEstimator, f64) {
+    let model = model();
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    let truth = Truth::standing(&model);
+    let weight = model.total_mass() * GRAVITY;
+    let mut forces = [Vector3::new(0.0, 0.0, weight / 3.0); NUM_LEGS];
+    forces[0] = Vector3::zeros();
+    let gravity_body = Vector3::new(0.0, 0.0, -GRAVITY);
+    let at = |k: usize| {
+        let t = k as f64 * DT;
+        let mut moving = truth;
+        moving.feet[0] += Vector3::new(0.05 * (8.0 * t).sin(), 0.0, 0.04 * (1.0 - (8.0 * t).cos()));
+        moving.feet_velocity[0] = Vector3::new(0.4 * (8.0 * t).cos(), 0.0, 0.32 * (8.0 * t).sin());
+        moving.measure(&model)
+    };
+    let mut worst = 0.0_f64;
+    let (mut state, mut imu) = at(0);
+    for k in 0..1500 {
+        let estimate = estimator.update(&model, &state, &sensors(imu), &plan, DT);
+        // The first tick has no effort to read yet (the schedule decides).
+        if k >= 10 {
+            worst = worst.max((estimate.position - truth.position).norm());
+            worst = worst.max(estimate.velocity.norm());
+        }
+        let (next, next_imu) = at(k + 1);
+        if with_effort {
+            let torques = torques_for(
+                &model,
+                &next,
+                &state.joint_velocities,
+                gravity_body,
+                &forces,
+            );
+            estimator.record_applied_torques(&torques);
+        }
+        (state, imu) = (next, next_imu);
+    }
+    (estimator, worst)
+}
+
+#[test]
+fn a_foot_in_scheduled_stance_without_load_is_no_contact() {
+    let model = model();
+    let weight = model.total_mass() * GRAVITY;
+    let (estimator, worst_with_effort) = standing_with_a_waving_leg(ALL_STANCE, true);
+    let contacts = estimator.detected_contacts();
+    assert!(!contacts[0].in_contact, "{:?}", contacts[0]);
+    assert!(contacts[0].probability < 0.1, "{:?}", contacts[0]);
+    let unloaded = contacts[0].normal_force.expect("force estimate");
+    assert!(
+        unloaded.abs() < 0.01 * weight,
+        "waving leg force {unloaded} N"
+    );
+    for contact in &contacts[1..] {
+        assert!(contact.in_contact, "{contact:?}");
+        let force = contact.normal_force.expect("force estimate");
+        assert!(
+            (force - weight / 3.0).abs() < 0.01 * weight,
+            "loaded leg force {force} N, expected {}",
+            weight / 3.0
+        );
+    }
+    // The schedule alone (no effort recorded) takes the waving leg as standing still.
+    let (schedule_only, worst_schedule_only) = standing_with_a_waving_leg(ALL_STANCE, false);
+    assert!(schedule_only.detected_contacts()[0].normal_force.is_none());
+    assert!(
+        worst_with_effort < 0.02 && worst_schedule_only > 5.0 * worst_with_effort,
+        "with effort {worst_with_effort}, schedule only {worst_schedule_only}"
+    );
+}
+
+#[test]
+fn a_loaded_foot_in_scheduled_swing_is_contact() {
+    let model = model();
+    let weight = model.total_mass() * GRAVITY;
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    let truth = Truth::standing(&model);
+    let (state, imu) = truth.measure(&model);
+    let forces = [Vector3::new(0.0, 0.0, weight / 4.0); NUM_LEGS];
+    let torques = torques_for(
+        &model,
+        &state,
+        &state.joint_velocities,
+        Vector3::new(0.0, 0.0, -GRAVITY),
+        &forces,
+    );
+    // Leg 0 planned in swing (an early touch-down): its effort says it carries a quarter of
+    // the weight.
+    let mut plan = ALL_STANCE;
+    plan[0] = None;
+    for _ in 0..100 {
+        estimator.update(&model, &state, &sensors(imu), &plan, DT);
+        estimator.record_applied_torques(&torques);
+    }
+    let contacts = estimator.detected_contacts();
+    for contact in &contacts {
+        assert!(contact.in_contact, "{contact:?}");
+        let force = contact.normal_force.expect("force estimate");
+        assert!(
+            (force - weight / 4.0).abs() < 0.01 * weight,
+            "force {force} N"
+        );
+    }
+    assert!(contacts[0].probability > 0.8, "{:?}", contacts[0]);
+    assert_eq!(
+        estimator.report().status & StatusFlag::FootWithoutContact.bit(),
+        0
+    );
 }

@@ -9,7 +9,7 @@ use crate::api::{Leg, NUM_JOINTS};
 impl RobotModel {
     /// Recursive Newton–Euler on the fixed-base leg chain: joint torques for (q, q̇, q̈) with the
     /// base frame taken as inertial and `gravity_base` the gravity acceleration in the base frame.
-    fn rnea(
+    pub(crate) fn rnea(
         &self,
         leg: Leg,
         q: [f64; 3],
