@@ -16,6 +16,7 @@
 //! accelerating the light leg.
 
 use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::api::{Leg, NUM_JOINTS, NUM_LEGS};
 use crate::estimate::leg_slice;
@@ -44,7 +45,7 @@ pub const CONTACT_ON_PROBABILITY: f64 = 0.65;
 pub const CONTACT_OFF_PROBABILITY: f64 = 0.35;
 
 /// What the force-based detector concluded for one leg.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LegContact {
     /// Fused contact probability, 0..1.
     pub probability: f64,
@@ -56,7 +57,7 @@ pub struct LegContact {
 }
 
 /// The detector's state between ticks.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ContactDetector {
     /// Torques applied since the last tick (the previous command), or `None` when unknown.
     applied_torques: Option<[f64; NUM_JOINTS]>,
