@@ -132,7 +132,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--contact-sensor",
         action="store_true",
-        help="kalman: tell the estimator which feet touch the ground (DART's contacts, an ideal sensor; default: it detects contact from the leg effort and its gait schedule)",
+        help="kalman: tell the estimator which feet touch the ground (DART's contacts, an ideal sensor; "
+        "default: it detects contact from the leg effort and its gait schedule)",
     )
     p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
 
