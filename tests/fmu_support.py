@@ -35,10 +35,17 @@ def new_slave(unzipped: Path, md: Any, name: str, guid: str | None = None) -> FM
     )
 
 
+# fmpy's logger proxy (`addLoggerProxy`) keeps the Python logger it was last given in a global of
+# its native library and forwards every proxied message to it, also those of instances made with
+# fmpy's default callbacks later on. A test's callbacks must therefore live as long as the process:
+# freed, the next FMU message of any instance would call into freed memory.
+_PROXIED_CALLBACKS: list[fmi2CallbackFunctions] = []
+
+
 def logging_callbacks(sink: Callable[[int, str, str], None]) -> fmi2CallbackFunctions:
     """Callbacks whose logger passes (status, category, formatted message) of every message to `sink`.
 
-    Keep the returned object alive as long as the instance: the FMU calls into it.
+    They are kept alive for the rest of the process (see `_PROXIED_CALLBACKS`).
     """
 
     def log(_env: Any, _instance: bytes, status: int, category: bytes, message: bytes) -> None:
@@ -50,4 +57,5 @@ def logging_callbacks(sink: Callable[[int, str, str], None]) -> fmi2CallbackFunc
     callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmi_free)
     # The proxy formats the printf-style message before it reaches Python.
     addLoggerProxy(byref(callbacks))
+    _PROXIED_CALLBACKS.append(callbacks)
     return callbacks

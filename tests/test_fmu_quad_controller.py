@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2FMUstate
 from fmpy.validation import validate_fmu
 from fmu_support import STATUS_ERROR, logging_callbacks, new_slave
 from pfnav_harness.fmu_runner import FmuContract
@@ -458,7 +458,7 @@ MISUSE_RUNNING: list[tuple[str, Callable[[FMU2Slave, dict[str, int]], Any], str]
     ("h negative", lambda s, r: s.doStep(0.0, -0.001), "communicationStepSize -0.001 must be finite and > 0"),
     ("h nan", lambda s, r: s.doStep(0.0, math.nan), "communicationStepSize NaN must be finite and > 0"),
     ("wrong time", lambda s, r: s.doStep(0.25, 0.01), "currentCommunicationPoint 0.25 does not match the FMU time 0"),
-    ("fmu state", lambda s, r: s.getFMUstate(), "fmi2GetFMUstate is not supported"),
+    ("foreign fmu state", lambda s, r: s.setFMUstate(fmi2FMUstate(0xDEAD0)), "FMUstate is not a live state of this FMU"),
     ("debug category", lambda s, r: s.setDebugLogging(True, ["logNothing"]), 'unknown log category "logNothing"'),
 ]
 

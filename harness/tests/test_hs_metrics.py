@@ -140,20 +140,23 @@ def test_footprint_takes_the_largest_p_within_the_radius() -> None:
     point = TraversabilityField(terrain, {}).values
     for radius in (0.0, 0.4, 0.5, 0.75, 1.0, 1.2, 2.0):
         values = TraversabilityField(terrain, {"footprint_radius_m": radius}).values
+        # Cells beyond the map edge count as p = 1 (the ground ends there).
+        padded = np.pad(point, heights.shape[0], constant_values=1.0)
         for iy, ix in np.ndindex(heights.shape):
-            sy, sx = np.indices(heights.shape)
+            sy, sx = np.indices(padded.shape) - heights.shape[0]
             within = np.hypot(sx - ix, sy - iy) * 0.5 <= radius + 1e-12
-            assert values[iy, ix] == point[within].max(), (radius, ix, iy)
+            assert values[iy, ix] == padded[within].max(), (radius, ix, iy)
     with pytest.raises(ValueError):
         TraversabilityField(terrain, {"footprint_radius_m": -0.1})
-    # Obstacle cells count as p = 1 around them and keep their own p.
+    # Obstacle cells count as p = 1 around them and keep their own p; so do the cells beyond the edge.
     pit = np.zeros((5, 7), dtype=bool)
     pit[2, 3] = True
     flat = Terrain((0.0, 0.0), 1.0, np.full((5, 7), 0.5), pit)
     values = TraversabilityField(flat, {"footprint_radius_m": 1.0, "h_max": 1.0}).values
     for iy, ix in np.ndindex(pit.shape):
         near = math.hypot(ix - 3, iy - 2) <= 1.0 and (ix, iy) != (3, 2)
-        assert values[iy, ix] == (1.0 if near else 0.5), (ix, iy)
+        on_edge = ix in (0, 6) or iy in (0, 4)
+        assert values[iy, ix] == (1.0 if near or on_edge else 0.5), (ix, iy)
 
 
 def test_angle_helpers() -> None:
