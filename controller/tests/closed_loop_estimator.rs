@@ -9,8 +9,7 @@ mod common;
 
 use nalgebra::Vector3;
 use quad_controller::{
-    Controller, ControllerConfig, EstimatorKind, FsmState, ImuReading, ModeRequest, Reference,
-    SensorReadings, GRAVITY,
+    Controller, ControllerConfig, EstimatorKind, FsmState, ModeRequest, Reference, SensorReadings,
 };
 
 #[test]
@@ -39,11 +38,7 @@ fn kalman_mode_trots_on_its_own_estimate() {
         let walking = tick >= stand_ticks;
         let t = (tick as f64 - stand_ticks as f64).max(0.0) * dt;
         let state = sim.state();
-        let rotation = sim.orientation.to_rotation_matrix();
-        let imu = ImuReading {
-            gyro: (rotation.inverse() * sim.angular_velocity).into(),
-            acc: (rotation.inverse() * (acceleration + Vector3::new(0.0, 0.0, GRAVITY))).into(),
-        };
+        let imu = sim.imu(acceleration);
         let sensors = SensorReadings {
             imu,
             ..SensorReadings::default()

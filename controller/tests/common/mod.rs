@@ -2,7 +2,9 @@
 #![allow(dead_code)]
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use quad_controller::{Command, Leg, RobotModel, RobotState, GRAVITY, NUM_JOINTS, NUM_LEGS};
+use quad_controller::{
+    Command, ImuReading, Leg, RobotModel, RobotState, GRAVITY, NUM_JOINTS, NUM_LEGS,
+};
 
 pub fn urdf_text() -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
@@ -35,6 +37,16 @@ pub struct SrbSim {
 }
 
 impl SrbSim {
+    /// What an ideal IMU on the trunk reads: gyro = Rᵀω, accelerometer = Rᵀ(a + g), with `acceleration`
+    /// the base origin's velocity change over the previous tick (a real IMU lags by a sample).
+    pub fn imu(&self, acceleration: Vector3<f64>) -> ImuReading {
+        let to_body = self.orientation.to_rotation_matrix().inverse();
+        ImuReading {
+            gyro: (to_body * self.angular_velocity).into(),
+            acc: (to_body * (acceleration + Vector3::new(0.0, 0.0, GRAVITY))).into(),
+        }
+    }
+
     /// Standing at `base_height` above the terrain at the origin, feet under the hips.
     pub fn standing(model: RobotModel, stand_q: [f64; NUM_JOINTS], base_height: f64) -> Self {
         let (inertia, com) = model.composite_inertia(&stand_q);
