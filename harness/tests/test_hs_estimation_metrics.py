@@ -237,9 +237,9 @@ def test_an_unknown_estimator_mode_is_refused() -> None:
         (["--estimator", "kalman", "--fix-rate", "-1"], "fix rate"),
         (["--estimator", "kalman", "--fix-noise", "nan"], "fix noise"),
         (["--estimator", "kalman", "--sensor-seed", "-3"], "seed"),
-        (["--fix-rate", "2"], "add --estimator kalman"),
-        (["--contact-sensor"], "add --estimator kalman"),
-        (["--fix-noise", "0.05"], "add --estimator kalman"),
+        (["--estimator", "groundTruth", "--fix-rate", "2"], "which --estimator groundTruth turns off"),
+        (["--estimator", "groundTruth", "--contact-sensor"], "which --estimator groundTruth turns off"),
+        (["--estimator", "groundTruth", "--fix-noise", "0.05"], "which --estimator groundTruth turns off"),
     ],
 )
 def test_bad_estimation_flags_give_a_clear_error(args: list[str], message: str) -> None:
@@ -256,4 +256,7 @@ def test_estimation_flags_reach_the_config() -> None:
     assert config.estimator == "kalman"
     b = config.body_sensors
     assert (b.fix_rate, b.fix_noise, b.seed, b.contact_sensor) == (2.0, 0.05, 9, True)
-    assert _config(build_parser().parse_args(["run", "--scenario", "pits"])).estimator == "groundTruth"
+    # Without the flag the controller runs on its estimate, like a real robot; the flags then need no --estimator.
+    default = _config(build_parser().parse_args(["run", "--scenario", "pits", "--fix-rate", "2"]))
+    assert (default.estimator, default.body_sensors.fix_rate) == ("kalman", 2.0)
+    assert _config(build_parser().parse_args(["run", "--scenario", "pits", "--estimator", "groundTruth"])).estimator == "groundTruth"

@@ -234,3 +234,22 @@ def test_forks_refuse_what_they_cannot_continue(ramp_scenario: Scenario, fmu_con
             sim.run_from(fork)
     with simulation(ramp_scenario, fmu_contract, tmp_path, config(max_duration=0.4)) as sim, pytest.raises(SimulationError, match="before its fork point"):
         sim.run_from(fork)
+
+
+def test_the_fork_key_names_the_robot_by_its_urdf_content(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    original = paths.urdf_path().read_text()
+    copy = tmp_path / "copy" / "robot.urdf"
+    copy.parent.mkdir()
+    copy.write_text(original)
+    cfg = config()
+
+    def key(urdf: Path) -> str:
+        sim = CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, urdf, tmp_path, cfg, controller=StatefulStandIn(fmu_contract))  # type: ignore[arg-type]
+        with sim:
+            return sim.fork_key()
+
+    assert key(copy) == key(paths.urdf_path())
+    heavier = original.replace('<mass value="5.0"/>', '<mass value="5.5"/>', 1)
+    assert heavier != original
+    copy.write_text(heavier)
+    assert key(copy) != key(paths.urdf_path())

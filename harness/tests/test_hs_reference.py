@@ -83,17 +83,18 @@ def test_a_replanned_trajectory_continues_from_where_it_was_planned(ramp_scenari
     t = np.linspace(0.0, 4.0, 41)
     first = make_plan(t, 0.2 + 0.4 * t, np.full_like(t, 1.0), np.zeros_like(t))
     source = TrajectorySource(first, ramp_scenario.terrain, 0.3, 0.0)
-    state = np.zeros(37)
+    # A time-indexed reference ignores the pose and the frame offset.
+    pose, offset = np.array([5.0, 5.0, 1.0]), np.array([0.3, 0.3, 0.1, 0.0])
     before, after = np.zeros(10), np.zeros(10)
     planned_at, applied_at = 1.0, 1.2
-    source.sample(applied_at, state, True, before)
+    source.sample(applied_at, pose, offset, True, before)
     # Replanned at t = 1 s from the pose the first plan had then, bending towards y = 1.4 at the same speed.
     second = make_plan(t, 0.6 + 0.4 * t * np.cos(0.3), 1.0 + 0.4 * t * np.sin(0.3), np.full_like(t, 0.3))
     source.replace(second, planned_at)
-    source.sample(applied_at, state, True, after)
+    source.sample(applied_at, pose, offset, True, after)
     # No jump at the swap beyond what the bend accumulates in the 0.2 s latency (0.08 m at 0.3 rad).
     jump = math.hypot(after[X] - before[X], after[Y] - before[Y])
     assert jump == pytest.approx(math.hypot(0.08 * math.cos(0.3) - 0.08, 0.08 * math.sin(0.3)), abs=1e-9)
-    source.sample(planned_at + 2.0, state, True, after)
+    source.sample(planned_at + 2.0, pose, offset, True, after)
     assert after[X] == pytest.approx(0.6 + 0.8 * math.cos(0.3), abs=1e-9)
     assert after[Y] == pytest.approx(1.0 + 0.8 * math.sin(0.3), abs=1e-9)

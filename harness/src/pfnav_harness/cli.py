@@ -122,9 +122,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--estimator",
         choices=ESTIMATOR_MODES,
-        default="groundTruth",
-        help="what the controller runs on: groundTruth (the simulated body's exact state; default) or kalman (its own estimate "
-        "from a simulated IMU, joint encoders and optional position fixes; needs an FMU with the estimator)",
+        default="kalman",
+        help="what the controller runs on: kalman (its own estimate from a simulated IMU, joint encoders and optional position "
+        "fixes, the way a real robot runs; default) or groundTruth (the simulated body's exact state)",
     )
     p.add_argument("--fix-rate", type=float, default=0.0, help="kalman: absolute position fixes per second (default 0 = none)")
     p.add_argument("--fix-noise", type=float, default=None, help="kalman: standard deviation of each fix coordinate, m (default 0.02)")
@@ -190,7 +190,7 @@ def _body_sensors(args: argparse.Namespace) -> BodySensorConfig:
     from .errors import SimulationError
 
     if args.estimator != "kalman" and (args.fix_rate != 0.0 or args.fix_noise is not None or args.sensor_seed != 0 or args.contact_sensor):
-        raise HarnessError("--fix-rate, --fix-noise, --sensor-seed and --contact-sensor feed the estimator: add --estimator kalman")
+        raise HarnessError("--fix-rate, --fix-noise, --sensor-seed and --contact-sensor feed the estimator, which --estimator groundTruth turns off")
     fix_noise = BodySensorConfig.fix_noise if args.fix_noise is None else args.fix_noise
     config = BodySensorConfig(seed=args.sensor_seed, fix_rate=args.fix_rate, fix_noise=fix_noise, contact_sensor=args.contact_sensor)
     try:

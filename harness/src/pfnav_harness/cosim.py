@@ -212,6 +212,7 @@ class ForkPoint:
     log_ref: NDArray[np.float64]
     log_flags: NDArray[np.int8]
     estimator: EstimatorLogState | None
+    belief_offset: NDArray[np.float64]
     timing: Timing
 
 
@@ -228,6 +229,8 @@ class _Loop:
     log_push: NDArray[np.float64] | None
     estimator: EstimatorInTheLoop | None
     timing: Timing
+    # Estimate − truth at the last communication point (dx, dy, dz, dyaw); zeros without an estimator.
+    belief_offset: NDArray[np.float64] = field(default_factory=lambda: np.zeros(4))
     # The next step to simulate; after a stop, the number of logged rows.
     k: int = 0
     mode: int = 0
@@ -304,12 +307,14 @@ class CoSimulation:
     def fork_key(self) -> str:
         """What the prefix up to `walk_start_step` depends on, as a digest: runs with equal keys share a fork.
 
-        Covers the FMU, the robot, the scenario's terrain and start, the plan and the config's
+        Covers the FMU, the robot's URDF (content), the scenario's terrain and start, the plan and the config's
         `prefix_signature`.
         """
         h = hashlib.sha256()
         guid = getattr(getattr(self.fmu, "info", None), "guid", type(self.fmu).__name__)
-        h.update(f"fmu={guid};urdf={self.urdf};scenario={self.scenario.name};start_yaw={self.scenario.start_yaw!r};".encode())
+        # The robot by content: an edited URDF at the same path is another robot.
+        urdf_digest = hashlib.sha256(self.urdf.read_bytes()).hexdigest()
+        h.update(f"fmu={guid};urdf={urdf_digest};scenario={self.scenario.name};start_yaw={self.scenario.start_yaw!r};".encode())
         h.update(terrain_digest(self.scenario.terrain).encode())
         for name, values in self.plan.to_npz_dict().items():
             h.update(name.encode())
@@ -358,6 +363,7 @@ class CoSimulation:
             log_ref=loop.log_ref[:end].copy(),
             log_flags=loop.log_flags[:end].copy(),
             estimator=None if est is None else est.save(end),
+            belief_offset=loop.belief_offset.copy(),
             timing=dataclasses.replace(loop.timing),
         )
 
@@ -391,6 +397,7 @@ class CoSimulation:
             raise SimulationError("the fork and this run differ in whether the estimator runs")
         if loop.estimator is not None and fork.estimator is not None:
             loop.estimator.restore(fork.estimator)
+        loop.belief_offset[:] = fork.belief_offset
         loop.k = k
         loop.mode = fork.mode
         loop.timing = dataclasses.replace(fork.timing)
@@ -456,6 +463,9 @@ class CoSimulation:
         contacts_view = fmu.contacts_array
         perf = time.perf_counter
         estimator = loop.estimator
+        offset = loop.belief_offset
+        # The pose the robot's navigation works with: x, y, yaw (truth + offset).
+        pose = np.zeros(3)
         stop_reason: str | None = None
         min_height = c.fall.min_base_height
         progress_every = max(1, n_steps // 200)
@@ -469,8 +479,12 @@ class CoSimulation:
                 break
             walking = t >= walk_start
             tau = t - walk_start
+            true_yaw = yaw_of(state[3:7])
+            pose[0] = state[0] + offset[0]
+            pose[1] = state[1] + offset[1]
+            pose[2] = true_yaw + offset[3]
             if online is not None and walking and k % ratio == 0:
-                answer = online.tick(tau, float(state[0]), float(state[1]), yaw_of(state[3:7]))
+                answer = online.tick(tau, float(pose[0]), float(pose[1]), float(pose[2]))
                 if answer is not None:
                     if isinstance(source, FieldSource):
                         assert answer.field is not None  # the navigator only passes on P-F answers with a field
@@ -478,9 +492,9 @@ class CoSimulation:
                     else:
                         assert answer.plan is not None
                         source.replace(answer.plan, online.replans[-1].t_publish)
-            source.sample(tau, state, walking, ref_row)
+            source.sample(tau, pose, offset, walking, ref_row)
             if pushes is not None and walking:
-                force = pushes.force_at(tau, yaw_of(state[3:7]))
+                force = pushes.force_at(tau, true_yaw)
                 if force is not None:
                     push_force[:] = force
                     world.apply_trunk_force(force)
@@ -491,14 +505,15 @@ class CoSimulation:
             if k % ratio == 0:
                 input_values[ref_in] = ref_row[ref_columns]
                 input_values[body_height_in] = c.body_height
-                # The elevation map a perception stack would give: the mesh vertices around the base.
+                # The elevation map a perception stack would give: the mesh vertices around the base,
+                # in the robot's estimated frame (perception measures the ground relative to the body).
                 grid = terrain.local_grid(float(state[0]), float(state[1]), fr.HEIGHT_MAP_SIZE) if use_map else None
                 if grid is None:
                     input_values[map_spacing] = 0.0
                 else:
-                    map_origin[0], map_origin[1] = grid[0], grid[1]
+                    map_origin[0], map_origin[1] = grid[0] + offset[0], grid[1] + offset[1]
                     input_values[map_spacing] = terrain.resolution
-                    map_heights[:] = grid[2].ravel()
+                    map_heights[:] = grid[2].ravel() + offset[2]
                 if estimator is not None:
                     estimator.write_inputs(t, state)
                 mode = modes.Locomotion if walking else modes.Stand
@@ -510,6 +525,8 @@ class CoSimulation:
                 torques[:] = fmu.torques
                 if not math.isfinite(float(torques.sum())):
                     raise SimulationError(f"the FMU returned non-finite torques at t={t:.3f} s")
+                if estimator is not None:
+                    estimator.belief_offset(state, true_yaw, offset)
                 world.apply_torques(torques)
             t0 = perf()
             world.step()
@@ -620,6 +637,7 @@ class EstimatorInTheLoop:
         self._status = np.zeros(n_steps, dtype=np.int32)
         self._fix_valid = np.zeros(n_steps, dtype=bool)
         self._new_fix = False
+        self._offset_scratch = np.zeros(4)
 
     def write_inputs(self, t: float, state: NDArray[np.float64]) -> None:
         readings = self.sensors.sample(t, state)
@@ -633,6 +651,20 @@ class EstimatorInTheLoop:
         if self.config.body_sensors.contact_sensor:
             # The last physics step's collision check: the contacts of the state just read.
             io.contact[:] = self.world.foot_contacts()
+
+    def belief_offset(self, state: NDArray[np.float64], true_yaw: float, out: NDArray[np.float64]) -> None:
+        """Estimate − truth after a communication step: dx, dy, dz, dyaw (wrapped to ±π) into `out`.
+
+        `state` is the truth the step started from; at one control tick per step the estimate is of
+        that same instant.
+        """
+        io = self.io
+        new = self._offset_scratch
+        np.subtract(io.est_pos, state[0:3], out=new[0:3])
+        new[3] = math.remainder(float(io.est_rpy[2]) - true_yaw, math.tau)
+        # A lost estimate (the FMU says so in est.status) keeps the last good offset.
+        if math.isfinite(float(new.sum())):
+            out[:] = new
 
     def log_step(self, k: int) -> None:
         io = self.io

@@ -6,6 +6,11 @@
   position is the robot's own, the velocity and heading come from the field, so a pushed robot
   heads for the goal from where it landed.
 
+Both are sampled at the pose the robot believes it has (`pose`: x, y, yaw — its estimate in kalman
+mode, the truth otherwise) and describe the terrain the way a body-relative perception would: the
+ground actually under the robot, moved into the robot's estimated frame by `offset` (estimate −
+truth: dx, dy, dz).
+
 Both can swap in a new plan mid-walk (online replanning) without a jump in the reference.
 """
 
@@ -50,7 +55,8 @@ class TrajectorySource:
     def finished(self) -> bool:
         return False
 
-    def sample(self, tau: float, state: NDArray[np.float64], walking: bool, out: NDArray[np.float64]) -> None:
+    def sample(self, tau: float, pose: NDArray[np.float64], offset: NDArray[np.float64], walking: bool, out: NDArray[np.float64]) -> None:
+        # Indexed by the walk clock alone: the plan (its positions and their terrain) is the map's.
         self.reference.sample(tau - self._start if walking else 0.0, out)
 
     def replace(self, plan: Plan, planned_at: float) -> None:
@@ -98,20 +104,21 @@ class FieldSource:
     def finished(self) -> bool:
         return self._at_goal
 
-    def sample(self, tau: float, state: NDArray[np.float64], walking: bool, out: NDArray[np.float64]) -> None:
-        x, y = float(state[0]), float(state[1])
-        plane = self.planes.at(x, y)
+    def sample(self, tau: float, pose: NDArray[np.float64], offset: NDArray[np.float64], walking: bool, out: NDArray[np.float64]) -> None:
+        x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
+        plane = self.planes.at(x - float(offset[0]), y - float(offset[1]))
+        height = plane.height + float(offset[2])
         out[X] = x
         out[Y] = y
-        out[Z] = plane.height
-        out[T_HEIGHT] = plane.height
+        out[Z] = height
+        out[T_HEIGHT] = height
         out[T_DZDX] = plane.dzdx
         out[T_DZDY] = plane.dzdy
         if not walking:
             out[YAW] = self.start_yaw
             out[VX] = out[VY] = out[YAW_RATE] = 0.0
             return
-        command = self.follower.command(x, y, yaw_of(state[3:7]), self.control_dt)
+        command = self.follower.command(x, y, yaw, self.control_dt)
         out[YAW] = command.yaw
         out[VX] = command.vx
         out[VY] = command.vy

@@ -128,7 +128,8 @@ pub struct PlanRequest {
 #[derive(Debug, Clone)]
 pub struct Plan {
     pub method: Method,
-    /// The continuous path (polyline), start first, ending in the goal region.
+    /// The continuous path (polyline), start first, ending at the goal's centre (or, when the
+    /// straight way there from where the path enters the goal region is blocked, at that entry).
     pub path: Vec<Point>,
     /// The time-parameterised reference along `path`.
     pub trajectory: Vec<TrajectorySample>,
@@ -246,6 +247,8 @@ impl PreparedMap<'_> {
         };
         let solve_time_s = started.elapsed().as_secs_f64();
         let retimed = Instant::now();
+        let mut path = path;
+        walk_into_goal(self.grid, &mut path, goal);
         let metrics = evaluate_path(self.map, self.field, &path);
         let trajectory = build_trajectory(self.map, &path, start_yaw, &trajectory_options)?;
         let trajectory_time_s = retimed.elapsed().as_secs_f64();
@@ -368,6 +371,22 @@ impl Planner {
 }
 
 /// Start and goal against the map itself (the grid adds its padding later).
+/// Continues `path` from where it entered the goal region straight to the goal's centre, when
+/// that segment is free: a plan that ends on the region's rim leaves a robot no room for tracking
+/// or localisation error, and it stops just outside as often as just inside.
+fn walk_into_goal(grid: &PlanningGrid, path: &mut Vec<Point>, goal: &GoalRegion) {
+    let Some(&last) = path.last() else {
+        return;
+    };
+    let centre = goal.center;
+    let remaining = (centre[0] - last[0]).hypot(centre[1] - last[1]);
+    // A zero-radius goal is the cell containing its centre.
+    let in_goal = goal.contains(last) || grid.cell_of(last) == grid.cell_of(centre);
+    if in_goal && remaining > 1e-9 && grid.segment_is_free(last, centre) {
+        path.push(centre);
+    }
+}
+
 fn check_endpoints(
     map: &GridMap,
     start: Point,
@@ -415,4 +434,57 @@ pub fn plan(req: &PlanRequest) -> Result<Plan, PlanError> {
         req.method,
         &req.options,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 10 × 10 cells of 1 m, origin at 0; `wall` blocks the cells of column 6, rows 3..=6.
+    fn grid(wall: bool) -> PlanningGrid {
+        let blocked = (0..100)
+            .map(|i| wall && i % 10 == 6 && (3..=6).contains(&(i / 10)))
+            .collect();
+        PlanningGrid::from_parts([0.0, 0.0], 1.0, 10, 10, vec![0.1; 100], blocked).expect("grid")
+    }
+
+    const GOAL: GoalRegion = GoalRegion {
+        center: [7.5, 5.5],
+        radius: 2.0,
+    };
+
+    #[test]
+    fn a_path_that_stops_on_the_goal_rim_goes_on_to_the_centre() {
+        let mut path = vec![[1.5, 5.5], [5.5, 5.5]];
+        walk_into_goal(&grid(false), &mut path, &GOAL);
+        assert_eq!(path, vec![[1.5, 5.5], [5.5, 5.5], GOAL.center]);
+    }
+
+    #[test]
+    fn a_blocked_way_to_the_centre_leaves_the_path_at_its_entry() {
+        let mut path = vec![[1.5, 5.5], [5.5, 5.5]];
+        walk_into_goal(&grid(true), &mut path, &GOAL);
+        assert_eq!(path, vec![[1.5, 5.5], [5.5, 5.5]]);
+    }
+
+    #[test]
+    fn a_path_outside_the_goal_or_at_its_centre_is_left_alone() {
+        let mut outside = vec![[1.5, 5.5], [3.5, 5.5]];
+        walk_into_goal(&grid(false), &mut outside, &GOAL);
+        assert_eq!(outside.len(), 2);
+        let mut at_centre = vec![[1.5, 5.5], GOAL.center];
+        walk_into_goal(&grid(false), &mut at_centre, &GOAL);
+        assert_eq!(at_centre.len(), 2);
+    }
+
+    #[test]
+    fn a_zero_radius_goal_is_entered_through_its_cell() {
+        let goal = GoalRegion {
+            center: [7.2, 5.7],
+            radius: 0.0,
+        };
+        let mut path = vec![[1.5, 5.5], [7.5, 5.5]];
+        walk_into_goal(&grid(false), &mut path, &goal);
+        assert_eq!(path.last(), Some(&goal.center));
+    }
 }

@@ -1,0 +1,171 @@
+"""The robot navigates in the frame of its own estimate.
+
+With an estimator the reference, the feedback law, the replans and the elevation map are all
+taken at the pose the robot believes it has (truth + the estimate's offset), and the terrain it is
+given is the ground actually under it, moved into that frame — as a body-relative perception
+would give it. A stand-in controller reports a known, constant estimate error here.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pfnav_harness import fmu_runner as fr
+from pfnav_harness import paths
+from pfnav_harness.body_sensors import BodySensorConfig
+from pfnav_harness.cosim import CoSimConfig, CoSimulation
+from pfnav_harness.feedback_field import FeedbackField
+from pfnav_harness.planner_client import Plan
+from pfnav_harness.reference import N_COLUMNS, T_HEIGHT, VX, VY, X, Y, Z
+from pfnav_harness.reference_source import FieldSource, yaw_of
+from pfnav_harness.scenario import Scenario
+from pfnav_harness.world import DEFAULT_STANCE
+
+# Estimate − truth the stand-in reports: dx, dy, dz [m], dyaw [rad].
+OFFSET = np.array([0.12, -0.07, 0.03, 0.2])
+GOAL = (2.5, 1.0, 0.2)
+
+
+def radial_field(scenario: Scenario) -> FeedbackField:
+    """Straight at the goal centre from every cell of the scenario's map (the optimal law of p ≡ 1)."""
+    terrain = scenario.terrain
+    ny, nx = terrain.shape
+    res = terrain.resolution
+    x = terrain.origin[0] + (np.arange(nx)[None, :] + 0.5) * res
+    y = terrain.origin[1] + (np.arange(ny)[:, None] + 0.5) * res
+    dx, dy = GOAL[0] - x, GOAL[1] - y
+    dist = np.hypot(dx, dy)
+    inside = dist <= GOAL[2]
+    safe = np.where(dist > 0.0, dist, 1.0)
+    zero = np.zeros_like(dist)
+    return FeedbackField(
+        terrain.origin,
+        res,
+        np.where(inside, zero, dx / safe),
+        np.where(inside, zero, dy / safe),
+        np.where(inside, zero, 0.4),
+        np.where(inside, zero, dist - GOAL[2]),
+        GOAL,
+    )
+
+
+def ramp_height(x: float) -> float:
+    """The `ramp_scenario` fixture's surface: 0.1 m + 0.2 m per metre along x."""
+    return 0.1 + 0.2 * x
+
+
+def test_the_field_is_sampled_at_the_believed_pose_over_the_true_ground(ramp_scenario: Scenario) -> None:
+    field = radial_field(ramp_scenario)
+    source = FieldSource(field, ramp_scenario.terrain, 0.3, 0.001, start_yaw=0.0)
+    # Believed (1.22, 1.12): the robot is at (1.10, 1.19), where the plane cache's 0.05 m quantum puts no rounding.
+    believed = np.array([1.22, 1.12, 0.0])
+    out = np.zeros(N_COLUMNS)
+    source.sample(0.0, believed, OFFSET, True, out)
+    assert (out[X], out[Y]) == (1.22, 1.12)
+    # The ground under the robot (x = 1.10), in the estimated frame; under the believed x it is 0.024 m higher.
+    assert out[T_HEIGHT] == pytest.approx(ramp_height(1.10) + 0.03, abs=1e-9)
+    assert out[Z] == out[T_HEIGHT]
+    # The law's direction at the believed position: the goal lies at (+1.28, −0.12) from there
+    # (from the true position it would be (+1.40, −0.19): 0.05 rad further south).
+    heading = math.atan2(out[VY], out[VX])
+    assert heading == pytest.approx(math.atan2(-0.12, 1.28), abs=0.01)
+    assert math.hypot(out[VX], out[VY]) > 0.0
+
+
+class OffsetEstimateStandIn:
+    """Holds the stance by joint PD; its estimate is the truth plus `OFFSET`; records the map it is given."""
+
+    def __init__(self, contract: fr.FmuContract) -> None:
+        self.contract = contract
+        self.inputs = fr.NamedVector(fr.REAL_INPUTS)
+        self.outputs = fr.NamedVector(fr.REAL_OUTPUTS)
+        self.can_save_state = False
+        self.estimation: fr.EstimationIo | None = None
+        self._contacts = np.ones(4, dtype=np.int32)
+        # Per doStep: base x, y, z, yaw as given; map origin x, y; the map's first height.
+        self.seen: list[tuple[float, ...]] = []
+
+    def enable_estimation(self, mode: str) -> fr.EstimationIo:
+        self.estimation = fr.EstimationIo.detached()
+        return self.estimation
+
+    def initialize(self, start_time: float = 0.0) -> None:
+        pass
+
+    def exchange_inputs(self, mode: int) -> None:
+        pass
+
+    def do_step(self, time: float, step: float) -> None:
+        q = self.inputs.view(fr.JOINT_Q)
+        dq = self.inputs.view(fr.JOINT_DQ)
+        self.outputs.view(fr.TORQUE_OUTPUTS)[:] = 100.0 * (DEFAULT_STANCE - q) - 3.0 * dq
+        base = self.inputs.view(fr.BASE_POS)
+        yaw = yaw_of(self.inputs.view(fr.BASE_QUAT))
+        origin = self.inputs.view(fr.HEIGHT_MAP_ORIGIN)
+        first_height = self.inputs.view(fr.HEIGHT_MAP_HEIGHTS)[0]
+        self.seen.append((time, base[0], base[1], base[2], yaw, origin[0], origin[1], first_height))
+        est = self.estimation
+        assert est is not None
+        est.est_pos[:] = base + OFFSET[:3]
+        est.est_rpy[:] = (0.0, 0.0, yaw + OFFSET[3])
+
+    def read_outputs(self) -> None:
+        pass
+
+    @property
+    def torques(self) -> np.ndarray:
+        return self.outputs.view(fr.TORQUE_OUTPUTS)
+
+    @property
+    def contacts_array(self) -> np.ndarray:
+        return self._contacts
+
+    @property
+    def fsm_state(self) -> int:
+        return int(self.contract.fsm.Stand)
+
+    def close(self) -> None:
+        pass
+
+
+def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    t = np.array([0.0, 1.0])
+    one = np.ones(2)
+    plan = Plan("pf", t, 1.2 * one, 1.0 * one, 0 * one, 0 * one, 0 * one, 0 * one, 0 * one)
+    config = CoSimConfig(stand_time=0.2, max_duration=0.4, follow="feedback", estimator="kalman", body_sensors=BodySensorConfig(seed=1))
+    controller = OffsetEstimateStandIn(fmu_contract)
+    with CoSimulation(ramp_scenario, plan, None, paths.urdf_path(), tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
+        result = sim.run()
+    truth, ref = result.log["base_pos"], result.log["ref"]
+    assert len(truth) == 400
+    # From the second step on the offset is known: the reference position is the believed one.
+    np.testing.assert_allclose(ref[1:, 0] - truth[1:, 0], OFFSET[0], atol=1e-12)
+    np.testing.assert_allclose(ref[1:, 1] - truth[1:, 1], OFFSET[1], atol=1e-12)
+    seen = np.array(controller.seen[1:])
+    terrain = ramp_scenario.terrain
+    for _, x, y, _, _, origin_x, origin_y, first_height in seen[::37]:
+        grid = terrain.local_grid(x, y, fr.HEIGHT_MAP_SIZE)
+        assert grid is not None
+        # The block of ground around the true base, shifted into the estimated frame.
+        assert (origin_x, origin_y) == pytest.approx((grid[0] + OFFSET[0], grid[1] + OFFSET[1]), abs=1e-12)
+        assert first_height == pytest.approx(grid[2][0, 0] + OFFSET[2], abs=1e-12)
+
+
+def test_without_an_estimator_nothing_is_shifted(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    t = np.array([0.0, 1.0])
+    one = np.ones(2)
+    plan = Plan("pf", t, 1.2 * one, 1.0 * one, 0 * one, 0 * one, 0 * one, 0 * one, 0 * one)
+    config = CoSimConfig(stand_time=0.2, max_duration=0.3, follow="feedback")
+    controller = OffsetEstimateStandIn(fmu_contract)
+    controller.estimation = fr.EstimationIo.detached()  # written by the stand-in, never read by the harness
+    with CoSimulation(ramp_scenario, plan, None, paths.urdf_path(), tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
+        result = sim.run()
+    np.testing.assert_array_equal(result.log["ref"][:, 0], result.log["base_pos"][:, 0])
+    for _, x, y, _, _, origin_x, _, _ in controller.seen[::50]:
+        grid = ramp_scenario.terrain.local_grid(x, y, fr.HEIGHT_MAP_SIZE)
+        assert grid is not None
+        assert origin_x == grid[0]
