@@ -382,3 +382,54 @@ fn config_file_names_its_urdf_relative_to_itself_or_by_package() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
     assert!(RobotModel::from_config_file(Path::new("/nonexistent/r.toml")).is_err());
 }
+
+#[test]
+fn inverse_kinematics_handles_offset_hips_and_slanted_links() {
+    // FR: hip joint off the abduction axis in x and z, knee ahead of the hip at q = 0, foot
+    // behind and beside the knee: the closed-form guess must account for all of them.
+    let urdf = tiny_urdf()
+        .replace(
+            r#"<child link="fr_l2"/><origin xyz="0 -0.05 0" rpy="0 0 0"/>"#,
+            r#"<child link="fr_l2"/><origin xyz="0.01 -0.05 -0.02" rpy="0 0 0"/>"#,
+        )
+        .replace(
+            r#"<child link="fr_l3"/><origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
+            r#"<child link="fr_l3"/><origin xyz="0.03 -0.01 -0.2" rpy="0 0 0"/>"#,
+        )
+        .replace(
+            r#"<child link="fr_toe"/><origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
+            r#"<child link="fr_toe"/><origin xyz="-0.02 -0.008 -0.19" rpy="0 0 0"/>"#,
+        );
+    assert_eq!(
+        urdf.matches("-0.008 -0.19").count(),
+        1,
+        "the FR leg was modified"
+    );
+    let model = RobotModel::from_config_str(&tiny_config(), &urdf).expect("offset leg");
+    let mut state = 7u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..200 {
+        let q = [
+            0.6 * (next() - 0.5),
+            0.4 + 0.8 * next(),
+            -0.6 - 1.2 * next(),
+        ];
+        let p = model.foot_position_body(Leg::FR, q);
+        let solved = model.inverse_kinematics(Leg::FR, p).expect("reachable");
+        for i in 0..3 {
+            assert!((solved[i] - q[i]).abs() < 1e-6, "IK {solved:?} for {q:?}");
+        }
+    }
+    let stand = model.stand_joint_positions(0.3).expect("stand");
+    let foot = model.foot_position_body(Leg::FR, [stand[0], stand[1], stand[2]]);
+    let nominal = model.nominal_foot_position(Leg::FR, 0.3);
+    assert!(
+        (0..3).all(|i| (foot[i] - nominal[i]).abs() < 1e-9),
+        "{foot:?} vs {nominal:?}"
+    );
+}
