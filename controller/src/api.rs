@@ -553,8 +553,8 @@ pub enum ModelError {
         /// OS error text.
         reason: String,
     },
-    /// A link or joint required by the naming convention is missing.
-    #[error("URDF is missing {0} (naming convention: base link `base`, joints `<LEG>_hip_abd_joint`, `<LEG>_hip_flex_joint`, `<LEG>_knee_joint`, foot link `<LEG>_foot`)")]
+    /// A link or joint named by the robot config is missing from the URDF.
+    #[error("URDF is missing {0}")]
     Missing(String),
     /// The URDF is structurally not a quadruped of the expected topology.
     #[error("unsupported URDF structure: {0}")]
@@ -562,6 +562,24 @@ pub enum ModelError {
     /// A numeric value in the URDF is invalid (non-finite, non-positive mass, …).
     #[error("invalid value in URDF: {0}")]
     InvalidValue(String),
+    /// The robot config (TOML) is invalid: syntax (with its line), an unknown or missing key, a
+    /// bad value, a file it names that cannot be found.
+    #[error("robot config {file}: {reason}")]
+    Config {
+        /// Config file (or the label of a config given as text).
+        file: String,
+        /// What is wrong, naming the key.
+        reason: String,
+    },
+    /// An error in the description read from `file` (the URDF, or the config for config-side
+    /// problems found while building the model).
+    #[error("{file}: {source}")]
+    InFile {
+        /// File path (or the label of a text given in memory).
+        file: String,
+        /// The error.
+        source: Box<ModelError>,
+    },
     /// Inverse kinematics has no solution for the requested foot position.
     #[error("foot position out of the {leg:?} leg's workspace: {reason}")]
     Unreachable {
@@ -570,6 +588,24 @@ pub enum ModelError {
         /// Why.
         reason: String,
     },
+}
+
+impl ModelError {
+    /// The error without its [`ModelError::InFile`] wrappers (for matching on the kind).
+    pub fn innermost(&self) -> &ModelError {
+        match self {
+            ModelError::InFile { source, .. } => source.innermost(),
+            other => other,
+        }
+    }
+
+    /// Wrap `self` with the file it was found in.
+    pub fn in_file(self, file: &str) -> ModelError {
+        ModelError::InFile {
+            file: file.to_string(),
+            source: Box::new(self),
+        }
+    }
 }
 
 /// Errors of [`crate::Controller`].

@@ -69,19 +69,9 @@ impl Controller {
     /// Build a controller; fails on an invalid config or when the standing pose is unreachable.
     pub fn new(model: RobotModel, config: ControllerConfig) -> Result<Self, ControllerError> {
         validate_config(&config)?;
-        let mut stand_joint_positions = [0.0; NUM_JOINTS];
-        let mut nominal_feet_body = [Vector3::zeros(); NUM_LEGS];
-        for leg in Leg::ALL {
-            let hip = model.hip_position_body(leg);
-            let foot = [
-                hip[0],
-                hip[1] + model.hip_lateral_offset(leg),
-                -(config.body_height - model.foot_radius()),
-            ];
-            nominal_feet_body[leg.index()] = Vector3::from(foot);
-            let q = model.inverse_kinematics(leg, foot)?;
-            stand_joint_positions[3 * leg.index()..3 * leg.index() + 3].copy_from_slice(&q);
-        }
+        let stand_joint_positions = model.stand_joint_positions(config.body_height)?;
+        let nominal_feet_body =
+            Leg::ALL.map(|leg| Vector3::from(model.nominal_foot_position(leg, config.body_height)));
         let (inertia, com) = model.composite_inertia(&stand_joint_positions);
         let com_offset_body = Vector3::from(com);
         let stages = Stages {

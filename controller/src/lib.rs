@@ -1,6 +1,6 @@
 //! Quadruped controller stack: URDF model, gait state machine, convex MPC on ground reaction
-//! forces, leg torque control. Pure library: no I/O besides reading the URDF on request, no FFI,
-//! deterministic.
+//! forces, leg torque control. Pure library: no I/O besides reading the robot config and its URDF
+//! on request, no FFI, deterministic.
 //!
 //! Data flow per tick (`Controller::step`, 1 kHz): measured [`RobotState`] + planner
 //! [`Reference`] → FSM (passive / stand-up / stand / locomotion / damping) → gait schedule and
@@ -32,7 +32,8 @@
 //! Module layout: the pipeline stages of `Controller::step` are private modules (`estimate`,
 //! `fsm`, `footholds`, `mpc_schedule`, `leg_control`, `validation`) except [`estimator`], public
 //! for its benchmark and its status table; [`math`] holds the shared geometry helpers, so no two
-//! modules depend on each other.
+//! modules depend on each other. [`robot_config`] is the robot description (TOML) the [`model`]
+//! is built from.
 pub mod api;
 pub mod config;
 pub mod controller;
@@ -47,6 +48,7 @@ pub mod math;
 pub mod model;
 pub mod mpc;
 mod mpc_schedule;
+pub mod robot_config;
 mod validation;
 
 pub use api::*;
@@ -55,3 +57,4 @@ pub use controller::{Controller, ControllerState};
 pub use estimator::{EstimatorStatus, StatusFlag};
 pub use fsm::FsmTransition;
 pub use model::RobotModel;
+pub use robot_config::{PackagePath, RobotConfig};

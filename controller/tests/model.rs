@@ -271,29 +271,63 @@ fn urdf_missing_a_leg_is_a_clear_error() {
     let start = text.find("<!-- RL leg -->").expect("RL section");
     let end = text.find("</robot>").expect("end");
     let without_rl = format!("{}{}", &text[..start], &text[end..]);
-    match RobotModel::from_urdf_str(&without_rl) {
+    match RobotModel::from_urdf_str(&without_rl)
+        .as_ref()
+        .map_err(ModelError::innermost)
+    {
         Err(ModelError::Missing(what)) => assert!(what.contains("RL_foot"), "{what}"),
         other => panic!("expected Missing, got {other:?}"),
     }
     let renamed = text.replace("FL_knee_joint", "FL_elbow_joint");
-    match RobotModel::from_urdf_str(&renamed) {
+    match RobotModel::from_urdf_str(&renamed)
+        .as_ref()
+        .map_err(ModelError::innermost)
+    {
         Err(ModelError::Missing(what)) => assert!(what.contains("FL_knee_joint"), "{what}"),
         other => panic!("expected Missing, got {other:?}"),
     }
     let no_sphere = text.replace("<collision><origin xyz=\"0 0 0\" rpy=\"0 0 0\"/><geometry><sphere radius=\"0.02\"/></geometry></collision>", "");
+    match RobotModel::from_urdf_str(&no_sphere) {
+        Err(ModelError::Config { reason, .. }) => {
+            assert!(reason.contains("foot radius"), "{reason}")
+        }
+        other => panic!("expected a config error, got {other:?}"),
+    }
     assert!(matches!(
-        RobotModel::from_urdf_str(&no_sphere),
-        Err(ModelError::Structure(_))
-    ));
-    assert!(matches!(
-        RobotModel::from_urdf_str("<robot"),
+        RobotModel::from_urdf_str("<robot")
+            .as_ref()
+            .map_err(ModelError::innermost),
         Err(ModelError::Parse(_))
     ));
     let missing_file = RobotModel::from_urdf_file(std::path::Path::new("/nonexistent/robot.urdf"));
     assert!(matches!(missing_file, Err(ModelError::Io { .. })));
     let negative_mass = text.replacen("<mass value=\"5.0\"/>", "<mass value=\"-5.0\"/>", 1);
     assert!(matches!(
-        RobotModel::from_urdf_str(&negative_mass),
+        RobotModel::from_urdf_str(&negative_mass)
+            .as_ref()
+            .map_err(ModelError::innermost),
         Err(ModelError::InvalidValue(_))
     ));
+}
+
+#[test]
+fn repository_robot_config_describes_the_repository_urdf() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    let from_config = RobotModel::from_config_file(&path).expect("robot/quadruped.toml loads");
+    let compiled_in = common::model();
+    assert_eq!(from_config.total_mass(), compiled_in.total_mass());
+    assert_eq!(from_config.effort_limits(), compiled_in.effort_limits());
+    assert_eq!(from_config.foot_radius(), compiled_in.foot_radius());
+    // The controller's default standing height is our robot's configured one.
+    assert_eq!(
+        from_config.stand_height(),
+        quad_controller::ControllerConfig::default().body_height
+    );
+    for leg in Leg::ALL {
+        let q = [0.2, 0.7, -1.4];
+        assert_eq!(
+            from_config.foot_position_body(leg, q),
+            compiled_in.foot_position_body(leg, q)
+        );
+    }
 }

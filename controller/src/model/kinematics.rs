@@ -4,8 +4,9 @@
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use super::{to_array3, to_array33, LegFrames, RobotModel, Transform};
-use crate::api::{Leg, ModelError};
+use crate::api::{Leg, ModelError, NUM_JOINTS};
 use crate::math::wrap_angle;
+use crate::robot_config::KneeDirection;
 
 /// One leg's foot kinematics in the base frame.
 #[derive(Clone, Copy, Debug)]
@@ -60,6 +61,11 @@ impl RobotModel {
         to_array3(&self.frames(leg, q_leg).foot)
     }
 
+    /// Positions of the leg's three joint origins (abduction, hip, knee) in the base frame, m.
+    pub fn joint_positions_body(&self, leg: Leg, q_leg: [f64; 3]) -> [[f64; 3]; 3] {
+        self.frames(leg, q_leg).joint_origin.map(|p| to_array3(&p))
+    }
+
     /// Foot Jacobian ∂p_foot/∂q in the base frame (row = Cartesian axis, column = joint).
     pub fn foot_jacobian_body(&self, leg: Leg, q_leg: [f64; 3]) -> [[f64; 3]; 3] {
         to_array33(&self.jacobian(leg, q_leg))
@@ -97,9 +103,10 @@ impl RobotModel {
         self.foot_position_and_jacobian(leg, q).1
     }
 
-    /// Inverse kinematics: joint angles placing the foot at `p_body` (base frame), knee-backward
-    /// branch (knee angle < 0), foot below the hip axis in the leg plane. Closed-form for the nominal layout, refined by Newton steps on
-    /// the full URDF kinematics. Joint limits are not enforced here (callers clamp).
+    /// Inverse kinematics: joint angles placing the foot at `p_body` (base frame), on the knee
+    /// branch of the robot config (`knee_points`), foot below the hip axis in the leg plane.
+    /// Closed-form for the leg layout checked at load time, refined by Newton steps on the full
+    /// URDF kinematics. Joint limits are not enforced here (callers clamp).
     pub fn inverse_kinematics(&self, leg: Leg, p_body: [f64; 3]) -> Result<[f64; 3], ModelError> {
         self.solve_ik(leg, p_body)
             .map_err(|failure| ModelError::Unreachable {
@@ -115,6 +122,28 @@ impl RobotModel {
                     }
                 },
             })
+    }
+
+    /// Foot (sphere centre) position of the nominal stand in the base frame: in the leg's
+    /// sagittal plane under the abduction joint, the sphere's bottom `height` below the base
+    /// origin.
+    pub fn nominal_foot_position(&self, leg: Leg, height: f64) -> [f64; 3] {
+        let hip = self.hip_position_body(leg);
+        [
+            hip[0],
+            hip[1] + self.hip_lateral_offset(leg),
+            -(height - self.foot_radius),
+        ]
+    }
+
+    /// Joint angles of the nominal stand at `height` (see [`RobotModel::nominal_foot_position`]).
+    pub fn stand_joint_positions(&self, height: f64) -> Result<[f64; NUM_JOINTS], ModelError> {
+        let mut q = [0.0; NUM_JOINTS];
+        for leg in Leg::ALL {
+            let leg_q = self.inverse_kinematics(leg, self.nominal_foot_position(leg, height))?;
+            q[3 * leg.index()..3 * leg.index() + 3].copy_from_slice(&leg_q);
+        }
+        Ok(q)
     }
 
     /// [`RobotModel::inverse_kinematics`] without building an error message: for callers that
@@ -136,9 +165,12 @@ impl RobotModel {
         if yz_sq < d * d + 1e-12 {
             return Err(IkFailure::InsideOffset);
         }
-        let z_plane = -(yz_sq - d * d).sqrt();
-        let q0 = rel.z.atan2(rel.y) - z_plane.atan2(d);
-        let x_plane = rel.x;
+        // Foot in the abduction frame before its rotation: (x, d, z_abd), foot below the axis.
+        let z_abd = -(yz_sq - d * d).sqrt();
+        let abduction = rel.z.atan2(rel.y) - z_abd.atan2(d);
+        // Foot relative to the hip-flexion joint in the sagittal plane.
+        let x_plane = rel.x - g.hip_origin.x;
+        let z_plane = z_abd - g.hip_origin.z;
         let reach_sq = x_plane * x_plane + z_plane * z_plane;
         let reach = reach_sq.sqrt();
         if reach > l1 + l2 - 1e-9 || reach < (l1 - l2).abs() + 1e-9 {
@@ -148,11 +180,22 @@ impl RobotModel {
                 max: l1 + l2,
             });
         }
+        // Two-link solution for links hanging straight down at zero angles; the thigh and calf
+        // angle offsets shift it to the URDF's zero pose.
         let cos_knee = ((reach_sq - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)).clamp(-1.0, 1.0);
-        let q2 = -cos_knee.acos();
+        let bend = match g.knee {
+            KneeDirection::Backward => -cos_knee.acos(),
+            KneeDirection::Forward => cos_knee.acos(),
+        };
         let direction = (-x_plane).atan2(-z_plane);
-        let q1 = direction - (l2 * q2.sin()).atan2(l1 + l2 * q2.cos());
-        let mut q = [wrap_angle(q0), wrap_angle(q1), q2];
+        let swing = direction - (l2 * bend.sin()).atan2(l1 + l2 * bend.cos());
+        let hip = swing + g.thigh_angle;
+        let knee = bend + g.calf_angle - g.thigh_angle;
+        let mut q = [
+            wrap_angle(g.axis_signs[0] * abduction),
+            wrap_angle(g.axis_signs[1] * hip),
+            g.axis_signs[2] * knee,
+        ];
         let target = Vector3::new(p_body[0], p_body[1], p_body[2]);
         for _ in 0..20 {
             let error = target - self.frames(leg, q).foot;

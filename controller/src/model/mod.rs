@@ -1,11 +1,10 @@
-//! Robot model loaded from the URDF: per-leg kinematic chains, forward/inverse kinematics, foot
-//! Jacobian and per-leg rigid-body dynamics.
+//! Robot model built from a URDF and its robot config ([`crate::robot_config`]): per-leg
+//! kinematic chains, forward/inverse kinematics, foot Jacobian and per-leg rigid-body dynamics.
 //!
-//! Legs are found by the naming convention of `robot/README.md`: base link `base`; for each
-//! `LEG ∈ {FR, FL, RR, RL}` the revolute joints `LEG_hip_abd_joint`, `LEG_hip_flex_joint`,
-//! `LEG_knee_joint` and the foot link `LEG_foot` (with a sphere collision). The chain from `base`
-//! to the foot is found by walking the URDF tree from the foot up; fixed joints on the way are
-//! merged into the neighbouring moving link. No link name appears anywhere else in the crate.
+//! The robot config names, for each leg (FR, FL, RR, RL), the three actuated joints and the foot
+//! link (plus an optional foot offset), and the base link. The chain from the base to the foot is
+//! found by walking the URDF tree from the foot up; fixed joints on the way are merged into the
+//! neighbouring moving link. No link or joint name is assumed anywhere in the crate.
 //!
 //! Leg dynamics treat the base as fixed (an inertial frame): `M(q)` and `h(q, q̇)` are those of the
 //! 3-link chain hanging from a motionless base, with gravity expressed in the base frame. The
@@ -29,6 +28,7 @@ mod tests;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use crate::api::{Leg, NUM_JOINTS, NUM_LEGS};
+use crate::robot_config::KneeDirection;
 
 /// Rigid transform (rotation, translation) mapping child-frame coordinates to the parent frame.
 #[derive(Clone, Copy, Debug)]
@@ -107,15 +107,26 @@ struct ChainJoint {
     velocity: f64,
 }
 
-/// Geometry used by the closed-form IK initial guess (exact for the reference leg layout: abduction
-/// about x, hip and knee about y, thigh offset along y, links along −z at q = 0).
+/// Geometry used by the closed-form IK initial guess, exact for any leg whose joint frames are
+/// unrotated with the abduction axis along ±x and the hip and knee axes along ±y (checked when
+/// the model is built). Lengths are in the leg's sagittal plane.
 #[derive(Clone, Copy, Debug)]
 struct LegGeometry {
     abd_origin: Vector3<f64>,
-    /// Signed lateral offset from the abduction axis to the thigh plane.
+    /// Hip-flexion joint origin in the abduction joint's frame.
+    hip_origin: Vector3<f64>,
+    /// Signed lateral offset from the abduction axis to the foot's sagittal plane (hip, knee and
+    /// foot offsets along y summed).
     lateral_offset: f64,
     thigh_length: f64,
     calf_length: f64,
+    /// Forward angle of the thigh (hip → knee) and calf (knee → foot) from straight down at
+    /// q = 0, rad.
+    thigh_angle: f64,
+    calf_angle: f64,
+    /// URDF angle = sign · angle about the canonical axis (+x, +y, +y).
+    axis_signs: [f64; 3],
+    knee: KneeDirection,
 }
 
 #[derive(Clone, Debug)]
@@ -143,6 +154,7 @@ pub struct RobotModel {
     base_body: MassProperties,
     legs: [LegChain; NUM_LEGS],
     foot_radius: f64,
+    stand_height: f64,
 }
 
 fn to_array3(v: &Vector3<f64>) -> [f64; 3] {
@@ -173,12 +185,17 @@ impl RobotModel {
         self.foot_radius
     }
 
-    /// URDF effort limits, N·m, index 3·leg + j.
+    /// Nominal height of the base origin above flat ground when standing (robot config), m.
+    pub fn stand_height(&self) -> f64 {
+        self.stand_height
+    }
+
+    /// Effort limits (URDF, or the robot config's overrides), N·m, index 3·leg + j.
     pub fn effort_limits(&self) -> [f64; NUM_JOINTS] {
         self.per_joint(|j| j.effort)
     }
 
-    /// URDF velocity limits, rad/s.
+    /// Velocity limits (URDF, or the robot config's overrides), rad/s.
     pub fn velocity_limits(&self) -> [f64; NUM_JOINTS] {
         self.per_joint(|j| j.velocity)
     }
@@ -214,7 +231,7 @@ impl RobotModel {
         self.legs[leg.index()].geometry.lateral_offset
     }
 
-    /// Thigh and calf lengths, m.
+    /// Thigh (hip → knee) and calf (knee → foot) lengths in the leg's sagittal plane, m.
     pub fn link_lengths(&self, leg: Leg) -> (f64, f64) {
         let g = &self.legs[leg.index()].geometry;
         (g.thigh_length, g.calf_length)

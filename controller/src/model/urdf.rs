@@ -1,24 +1,57 @@
-//! Building the model from a URDF document: indexing the link/joint tree, merging fixed-joint
-//! clusters into mass properties and extracting the three-joint leg chains. All validation of the
-//! input lives here, so a model that was built is known to be well-formed.
+//! Building the model from a URDF document and its robot config: indexing the link/joint tree,
+//! merging fixed-joint clusters into mass properties and extracting the three-joint leg chains the
+//! config names. All validation of the input lives here, so a model that was built is known to be
+//! well-formed; every error names the file it was found in.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::{ChainJoint, LegChain, LegGeometry, MassProperties, RobotModel, Transform};
 use crate::api::{Leg, ModelError};
+use crate::robot_config::{LegConfig, PackagePath, RobotConfig};
+
+/// Our own robot's config, used by [`RobotModel::from_urdf_str`] and
+/// [`RobotModel::from_urdf_file`] until every caller passes a config.
+const DEFAULT_CONFIG_TOML: &str = include_str!("../../../robot/quadruped.toml");
+const DEFAULT_CONFIG_LABEL: &str = "robot/quadruped.toml (compiled in)";
+
+/// Principal moments may break the triangle inequality by this relative amount (rounding in
+/// published values) before the inertia is refused as physically impossible.
+const TRIANGLE_TOLERANCE: f64 = 1e-6;
+
+/// Names of the two descriptions in error messages.
+struct Sources<'a> {
+    config: &'a str,
+    urdf: &'a str,
+}
 
 fn finite3(v: &[f64; 3], what: &str) -> Result<(), ModelError> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
-        Err(ModelError::InvalidValue(format!("{what} is not finite")))
+        Err(ModelError::InvalidValue(format!(
+            "{what} is not finite: {v:?}"
+        )))
     }
 }
 
-fn link_mass_properties(link: &urdf_rs::Link) -> Result<MassProperties, ModelError> {
+/// Mass properties of one link. A link with zero mass and zero inertia (or no `<inertial>`) is a
+/// massless frame; a link listed in `massless_links` is made one. Anything else needs a positive
+/// mass and a positive-definite inertia whose principal moments satisfy the triangle inequality.
+fn link_mass_properties(
+    link: &urdf_rs::Link,
+    massless: bool,
+) -> Result<MassProperties, ModelError> {
+    let massless_frame = MassProperties {
+        mass: 0.0,
+        com: Vector3::zeros(),
+        inertia_com: Matrix3::zeros(),
+    };
+    if massless {
+        return Ok(massless_frame);
+    }
     let inertial = &link.inertial;
     let mass = inertial.mass.value;
     if !mass.is_finite() || mass < 0.0 {
@@ -29,11 +62,11 @@ fn link_mass_properties(link: &urdf_rs::Link) -> Result<MassProperties, ModelErr
     }
     finite3(
         &inertial.origin.xyz,
-        &format!("inertial origin of `{}`", link.name),
+        &format!("inertial origin of link `{}`", link.name),
     )?;
     finite3(
         &inertial.origin.rpy,
-        &format!("inertial rpy of `{}`", link.name),
+        &format!("inertial rpy of link `{}`", link.name),
     )?;
     let i = &inertial.inertia;
     let inertia = Matrix3::new(
@@ -45,6 +78,16 @@ fn link_mass_properties(link: &urdf_rs::Link) -> Result<MassProperties, ModelErr
             link.name
         )));
     }
+    if mass == 0.0 {
+        if inertia.iter().any(|x| *x != 0.0) {
+            return Err(ModelError::InvalidValue(format!(
+                "link `{}` has zero mass but a non-zero inertia",
+                link.name
+            )));
+        }
+        return Ok(massless_frame);
+    }
+    check_inertia(&link.name, &inertia)?;
     let pose = Transform::from_pose(&inertial.origin);
     Ok(MassProperties {
         mass,
@@ -53,15 +96,48 @@ fn link_mass_properties(link: &urdf_rs::Link) -> Result<MassProperties, ModelErr
     })
 }
 
+fn check_inertia(link: &str, inertia: &Matrix3<f64>) -> Result<(), ModelError> {
+    let mut moments: Vec<f64> = SymmetricEigen::new(*inertia)
+        .eigenvalues
+        .iter()
+        .copied()
+        .collect();
+    moments.sort_by(f64::total_cmp);
+    let hint =
+        "(list the link in `massless_links` of the robot config if its inertial is a placeholder)";
+    if moments[0] <= moments[2] * 1e-9 || moments[2] <= 0.0 {
+        return Err(ModelError::InvalidValue(format!(
+            "inertia of link `{link}` is not positive definite (principal moments {}) {hint}",
+            format_moments(&moments)
+        )));
+    }
+    if moments[0] + moments[1] < moments[2] * (1.0 - TRIANGLE_TOLERANCE) {
+        return Err(ModelError::InvalidValue(format!(
+            "inertia of link `{link}` breaks the triangle inequality (principal moments {}) {hint}",
+            format_moments(&moments)
+        )));
+    }
+    Ok(())
+}
+
+fn format_moments(moments: &[f64]) -> String {
+    moments
+        .iter()
+        .map(|m| format!("{m:.3e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// Indexed view of the URDF tree.
 struct Tree<'a> {
     links: HashMap<&'a str, &'a urdf_rs::Link>,
     parent_joint: HashMap<&'a str, &'a urdf_rs::Joint>,
     child_joints: HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    massless: HashSet<&'a str>,
 }
 
 impl<'a> Tree<'a> {
-    fn new(robot: &'a urdf_rs::Robot) -> Result<Self, ModelError> {
+    fn new(robot: &'a urdf_rs::Robot, massless: &'a [String]) -> Result<Self, ModelError> {
         let mut links = HashMap::new();
         for link in &robot.links {
             if links.insert(link.name.as_str(), link).is_some() {
@@ -100,7 +176,19 @@ impl<'a> Tree<'a> {
             links,
             parent_joint,
             child_joints,
+            massless: massless.iter().map(String::as_str).collect(),
         })
+    }
+
+    fn link(&self, name: &str) -> Result<&'a urdf_rs::Link, ModelError> {
+        self.links
+            .get(name)
+            .copied()
+            .ok_or_else(|| ModelError::Missing(format!("link `{name}`")))
+    }
+
+    fn mass_properties(&self, link: &urdf_rs::Link) -> Result<MassProperties, ModelError> {
+        link_mass_properties(link, self.massless.contains(link.name.as_str()))
     }
 
     /// Mass properties of `link` plus everything attached to it through fixed joints, in the
@@ -111,160 +199,248 @@ impl<'a> Tree<'a> {
                 "kinematic tree too deep or cyclic".into(),
             ));
         }
-        let urdf_link = self
-            .links
-            .get(link)
-            .ok_or_else(|| ModelError::Missing(format!("link `{link}`")))?;
-        let mut props = link_mass_properties(urdf_link)?;
+        let mut props = self.mass_properties(self.link(link)?)?;
         for joint in self.child_joints.get(link).into_iter().flatten() {
             if joint.joint_type == urdf_rs::JointType::Fixed {
+                check_origin(joint)?;
                 let child = self.rigid_cluster(&joint.child.link, depth + 1)?;
                 props.merge(&child, &Transform::from_pose(&joint.origin));
             }
         }
         Ok(props)
     }
-}
 
-fn is_unit_axis(axis: &Vector3<f64>, expected: Vector3<f64>) -> bool {
-    (axis - expected).norm() < 1e-9
-}
-
-fn build_leg(tree: &Tree<'_>, leg: Leg) -> Result<LegChain, ModelError> {
-    let prefix = leg.name();
-    let joint_names = [
-        format!("{prefix}_hip_abd_joint"),
-        format!("{prefix}_hip_flex_joint"),
-        format!("{prefix}_knee_joint"),
-    ];
-    let foot_name = format!("{prefix}_foot");
-    if !tree.links.contains_key(foot_name.as_str()) {
-        return Err(ModelError::Missing(format!("foot link `{foot_name}`")));
-    }
-    // Walk from the foot up to the base, recording the path (foot-most joint first).
-    let mut path: Vec<&urdf_rs::Joint> = Vec::new();
-    let mut link = foot_name.as_str();
-    while link != "base" {
-        let joint = tree.parent_joint.get(link).ok_or_else(|| {
-            ModelError::Structure(format!("link `{link}` is not connected to `base`"))
-        })?;
-        path.push(joint);
-        if path.len() > 64 {
-            return Err(ModelError::Structure(
-                "kinematic tree too deep or cyclic".into(),
-            ));
+    /// Joints from `base` down to `tip`, base-most first.
+    fn path(&self, base: &str, tip: &str) -> Result<Vec<&'a urdf_rs::Joint>, ModelError> {
+        let mut path = Vec::new();
+        let mut link = tip;
+        while link != base {
+            let joint = self.parent_joint.get(link).ok_or_else(|| {
+                ModelError::Structure(format!("link `{tip}` is not below the base link `{base}`"))
+            })?;
+            path.push(*joint);
+            if path.len() > 64 {
+                return Err(ModelError::Structure(
+                    "kinematic tree too deep or cyclic".into(),
+                ));
+            }
+            link = joint.parent.link.as_str();
         }
-        link = joint.parent.link.as_str();
+        path.reverse();
+        Ok(path)
     }
-    path.reverse();
-    let moving: Vec<&urdf_rs::Joint> = path
-        .iter()
-        .copied()
-        .filter(|j| j.joint_type != urdf_rs::JointType::Fixed)
-        .collect();
-    for name in &joint_names {
+}
+
+fn check_origin(joint: &urdf_rs::Joint) -> Result<(), ModelError> {
+    finite3(
+        &joint.origin.xyz,
+        &format!("origin xyz of joint `{}`", joint.name),
+    )?;
+    finite3(
+        &joint.origin.rpy,
+        &format!("origin rpy of joint `{}`", joint.name),
+    )
+}
+
+/// The axis of an actuated joint must be ± `expected` (the closed-form IK's layout); returns the
+/// sign.
+fn axis_sign(
+    joint: &urdf_rs::Joint,
+    axis: &Vector3<f64>,
+    expected: Vector3<f64>,
+    role: &str,
+) -> Result<f64, ModelError> {
+    for sign in [1.0, -1.0] {
+        if (axis - expected * sign).norm() < 1e-9 {
+            return Ok(sign);
+        }
+    }
+    Err(ModelError::Structure(format!(
+        "{role} joint `{}` has axis {:?}; it must be ±({}, {}, {}) in an unrotated joint frame",
+        joint.name, joint.axis.xyz, expected.x, expected.y, expected.z
+    )))
+}
+
+/// Limit of `joint` from the URDF unless overridden; missing (zero) without an override is an
+/// error naming the joint.
+fn joint_limit(
+    joint: &urdf_rs::Joint,
+    urdf_value: f64,
+    overridden: Option<f64>,
+    what: &str,
+) -> Result<f64, ModelError> {
+    if let Some(value) = overridden {
+        return Ok(value);
+    }
+    if urdf_value.is_finite() && urdf_value > 0.0 {
+        Ok(urdf_value)
+    } else {
+        Err(ModelError::InvalidValue(format!(
+            "{what} limit of joint `{}` is {urdf_value} (missing or not positive in <limit>); \
+             set `limits.{what}` in the robot config",
+            joint.name
+        )))
+    }
+}
+
+const ROLES: [&str; 3] = ["abduction", "hip", "knee"];
+
+fn build_leg(
+    tree: &Tree<'_>,
+    config: &RobotConfig,
+    leg: Leg,
+    leg_config: &LegConfig,
+) -> Result<LegChain, ModelError> {
+    let prefix = leg.name();
+    let foot_link = leg_config.foot_link.as_str();
+    tree.link(foot_link)?;
+    let path = tree.path(&config.base_link, foot_link)?;
+    for name in &leg_config.joints {
         if !path.iter().any(|j| &j.name == name) {
+            let why = if tree.parent_joint.values().any(|j| &j.name == name) {
+                "is not"
+            } else {
+                "does not exist"
+            };
             return Err(ModelError::Missing(format!(
-                "joint `{name}` between `base` and `{foot_name}`"
+                "joint `{name}` of leg {prefix} ({why} on the chain from `{}` to `{foot_link}`)",
+                config.base_link
             )));
         }
     }
-    if moving.len() != 3 || moving.iter().zip(&joint_names).any(|(j, n)| &j.name != n) {
+    let moving: Vec<&str> = path
+        .iter()
+        .filter(|j| j.joint_type != urdf_rs::JointType::Fixed)
+        .map(|j| j.name.as_str())
+        .collect();
+    if moving
+        != leg_config
+            .joints
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>()
+    {
         return Err(ModelError::Structure(format!(
-            "leg {prefix}: the joints from `base` to `{foot_name}` must be exactly {joint_names:?} (plus fixed joints), found {:?}",
-            moving.iter().map(|j| j.name.as_str()).collect::<Vec<_>>()
+            "leg {prefix}: the chain from `{}` to `{foot_link}` must have exactly the actuated joints {:?} in that order (plus fixed joints), found {moving:?} ({} movable joints)",
+            config.base_link,
+            leg_config.joints,
+            moving.len()
         )));
     }
     let mut joints = Vec::with_capacity(3);
     let mut pre = Transform::identity();
+    let mut rotated = None;
     for joint in &path {
-        finite3(&joint.origin.xyz, &format!("origin of `{}`", joint.name))?;
-        finite3(&joint.origin.rpy, &format!("rpy of `{}`", joint.name))?;
+        check_origin(joint)?;
         let origin = Transform::from_pose(&joint.origin);
+        if (origin.rotation - Matrix3::identity()).norm() > 1e-9 && rotated.is_none() {
+            rotated = Some(joint.name.as_str());
+        }
         if joint.joint_type == urdf_rs::JointType::Fixed {
             pre = pre.then(&origin);
             continue;
         }
         if joint.joint_type != urdf_rs::JointType::Revolute {
             return Err(ModelError::Structure(format!(
-                "joint `{}` must be revolute, is {:?}",
+                "joint `{}` of leg {prefix} must be revolute, is {:?}",
                 joint.name, joint.joint_type
             )));
         }
+        finite3(&joint.axis.xyz, &format!("axis of joint `{}`", joint.name))?;
         let axis = Vector3::new(joint.axis.xyz[0], joint.axis.xyz[1], joint.axis.xyz[2]);
         let norm = axis.norm();
-        if !norm.is_finite() || norm < 1e-9 {
+        if norm < 1e-9 {
             return Err(ModelError::InvalidValue(format!(
-                "axis of `{}`",
+                "axis of joint `{}` is zero",
                 joint.name
             )));
         }
         let limit = &joint.limit;
         if !(limit.lower.is_finite() && limit.upper.is_finite() && limit.lower < limit.upper) {
             return Err(ModelError::InvalidValue(format!(
-                "position limits of `{}`: [{}, {}]",
+                "position limits of joint `{}`: [{}, {}]",
                 joint.name, limit.lower, limit.upper
             )));
         }
-        if !(limit.effort.is_finite() && limit.effort > 0.0) {
-            return Err(ModelError::InvalidValue(format!(
-                "effort limit of `{}`: {}",
-                joint.name, limit.effort
-            )));
-        }
-        if !(limit.velocity.is_finite() && limit.velocity > 0.0) {
-            return Err(ModelError::InvalidValue(format!(
-                "velocity limit of `{}`: {}",
-                joint.name, limit.velocity
-            )));
-        }
+        let role = joints.len();
+        let effort = joint_limit(
+            joint,
+            limit.effort,
+            config.limits.effort.map(|v| v[role]),
+            "effort",
+        )?;
+        let velocity = joint_limit(
+            joint,
+            limit.velocity,
+            config.limits.velocity.map(|v| v[role]),
+            "velocity",
+        )?;
         joints.push(ChainJoint {
             pre: pre.then(&origin),
             axis: axis / norm,
             body: tree.rigid_cluster(&joint.child.link, 0)?,
             lower: limit.lower,
             upper: limit.upper,
-            effort: limit.effort,
-            velocity: limit.velocity,
+            effort,
+            velocity,
         });
         pre = Transform::identity();
     }
-    let foot = pre;
+    let offset = leg_config.foot_offset.unwrap_or([0.0; 3]);
+    let foot = pre.then(&Transform {
+        rotation: Matrix3::identity(),
+        translation: Vector3::from(offset),
+    });
     let joints: [ChainJoint; 3] = joints
         .try_into()
         .map_err(|_| ModelError::Structure(format!("leg {prefix} does not have 3 joints")))?;
     // The rigid cluster of the knee's child already contains the foot (fixed joints), and the
     // clusters never overlap because each stops at the next moving joint.
-    if !is_unit_axis(&joints[0].axis, Vector3::x())
-        || !is_unit_axis(&joints[1].axis, Vector3::y())
-        || !is_unit_axis(&joints[2].axis, Vector3::y())
-    {
+    if let Some(joint) = rotated {
         return Err(ModelError::Structure(format!(
-            "leg {prefix}: expected axes x (abduction), y (hip), y (knee)"
+            "leg {prefix}: joint `{joint}` has a rotated origin (rpy ≠ 0); the leg's joint frames must be unrotated"
         )));
     }
-    let all_rotations_identity = joints
-        .iter()
-        .map(|j| j.pre.rotation)
-        .chain(std::iter::once(foot.rotation))
-        .all(|r| (r - Matrix3::identity()).norm() < 1e-9);
-    if !all_rotations_identity {
-        return Err(ModelError::Structure(format!(
-            "leg {prefix}: joint origins must not be rotated (rpy = 0)"
-        )));
-    }
-    let thigh_length = joints[2].pre.translation.norm();
-    let calf_length = foot.translation.norm();
+    let axis_signs = [
+        axis_sign(
+            path_joint(&path, &leg_config.joints[0])?,
+            &joints[0].axis,
+            Vector3::x(),
+            ROLES[0],
+        )?,
+        axis_sign(
+            path_joint(&path, &leg_config.joints[1])?,
+            &joints[1].axis,
+            Vector3::y(),
+            ROLES[1],
+        )?,
+        axis_sign(
+            path_joint(&path, &leg_config.joints[2])?,
+            &joints[2].axis,
+            Vector3::y(),
+            ROLES[2],
+        )?,
+    ];
+    let thigh = joints[2].pre.translation;
+    let calf = foot.translation;
+    let thigh_length = thigh.x.hypot(thigh.z);
+    let calf_length = calf.x.hypot(calf.z);
     if thigh_length < 1e-3 || calf_length < 1e-3 {
         return Err(ModelError::Structure(format!(
-            "leg {prefix}: thigh or calf length is zero"
+            "leg {prefix}: thigh ({thigh_length} m) or calf ({calf_length} m) length in the sagittal plane is below 1 mm"
         )));
     }
+    let hip_origin = joints[1].pre.translation;
     let geometry = LegGeometry {
         abd_origin: joints[0].pre.translation,
-        lateral_offset: joints[1].pre.translation.y,
+        hip_origin,
+        lateral_offset: hip_origin.y + thigh.y + calf.y,
         thigh_length,
         calf_length,
+        thigh_angle: thigh.x.atan2(-thigh.z),
+        calf_angle: calf.x.atan2(-calf.z),
+        axis_signs,
+        knee: leg_config.knee_points,
     };
     Ok(LegChain {
         joints,
@@ -273,76 +449,238 @@ fn build_leg(tree: &Tree<'_>, leg: Leg) -> Result<LegChain, ModelError> {
     })
 }
 
+fn path_joint<'a>(
+    path: &[&'a urdf_rs::Joint],
+    name: &str,
+) -> Result<&'a urdf_rs::Joint, ModelError> {
+    path.iter()
+        .copied()
+        .find(|j| j.name == name)
+        .ok_or_else(|| ModelError::Missing(format!("joint `{name}`")))
+}
+
+/// Radius of the sphere collision of the foot link centred on the foot point, if there is one.
+fn foot_sphere_radius(link: &urdf_rs::Link, offset: [f64; 3]) -> Option<f64> {
+    link.collision.iter().find_map(|c| match c.geometry {
+        urdf_rs::Geometry::Sphere { radius }
+            if (Vector3::from(*c.origin.xyz) - Vector3::from(offset)).norm() < 1e-6 =>
+        {
+            Some(radius)
+        }
+        _ => None,
+    })
+}
+
+/// Foot radius: the feet's sphere collisions, else the config's `foot_radius`. Errors are the
+/// config's (`Ok(Err)`) or the URDF's (`Err`).
+fn foot_radius(tree: &Tree<'_>, config: &RobotConfig) -> Result<Result<f64, String>, ModelError> {
+    let mut from_urdf: Option<(f64, &str)> = None;
+    for leg in Leg::ALL {
+        let leg_config = config.legs.get(leg);
+        let link = tree.link(&leg_config.foot_link)?;
+        let Some(radius) = foot_sphere_radius(link, leg_config.foot_offset.unwrap_or([0.0; 3]))
+        else {
+            continue;
+        };
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(ModelError::InvalidValue(format!(
+                "sphere radius {radius} of foot link `{}`",
+                link.name
+            )));
+        }
+        match from_urdf {
+            Some((other, other_link)) if (other - radius).abs() > 1e-9 => {
+                return Err(ModelError::Structure(format!(
+                    "foot spheres differ: `{other_link}` has radius {other}, `{}` {radius}",
+                    link.name
+                )));
+            }
+            _ => from_urdf = Some((radius, link.name.as_str())),
+        }
+    }
+    Ok(match (from_urdf, config.foot_radius) {
+        (Some((radius, _)), None) => Ok(radius),
+        (Some((radius, link)), Some(configured)) if (radius - configured).abs() > 1e-9 => Err(
+            format!("key `foot_radius` = {configured} contradicts the sphere collision of `{link}` (radius {radius}); remove the key"),
+        ),
+        (Some((radius, _)), Some(_)) => Ok(radius),
+        (None, Some(configured)) => Ok(configured),
+        (None, None) => Err(format!(
+            "no foot radius: the foot links ({}) have no sphere collision at the foot point and key `foot_radius` is not set",
+            Leg::ALL
+                .iter()
+                .map(|leg| format!("`{}`", config.legs.get(*leg).foot_link))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+    })
+}
+
 impl RobotModel {
-    /// Parse a URDF document.
-    pub fn from_urdf_str(xml: &str) -> Result<Self, ModelError> {
-        let robot = urdf_rs::read_from_string(xml).map_err(|e| ModelError::Parse(e.to_string()))?;
-        Self::from_urdf_robot(&robot)
+    /// Load a robot config file and the URDF it names; `package://` URIs resolve through
+    /// [`PackagePath::from_env`].
+    pub fn from_config_file(path: &Path) -> Result<Self, ModelError> {
+        Self::from_config_file_with(path, &PackagePath::from_env())
     }
 
-    /// Read and parse a URDF file.
+    /// [`RobotModel::from_config_file`] with explicit package roots.
+    pub fn from_config_file_with(path: &Path, packages: &PackagePath) -> Result<Self, ModelError> {
+        let config = RobotConfig::from_file(path)?;
+        let urdf_path = config.urdf_path(path, packages)?;
+        let xml = std::fs::read_to_string(&urdf_path).map_err(|e| ModelError::Io {
+            path: urdf_path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        let sources = Sources {
+            config: &path.display().to_string(),
+            urdf: &urdf_path.display().to_string(),
+        };
+        Self::build(&config, &xml, &sources)
+    }
+
+    /// A model from the texts of a robot config and of its URDF (the config's `urdf` key is not
+    /// read: the caller already has the document, e.g. from the FMU's resources).
+    pub fn from_config_str(config_toml: &str, urdf_xml: &str) -> Result<Self, ModelError> {
+        let sources = Sources {
+            config: "robot config text",
+            urdf: "URDF text",
+        };
+        let config = RobotConfig::from_toml_str(config_toml, sources.config)?;
+        Self::build(&config, urdf_xml, &sources)
+    }
+
+    /// A model from an already parsed config and the URDF text it describes.
+    pub fn from_config(config: &RobotConfig, urdf_xml: &str) -> Result<Self, ModelError> {
+        let sources = Sources {
+            config: "robot config",
+            urdf: "URDF text",
+        };
+        Self::build(config, urdf_xml, &sources)
+    }
+
+    /// Our own robot's URDF document, described by the compiled-in `robot/quadruped.toml`.
+    pub fn from_urdf_str(xml: &str) -> Result<Self, ModelError> {
+        let config = RobotConfig::from_toml_str(DEFAULT_CONFIG_TOML, DEFAULT_CONFIG_LABEL)?;
+        let sources = Sources {
+            config: DEFAULT_CONFIG_LABEL,
+            urdf: "URDF text",
+        };
+        Self::build(&config, xml, &sources)
+    }
+
+    /// Read our own robot's URDF file, described by the compiled-in `robot/quadruped.toml`.
     pub fn from_urdf_file(path: &Path) -> Result<Self, ModelError> {
         let xml = std::fs::read_to_string(path).map_err(|e| ModelError::Io {
             path: path.display().to_string(),
             reason: e.to_string(),
         })?;
-        Self::from_urdf_str(&xml)
+        let config = RobotConfig::from_toml_str(DEFAULT_CONFIG_TOML, DEFAULT_CONFIG_LABEL)?;
+        let sources = Sources {
+            config: DEFAULT_CONFIG_LABEL,
+            urdf: &path.display().to_string(),
+        };
+        Self::build(&config, &xml, &sources)
     }
 
-    fn from_urdf_robot(robot: &urdf_rs::Robot) -> Result<Self, ModelError> {
-        let tree = Tree::new(robot)?;
-        if !tree.links.contains_key("base") {
-            return Err(ModelError::Missing("base link `base`".into()));
+    fn build(config: &RobotConfig, xml: &str, sources: &Sources<'_>) -> Result<Self, ModelError> {
+        let robot = urdf_rs::read_from_string(xml)
+            .map_err(|e| ModelError::Parse(e.to_string()).in_file(sources.urdf))?;
+        Self::from_urdf_robot(&robot, config, sources)
+    }
+
+    fn from_urdf_robot(
+        robot: &urdf_rs::Robot,
+        config: &RobotConfig,
+        sources: &Sources<'_>,
+    ) -> Result<Self, ModelError> {
+        let in_urdf = |e: ModelError| e.in_file(sources.urdf);
+        let in_config = |reason: String| ModelError::Config {
+            file: sources.config.to_string(),
+            reason,
+        };
+        let tree = Tree::new(robot, &config.massless_links).map_err(in_urdf)?;
+        for link in &config.massless_links {
+            if !tree.links.contains_key(link.as_str()) {
+                return Err(in_config(format!(
+                    "key `massless_links` names `{link}`, which is not a link of {}",
+                    sources.urdf
+                )));
+            }
         }
-        if tree.parent_joint.contains_key("base") {
-            return Err(ModelError::Structure("link `base` must be the root".into()));
+        let base = config.base_link.as_str();
+        tree.link(base)
+            .map_err(|_| ModelError::Missing(format!("base link `{base}`")))
+            .map_err(in_urdf)?;
+        if let Some(joint) = tree.parent_joint.get(base) {
+            return Err(in_urdf(ModelError::Structure(format!(
+                "base link `{base}` must be the root of the tree, but joint `{}` attaches it to `{}`",
+                joint.name, joint.parent.link
+            ))));
         }
-        let base_body = tree.rigid_cluster("base", 0)?;
-        let legs = [
-            build_leg(&tree, Leg::FR)?,
-            build_leg(&tree, Leg::FL)?,
-            build_leg(&tree, Leg::RR)?,
-            build_leg(&tree, Leg::RL)?,
-        ];
+        if let Some(root) = robot
+            .links
+            .iter()
+            .find(|l| l.name != base && !tree.parent_joint.contains_key(l.name.as_str()))
+        {
+            return Err(in_urdf(ModelError::Structure(format!(
+                "link `{}` is not attached to the base link `{base}` (a second root)",
+                root.name
+            ))));
+        }
+        let base_body = tree.rigid_cluster(base, 0).map_err(in_urdf)?;
+        let mut legs = Vec::with_capacity(4);
+        for leg in Leg::ALL {
+            legs.push(build_leg(&tree, config, leg, config.legs.get(leg)).map_err(in_urdf)?);
+        }
+        let legs: [LegChain; 4] = legs
+            .try_into()
+            .map_err(|_| in_urdf(ModelError::Structure("not four legs".into())))?;
+        let leg_joints: HashSet<&str> = Leg::ALL
+            .iter()
+            .flat_map(|leg| config.legs.get(*leg).joints.iter().map(String::as_str))
+            .collect();
+        if let Some(extra) = robot.joints.iter().find(|j| {
+            j.joint_type != urdf_rs::JointType::Fixed && !leg_joints.contains(j.name.as_str())
+        }) {
+            return Err(in_urdf(ModelError::Structure(format!(
+                "joint `{}` ({:?}) is movable but is none of the legs' 12 actuated joints; only 12-DOF quadrupeds are supported",
+                extra.name, extra.joint_type
+            ))));
+        }
         let mut total_mass = 0.0;
         for link in &robot.links {
-            total_mass += link_mass_properties(link)?.mass;
+            total_mass += tree.mass_properties(link).map_err(in_urdf)?.mass;
         }
         if total_mass <= 0.0 {
-            return Err(ModelError::InvalidValue("total mass is zero".into()));
+            return Err(in_urdf(ModelError::InvalidValue(
+                "total mass is zero".into(),
+            )));
         }
-        let mut foot_radius = None;
-        for leg in Leg::ALL {
-            let foot_name = format!("{}_foot", leg.name());
-            let link = tree
-                .links
-                .get(foot_name.as_str())
-                .ok_or_else(|| ModelError::Missing(format!("foot link `{foot_name}`")))?;
-            let radius = link
-                .collision
-                .iter()
-                .find_map(|c| match c.geometry {
-                    urdf_rs::Geometry::Sphere { radius } => Some(radius),
-                    _ => None,
-                })
-                .ok_or_else(|| {
-                    ModelError::Structure(format!(
-                        "foot link `{foot_name}` has no sphere collision"
-                    ))
-                })?;
-            if !(radius.is_finite() && radius > 0.0) {
-                return Err(ModelError::InvalidValue(format!("foot radius {radius}")));
-            }
-            foot_radius = Some(radius);
-        }
-        let foot_radius =
-            foot_radius.ok_or_else(|| ModelError::Missing("foot sphere collision".into()))?;
-        Ok(RobotModel {
+        let foot_radius = foot_radius(&tree, config)
+            .map_err(in_urdf)?
+            .map_err(in_config)?;
+        let model = RobotModel {
             name: robot.name.clone(),
             total_mass,
             base_body,
             legs,
             foot_radius,
-        })
+            stand_height: config.stand_height,
+        };
+        if config.stand_height <= foot_radius {
+            return Err(in_config(format!(
+                "key `stand_height` = {} m is not above the foot radius {foot_radius} m",
+                config.stand_height
+            )));
+        }
+        model
+            .stand_joint_positions(config.stand_height)
+            .map_err(|e| {
+                in_config(format!(
+                    "key `stand_height` = {} m: {e}",
+                    config.stand_height
+                ))
+            })?;
+        Ok(model)
     }
 }

@@ -1,0 +1,435 @@
+//! Robot descriptions through a robot config: a small generic 12-DOF URDF and config, and the
+//! clear errors of broken descriptions (each names the item and the file, never a panic).
+use std::path::{Path, PathBuf};
+
+use quad_controller::{Leg, ModelError, PackagePath, RobotModel};
+
+const LEGS: [(&str, f64, f64); 4] = [
+    ("fr", 0.2, -0.1),
+    ("fl", 0.2, 0.1),
+    ("rr", -0.2, -0.1),
+    ("rl", -0.2, 0.1),
+];
+
+const LINK_INERTIAL: &str = r#"<inertial><mass value="0.5"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial>"#;
+
+/// A generic 12-DOF quadruped: links `body`, `<leg>_l1..l3`, foot link `<leg>_toe` with a
+/// 2 cm sphere; joints `<leg>_j1` (x), `<leg>_j2` (y), `<leg>_j3` (y), fixed `<leg>_toe_fix`.
+fn tiny_urdf() -> String {
+    let mut xml = String::from(
+        r#"<robot name="tiny"><link name="body"><inertial><mass value="4.0"/><inertia ixx="0.02" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.05"/></inertial></link>"#,
+    );
+    for (leg, x, y) in LEGS {
+        let side = y.signum() * 0.05;
+        xml.push_str(&format!(
+            r#"
+<joint name="{leg}_j1" type="revolute"><parent link="body"/><child link="{leg}_l1"/><origin xyz="{x} {y} 0" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="20" velocity="20"/></joint>
+<link name="{leg}_l1">{LINK_INERTIAL}</link>
+<joint name="{leg}_j2" type="revolute"><parent link="{leg}_l1"/><child link="{leg}_l2"/><origin xyz="0 {side} 0" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-2" upper="3" effort="20" velocity="20"/></joint>
+<link name="{leg}_l2">{LINK_INERTIAL}</link>
+<joint name="{leg}_j3" type="revolute"><parent link="{leg}_l2"/><child link="{leg}_l3"/><origin xyz="0 0 -0.2" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-2.7" upper="2.7" effort="30" velocity="20"/></joint>
+<link name="{leg}_l3">{LINK_INERTIAL}</link>
+<joint name="{leg}_toe_fix" type="fixed"><parent link="{leg}_l3"/><child link="{leg}_toe"/><origin xyz="0 0 -0.2" rpy="0 0 0"/></joint>
+<link name="{leg}_toe"><inertial><mass value="0.05"/><inertia ixx="1e-5" ixy="0" ixz="0" iyy="1e-5" iyz="0" izz="1e-5"/></inertial><collision><geometry><sphere radius="0.02"/></geometry></collision></link>"#
+        ));
+    }
+    xml.push_str("\n</robot>\n");
+    xml
+}
+
+fn tiny_config() -> String {
+    let mut toml = String::from("urdf = \"tiny.urdf\"\nbase_link = \"body\"\nstand_height = 0.3\n");
+    for (ours, (leg, _, _)) in ["FR", "FL", "RR", "RL"].iter().zip(LEGS) {
+        let knee = if leg.starts_with('f') {
+            "backward"
+        } else {
+            "forward"
+        };
+        toml.push_str(&format!(
+            "\n[legs.{ours}]\njoints = [\"{leg}_j1\", \"{leg}_j2\", \"{leg}_j3\"]\nfoot_link = \"{leg}_toe\"\nknee_points = \"{knee}\"\n"
+        ));
+    }
+    toml
+}
+
+/// The error of loading `config` + `urdf`, as text, with the innermost kind.
+fn load_error(config: &str, urdf: &str) -> (String, ModelError) {
+    match RobotModel::from_config_str(config, urdf) {
+        Ok(_) => panic!("expected an error"),
+        Err(e) => {
+            let text = e.to_string();
+            let kind = match e.innermost() {
+                ModelError::Missing(s) => ModelError::Missing(s.clone()),
+                ModelError::Structure(s) => ModelError::Structure(s.clone()),
+                ModelError::InvalidValue(s) => ModelError::InvalidValue(s.clone()),
+                ModelError::Parse(s) => ModelError::Parse(s.clone()),
+                ModelError::Config { file, reason } => ModelError::Config {
+                    file: file.clone(),
+                    reason: reason.clone(),
+                },
+                other => panic!("unexpected error kind {other:?}"),
+            };
+            (text, kind)
+        }
+    }
+}
+
+fn assert_urdf_error(config: &str, urdf: &str, needle: &str) -> ModelError {
+    let (text, kind) = load_error(config, urdf);
+    assert!(text.starts_with("URDF text: "), "file not named: {text}");
+    assert!(text.contains(needle), "`{needle}` not in: {text}");
+    kind
+}
+
+fn assert_config_error(config: &str, urdf: &str, needle: &str) {
+    let (text, kind) = load_error(config, urdf);
+    assert!(matches!(kind, ModelError::Config { .. }), "{text}");
+    assert!(text.contains("robot config text"), "file not named: {text}");
+    assert!(text.contains(needle), "`{needle}` not in: {text}");
+}
+
+#[test]
+fn tiny_robot_loads_and_bends_its_knees_as_configured() {
+    let model = RobotModel::from_config_str(&tiny_config(), &tiny_urdf()).expect("tiny robot");
+    assert!((model.total_mass() - (4.0 + 4.0 * 1.55)).abs() < 1e-12);
+    assert!((model.foot_radius() - 0.02).abs() < 1e-15);
+    assert_eq!(model.stand_height(), 0.3);
+    let q = model.stand_joint_positions(0.3).expect("stand");
+    for leg in Leg::ALL {
+        let knee = q[3 * leg.index() + 2];
+        let front = matches!(leg, Leg::FR | Leg::FL);
+        assert!(
+            if front { knee < -0.1 } else { knee > 0.1 },
+            "{leg:?} knee {knee}"
+        );
+    }
+}
+
+#[test]
+fn flipped_axes_are_a_sign_convention_not_an_error() {
+    // A joint turning about −y moves the same way for the negated angle: IK must follow.
+    let urdf = tiny_urdf().replace(
+        r#"<child link="fl_l3"/><origin xyz="0 0 -0.2" rpy="0 0 0"/><axis xyz="0 1 0"/>"#,
+        r#"<child link="fl_l3"/><origin xyz="0 0 -0.2" rpy="0 0 0"/><axis xyz="0 -1 0"/>"#,
+    );
+    assert_ne!(urdf, tiny_urdf());
+    let straight = RobotModel::from_config_str(&tiny_config(), &tiny_urdf()).expect("tiny");
+    let flipped = RobotModel::from_config_str(&tiny_config(), &urdf).expect("flipped");
+    let a = straight.stand_joint_positions(0.3).expect("stand");
+    let b = flipped.stand_joint_positions(0.3).expect("stand");
+    let fl_knee = 3 * Leg::FL.index() + 2;
+    assert!(
+        (a[fl_knee] + b[fl_knee]).abs() < 1e-9,
+        "{} vs {}",
+        a[fl_knee],
+        b[fl_knee]
+    );
+    assert!(a[fl_knee].abs() > 0.1);
+}
+
+#[test]
+fn missing_joint_and_link_are_named() {
+    let config = tiny_config().replace("\"fl_j3\"", "\"fl_knee\"");
+    let kind = assert_urdf_error(&config, &tiny_urdf(), "`fl_knee`");
+    assert!(matches!(kind, ModelError::Missing(_)));
+    let config = tiny_config().replace("\"rl_toe\"", "\"rl_paw\"");
+    assert_urdf_error(&config, &tiny_urdf(), "link `rl_paw`");
+    let config = tiny_config().replace("base_link = \"body\"", "base_link = \"trunk\"");
+    assert_urdf_error(&config, &tiny_urdf(), "base link `trunk`");
+    let config = tiny_config().replace("base_link = \"body\"", "base_link = \"fr_l1\"");
+    assert_urdf_error(&config, &tiny_urdf(), "must be the root");
+}
+
+#[test]
+fn ten_and_sixteen_dof_robots_are_refused() {
+    // 10 DOF: one leg's knee is fixed.
+    let urdf = tiny_urdf().replace(
+        r#"<joint name="rr_j3" type="revolute">"#,
+        r#"<joint name="rr_j3" type="fixed">"#,
+    );
+    assert_urdf_error(&tiny_config(), &urdf, "rr_j3");
+    // 16 DOF: every leg gets an actuated ankle between the calf and the toe.
+    let urdf = tiny_urdf().replace(
+        r#"_toe_fix" type="fixed">"#,
+        r#"_toe_fix" type="revolute">"#,
+    );
+    let text = load_error(&tiny_config(), &urdf).0;
+    assert!(
+        text.contains("exactly the actuated joints") && text.contains("4 movable joints"),
+        "{text}"
+    );
+    // 13 DOF: a movable joint outside the legs (a tail).
+    let urdf = tiny_urdf().replace(
+        "</robot>",
+        r#"<joint name="tail" type="revolute"><parent link="body"/><child link="tail_link"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint><link name="tail_link"/></robot>"#,
+    );
+    assert_urdf_error(&tiny_config(), &urdf, "joint `tail`");
+}
+
+#[test]
+fn non_revolute_and_badly_oriented_joints_are_refused() {
+    let urdf = tiny_urdf().replace(
+        r#"<joint name="fl_j2" type="revolute">"#,
+        r#"<joint name="fl_j2" type="prismatic">"#,
+    );
+    assert_urdf_error(&tiny_config(), &urdf, "`fl_j2` of leg FL must be revolute");
+    let urdf = tiny_urdf().replacen(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="0 0 1"/>"#, 1);
+    assert_urdf_error(&tiny_config(), &urdf, "abduction joint `fr_j1` has axis");
+    let urdf = tiny_urdf().replacen(
+        r#"<origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
+        r#"<origin xyz="0 0 -0.2" rpy="0 0.3 0"/>"#,
+        1,
+    );
+    assert_urdf_error(&tiny_config(), &urdf, "`fr_j3` has a rotated origin");
+}
+
+#[test]
+fn bad_masses_and_inertias_are_refused() {
+    let body = r#"<mass value="4.0"/>"#;
+    for (bad, needle) in [
+        (r#"<mass value="-4.0"/>"#, "mass of link `body` is -4"),
+        (r#"<mass value="nan"/>"#, "mass of link `body` is NaN"),
+        (
+            r#"<mass value="0"/>"#,
+            "link `body` has zero mass but a non-zero inertia",
+        ),
+    ] {
+        let kind = assert_urdf_error(&tiny_config(), &tiny_urdf().replace(body, bad), needle);
+        assert!(matches!(kind, ModelError::InvalidValue(_)));
+    }
+    let inertia = r#"ixx="0.02" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.05""#;
+    for (bad, needle) in [
+        (
+            r#"ixx="-0.02" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.05""#,
+            "not positive definite",
+        ),
+        (
+            r#"ixx="0.01" ixy="0.01" ixz="0.01" iyy="0.01" iyz="0.01" izz="0.01""#,
+            "not positive definite",
+        ),
+        (
+            r#"ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.05""#,
+            "triangle inequality",
+        ),
+        (
+            r#"ixx="inf" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.05""#,
+            "not finite",
+        ),
+    ] {
+        let text = load_error(&tiny_config(), &tiny_urdf().replace(inertia, bad)).0;
+        assert!(text.contains(needle) && text.contains("`body`"), "{text}");
+        let physical = needle != "not finite";
+        assert_eq!(
+            text.contains("massless_links"),
+            physical,
+            "remedy hint: {text}"
+        );
+    }
+    // The remedy the message names: a placeholder inertial declared massless is accepted.
+    let singular = tiny_urdf().replace(
+        inertia,
+        r#"ixx="0.01" ixy="0.01" ixz="0.01" iyy="0.01" iyz="0.01" izz="0.01""#,
+    );
+    let config = format!("massless_links = [\"body\"]\n{}", tiny_config());
+    let model = RobotModel::from_config_str(&config, &singular).expect("massless body");
+    assert!((model.total_mass() - 4.0 * 1.55).abs() < 1e-12);
+    // A link without <inertial> is a massless frame.
+    let frame = tiny_urdf().replace("</robot>", r#"<joint name="cam" type="fixed"><parent link="body"/><child link="cam_link"/></joint><link name="cam_link"/></robot>"#);
+    RobotModel::from_config_str(&tiny_config(), &frame).expect("massless frame link");
+    let config = format!("massless_links = [\"nothing\"]\n{}", tiny_config());
+    assert_config_error(&config, &tiny_urdf(), "`nothing`");
+}
+
+#[test]
+fn non_finite_origins_and_axes_are_refused() {
+    let urdf = tiny_urdf().replacen(
+        r#"<origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
+        r#"<origin xyz="0 nan -0.2" rpy="0 0 0"/>"#,
+        1,
+    );
+    assert_urdf_error(
+        &tiny_config(),
+        &urdf,
+        "origin xyz of joint `fr_j3` is not finite",
+    );
+    let urdf = tiny_urdf().replacen(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="inf 0 0"/>"#, 1);
+    assert_urdf_error(&tiny_config(), &urdf, "axis of joint `fr_j1` is not finite");
+    let urdf = tiny_urdf().replacen(
+        r#"<origin xyz="0 0 -0.2" rpy="0 0 0"/></joint>"#,
+        r#"<origin xyz="0 0 -0.2" rpy="0 inf 0"/></joint>"#,
+        1,
+    );
+    assert_urdf_error(
+        &tiny_config(),
+        &urdf,
+        "origin rpy of joint `fr_toe_fix` is not finite",
+    );
+}
+
+#[test]
+fn foot_radius_comes_from_the_sphere_or_the_config() {
+    let no_spheres = tiny_urdf().replace(
+        r#"<collision><geometry><sphere radius="0.02"/></geometry></collision>"#,
+        "",
+    );
+    assert_config_error(&tiny_config(), &no_spheres, "no foot radius");
+    let config = format!("foot_radius = 0.015\n{}", tiny_config());
+    let model = RobotModel::from_config_str(&config, &no_spheres).expect("radius from config");
+    assert!((model.foot_radius() - 0.015).abs() < 1e-15);
+    assert_config_error(&config, &tiny_urdf(), "contradicts the sphere collision");
+    // Foot offset on the last link instead of a foot link.
+    let config = tiny_config()
+        .replace(
+            "foot_link = \"fr_toe\"",
+            "foot_link = \"fr_l3\"\nfoot_offset = [0.0, 0.0, -0.2]",
+        )
+        .replace(
+            "foot_link = \"fl_toe\"",
+            "foot_link = \"fl_l3\"\nfoot_offset = [0.0, 0.0, -0.2]",
+        );
+    let offset = RobotModel::from_config_str(&config, &tiny_urdf()).expect("foot offset");
+    let linked = RobotModel::from_config_str(&tiny_config(), &tiny_urdf()).expect("tiny");
+    let q = [0.1, 0.5, -1.0];
+    for leg in [Leg::FR, Leg::FL] {
+        let (a, b) = (
+            offset.foot_position_body(leg, q),
+            linked.foot_position_body(leg, q),
+        );
+        assert!(
+            (0..3).all(|i| (a[i] - b[i]).abs() < 1e-12),
+            "{a:?} vs {b:?}"
+        );
+    }
+}
+
+#[test]
+fn missing_or_zero_limits_need_an_override() {
+    let urdf = tiny_urdf().replacen(
+        r#"effort="20" velocity="20""#,
+        r#"effort="0" velocity="20""#,
+        1,
+    );
+    assert_urdf_error(&tiny_config(), &urdf, "effort limit of joint `fr_j1` is 0");
+    let config = format!("{}\n[limits]\neffort = [5.0, 6.0, 7.0]\n", tiny_config());
+    let model = RobotModel::from_config_str(&config, &urdf).expect("override");
+    assert_eq!(&model.effort_limits()[..3], &[5.0, 6.0, 7.0]);
+    assert_eq!(&model.velocity_limits()[..3], &[20.0, 20.0, 20.0]);
+}
+
+#[test]
+fn toml_and_urdf_syntax_errors_name_the_file() {
+    let (text, _) = load_error("urdf = \"x.urdf\"\nbase_link = \n", &tiny_urdf());
+    assert!(
+        text.contains("robot config text") && text.contains("line 2"),
+        "{text}"
+    );
+    let (text, kind) = load_error(&tiny_config(), "<robot");
+    assert!(
+        matches!(kind, ModelError::Parse(_)) && text.starts_with("URDF text: "),
+        "{text}"
+    );
+    assert_config_error(
+        &tiny_config().replace("stand_height = 0.3", "stand_height = 0.9"),
+        &tiny_urdf(),
+        "stand_height",
+    );
+}
+
+/// A scratch folder with the tiny robot's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("pfnav-robot-config-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+#[test]
+fn config_file_names_its_urdf_relative_to_itself_or_by_package() {
+    let dir = scratch("files");
+    std::fs::write(dir.join("tiny.urdf"), tiny_urdf()).expect("write");
+    std::fs::write(dir.join("tiny.toml"), tiny_config()).expect("write");
+    let model = RobotModel::from_config_file(&dir.join("tiny.toml")).expect("relative URDF");
+    assert_eq!(model.name(), "tiny");
+    // package://NAME/PATH through explicit roots.
+    let package = dir.join("share/tiny_pkg/urdf");
+    std::fs::create_dir_all(&package).expect("mkdir");
+    std::fs::write(package.join("tiny.urdf"), tiny_urdf()).expect("write");
+    let config = tiny_config().replace("\"tiny.urdf\"", "\"package://tiny_pkg/urdf/tiny.urdf\"");
+    std::fs::write(dir.join("pkg.toml"), config).expect("write");
+    let roots = PackagePath::new(vec![dir.join("share")]);
+    RobotModel::from_config_file_with(&dir.join("pkg.toml"), &roots).expect("package URDF");
+    let error = RobotModel::from_config_file_with(&dir.join("pkg.toml"), &PackagePath::default())
+        .expect_err("no roots")
+        .to_string();
+    assert!(
+        error.contains("pkg.toml") && error.contains("package `tiny_pkg`"),
+        "{error}"
+    );
+    // URDF errors name the URDF file.
+    std::fs::write(
+        dir.join("tiny.urdf"),
+        tiny_urdf().replace(r#"<mass value="4.0"/>"#, r#"<mass value="-1"/>"#),
+    )
+    .expect("write");
+    let error = RobotModel::from_config_file(&dir.join("tiny.toml"))
+        .expect_err("bad mass")
+        .to_string();
+    let urdf_path = dir.join("tiny.urdf");
+    assert!(
+        error.starts_with(&format!("{}: ", urdf_path.display())),
+        "{error}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+    assert!(RobotModel::from_config_file(Path::new("/nonexistent/r.toml")).is_err());
+}
+
+#[test]
+fn inverse_kinematics_handles_offset_hips_and_slanted_links() {
+    // FR: hip joint off the abduction axis in x and z, knee ahead of the hip at q = 0, foot
+    // behind and beside the knee: the closed-form guess must account for all of them.
+    let urdf = tiny_urdf()
+        .replace(
+            r#"<child link="fr_l2"/><origin xyz="0 -0.05 0" rpy="0 0 0"/>"#,
+            r#"<child link="fr_l2"/><origin xyz="0.01 -0.05 -0.02" rpy="0 0 0"/>"#,
+        )
+        .replace(
+            r#"<child link="fr_l3"/><origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
+            r#"<child link="fr_l3"/><origin xyz="0.03 -0.01 -0.2" rpy="0 0 0"/>"#,
+        )
+        .replace(
+            r#"<child link="fr_toe"/><origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
+            r#"<child link="fr_toe"/><origin xyz="-0.02 -0.008 -0.19" rpy="0 0 0"/>"#,
+        );
+    assert_eq!(
+        urdf.matches("-0.008 -0.19").count(),
+        1,
+        "the FR leg was modified"
+    );
+    let model = RobotModel::from_config_str(&tiny_config(), &urdf).expect("offset leg");
+    let mut state = 7u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..200 {
+        let q = [
+            0.6 * (next() - 0.5),
+            0.4 + 0.8 * next(),
+            -0.6 - 1.2 * next(),
+        ];
+        let p = model.foot_position_body(Leg::FR, q);
+        let solved = model.inverse_kinematics(Leg::FR, p).expect("reachable");
+        for i in 0..3 {
+            assert!((solved[i] - q[i]).abs() < 1e-6, "IK {solved:?} for {q:?}");
+        }
+    }
+    let stand = model.stand_joint_positions(0.3).expect("stand");
+    let foot = model.foot_position_body(Leg::FR, [stand[0], stand[1], stand[2]]);
+    let nominal = model.nominal_foot_position(Leg::FR, 0.3);
+    assert!(
+        (0..3).all(|i| (foot[i] - nominal[i]).abs() < 1e-9),
+        "{foot:?} vs {nominal:?}"
+    );
+}
