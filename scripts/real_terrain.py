@@ -624,6 +624,7 @@ def main(argv: list[str] | None = None) -> int:
                 "stop_reason": metrics.get("stop_reason"),
                 "walk_start": metrics.get("walk_start"),
                 "duration": metrics.get("duration"),
+                "estimator": (metrics.get("estimation") or {}).get("estimator", "groundTruth"),
             }
             rows.append(row)
             plotted.append((row, log))
@@ -637,6 +638,8 @@ def main(argv: list[str] | None = None) -> int:
     total = time.perf_counter() - started
     fmu = paths.fmu_path()
     fmu_sha = hashlib.sha256(fmu.read_bytes()).hexdigest()[:12]
+    estimators = sorted({str(r.extra.get("estimator")) for r in rows if r.extra}) or ["(no run)"]
+    state_source = {"kalman": "on its own state estimate (IMU, encoders; no fixes)", "groundTruth": "on ground truth"}
     header = [
         f"# Real elevation data at robot scale{' (vertical exaggeration ×' + f'{args.exaggeration:g})' if variant else ''}",
         "",
@@ -650,7 +653,8 @@ def main(argv: list[str] | None = None) -> int:
             f"latitude {dem.mean_latitude:.3f}°). Each crop: {args.source_columns} DEM columns, scaled uniformly to {args.cells} × {args.cells} "
             f"cells of {args.cell_size} m (heights scaled by the same factor, slopes kept). Slopes are the planner's (central differences per cell); "
             "map figures from `pf-plan import`, path figures over the cells under the planned path. P-F plans by `pf-planner-service` "
-            f"(footprint radius as `pfnav-demo`'s default), the controller FMU `{fmu.name}` (sha256 {fmu_sha}) on ground truth, DART physics. "
+            f"(footprint radius as `pfnav-demo`'s default), the controller FMU `{fmu.name}` (sha256 {fmu_sha}) "
+            f"{' / '.join(state_source.get(e, e) for e in estimators)}, DART physics. "
             "'reached goal' and 'fell' as `pfnav-demo` judges them (reached: the base came within the goal radius, "
             f"{goal_radius:g} m, of the goal centre). 'edge keep-out': the crop's outer ring of DEM cells written as nodata, "
             "which `pf-plan import` turns into obstacles (the physics terrain ends at the map's edge)."

@@ -33,10 +33,11 @@ if [[ ! -x .venv/bin/python ]]; then
 fi
 stamp=.venv/.pfnav-requirements
 # Hash of everything pip installs from; a missing file hashes as empty instead of aborting.
-want="$( { cat scripts/requirements.txt; cat harness/pyproject.toml 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
+want="$( { cat scripts/requirements.txt scripts/requirements-robots.txt; cat harness/pyproject.toml 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
 if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
     log "installing pinned Python packages"
     .venv/bin/pip install -q --disable-pip-version-check -r scripts/requirements.txt
+    .venv/bin/pip install -q --disable-pip-version-check --no-deps -r scripts/requirements-robots.txt
     if [[ -f harness/pyproject.toml ]]; then
         .venv/bin/pip install -q --disable-pip-version-check -e harness
     fi
