@@ -81,12 +81,21 @@ def test_planner_that_does_not_answer(fake_tools: dict[str, str], tmp_path: Path
         "memq://",
         "--service-timeout",
         "1",
+        # The stand-in FMU is no FMU: on ground truth nothing reads it before the planner answers.
+        "--estimator",
+        "groundTruth",
         "--out",
         str(tmp_path / "out"),
         cwd=tmp_path,
     )
     assert_clean_failure(proc, 4, "published no status")
     assert "silent service starting" in proc.stderr  # the service log tail is shown
+
+
+def test_the_default_estimator_checks_the_fmu_before_planning(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--lcm-url", "memq://", "--service-timeout", "1", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 5, "cannot read the model description")
+    assert "silent service starting" not in proc.stderr  # no service was started
 
 
 def test_bad_arguments(fake_tools: dict[str, str], tmp_path: Path) -> None:
@@ -129,7 +138,7 @@ def test_traversability_fields_reach_the_started_service(fake_tools: dict[str, s
     env = {**fake_tools, "PFNAV_PLANNER_SERVICE": str(service)}
     proc = run_cli(
         env, "run", "--scenario", "ramp", "--lcm-url", "memq://", "--service-timeout", "1",
-        "--traversability", "height_weight=2", "--out", str(tmp_path / "out"), cwd=tmp_path,
+        "--traversability", "height_weight=2", "--estimator", "groundTruth", "--out", str(tmp_path / "out"), cwd=tmp_path,
     )
     assert_clean_failure(proc, 4, "published no status")
     argv = recorded.read_text().splitlines()

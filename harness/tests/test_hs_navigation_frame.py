@@ -13,17 +13,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_hs_cosim import PdStandIn, standing_plan
 
 from pfnav_harness import fmu_runner as fr
 from pfnav_harness import paths
 from pfnav_harness.body_sensors import BodySensorConfig
 from pfnav_harness.cosim import CoSimConfig, CoSimulation
 from pfnav_harness.feedback_field import FeedbackField
-from pfnav_harness.planner_client import Plan
 from pfnav_harness.reference import N_COLUMNS, T_HEIGHT, VX, VY, X, Y, Z
 from pfnav_harness.reference_source import FieldSource, yaw_of
 from pfnav_harness.scenario import Scenario
-from pfnav_harness.world import DEFAULT_STANCE
 
 # Estimate − truth the stand-in reports: dx, dy, dz [m], dyaw [rad].
 OFFSET = np.array([0.12, -0.07, 0.03, 0.2])
@@ -76,33 +75,21 @@ def test_the_field_is_sampled_at_the_believed_pose_over_the_true_ground(ramp_sce
     assert math.hypot(out[VX], out[VY]) > 0.0
 
 
-class OffsetEstimateStandIn:
+class OffsetEstimateStandIn(PdStandIn):
     """Holds the stance by joint PD; its estimate is the truth plus `OFFSET`; records the map it is given."""
 
     def __init__(self, contract: fr.FmuContract) -> None:
-        self.contract = contract
-        self.inputs = fr.NamedVector(fr.REAL_INPUTS)
-        self.outputs = fr.NamedVector(fr.REAL_OUTPUTS)
-        self.can_save_state = False
+        super().__init__(contract)
         self.estimation: fr.EstimationIo | None = None
-        self._contacts = np.ones(4, dtype=np.int32)
-        # Per doStep: base x, y, z, yaw as given; map origin x, y; the map's first height.
+        # Per doStep: time; base x, y, z and yaw as given; map origin x, y; the map's first height.
         self.seen: list[tuple[float, ...]] = []
 
     def enable_estimation(self, mode: str) -> fr.EstimationIo:
         self.estimation = fr.EstimationIo.detached()
         return self.estimation
 
-    def initialize(self, start_time: float = 0.0) -> None:
-        pass
-
-    def exchange_inputs(self, mode: int) -> None:
-        pass
-
     def do_step(self, time: float, step: float) -> None:
-        q = self.inputs.view(fr.JOINT_Q)
-        dq = self.inputs.view(fr.JOINT_DQ)
-        self.outputs.view(fr.TORQUE_OUTPUTS)[:] = 100.0 * (DEFAULT_STANCE - q) - 3.0 * dq
+        super().do_step(time, step)
         base = self.inputs.view(fr.BASE_POS)
         yaw = yaw_of(self.inputs.view(fr.BASE_QUAT))
         origin = self.inputs.view(fr.HEIGHT_MAP_ORIGIN)
@@ -113,29 +100,9 @@ class OffsetEstimateStandIn:
         est.est_pos[:] = base + OFFSET[:3]
         est.est_rpy[:] = (0.0, 0.0, yaw + OFFSET[3])
 
-    def read_outputs(self) -> None:
-        pass
-
-    @property
-    def torques(self) -> np.ndarray:
-        return self.outputs.view(fr.TORQUE_OUTPUTS)
-
-    @property
-    def contacts_array(self) -> np.ndarray:
-        return self._contacts
-
-    @property
-    def fsm_state(self) -> int:
-        return int(self.contract.fsm.Stand)
-
-    def close(self) -> None:
-        pass
-
 
 def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
-    t = np.array([0.0, 1.0])
-    one = np.ones(2)
-    plan = Plan("pf", t, 1.2 * one, 1.0 * one, 0 * one, 0 * one, 0 * one, 0 * one, 0 * one)
+    plan = standing_plan(1.2, 1.0)
     config = CoSimConfig(stand_time=0.2, max_duration=0.4, follow="feedback", estimator="kalman", body_sensors=BodySensorConfig(seed=1))
     controller = OffsetEstimateStandIn(fmu_contract)
     with CoSimulation(ramp_scenario, plan, None, paths.urdf_path(), tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
@@ -156,9 +123,7 @@ def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_sce
 
 
 def test_without_an_estimator_nothing_is_shifted(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
-    t = np.array([0.0, 1.0])
-    one = np.ones(2)
-    plan = Plan("pf", t, 1.2 * one, 1.0 * one, 0 * one, 0 * one, 0 * one, 0 * one, 0 * one)
+    plan = standing_plan(1.2, 1.0)
     config = CoSimConfig(stand_time=0.2, max_duration=0.3, follow="feedback")
     controller = OffsetEstimateStandIn(fmu_contract)
     controller.estimation = fr.EstimationIo.detached()  # written by the stand-in, never read by the harness

@@ -366,11 +366,6 @@ def execute(args: argparse.Namespace) -> int:
     from .report import write_report
 
     config = _config(args)
-    if config.estimator == "kalman":
-        from .fmu_runner import read_contract
-
-        # Before any planning: an FMU without the estimator cannot run this.
-        read_contract(fmu).require_estimation()
     if config.follow == "feedback" and any(m != "pf" for m in methods):
         raise HarnessError("feedback mode follows the P-F feedback field: use --method pf (graph planners give only a path)")
     online_config = _online_config(args) if args.online else None
@@ -394,6 +389,11 @@ def execute(args: argparse.Namespace) -> int:
             max_slope = _max_slope_deg(args)
             if max_slope is not None:
                 scenario.traversability["max_slope_deg"] = max_slope
+    if config.estimator == "kalman":
+        from .fmu_runner import read_contract
+
+        # Before any planning (the scenarios are checked first): an FMU without the estimator cannot run this.
+        read_contract(fmu).require_estimation()
     check_lcm_url(args.lcm_url, args.allow_host_network)
     answers = {} if online_config is not None else _plan_all(args, scenarios, methods, out)
     plan_time = time.perf_counter() - started
