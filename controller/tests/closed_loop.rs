@@ -5,9 +5,7 @@
 #![allow(clippy::needless_range_loop)] // parallel indexing of joints, axes and legs
 mod common;
 
-use quad_controller::{
-    Controller, ControllerConfig, FsmState, ModeRequest, Reference, TerrainPlane,
-};
+use quad_controller::{ControllerConfig, FsmState, ModeRequest, Reference, TerrainPlane};
 
 struct Track {
     max_error: f64,
@@ -24,12 +22,7 @@ fn run(path: impl Fn(f64) -> [f64; 6], duration: f64, slope_x: f64) -> Track {
     let model = common::model();
     let config = ControllerConfig::default();
     let dt = config.control_dt;
-    let mut controller = Controller::new(model.clone(), config.clone()).expect("controller");
-    let mut sim = common::SrbSim::standing(
-        model,
-        controller.stand_joint_positions(),
-        config.body_height,
-    );
+    let (mut controller, mut sim) = common::controller_and_standing_sim(model, &config);
     sim.set_slope(slope_x, dt);
     let stand_ticks = (1.5 / dt) as usize;
     let walk_ticks = (duration / dt) as usize;

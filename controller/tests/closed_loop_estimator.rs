@@ -9,7 +9,7 @@ mod common;
 
 use nalgebra::Vector3;
 use quad_controller::{
-    Controller, ControllerConfig, EstimatorKind, FsmState, ModeRequest, Reference, SensorReadings,
+    ControllerConfig, EstimatorKind, FsmState, ModeRequest, Reference, SensorReadings,
 };
 
 #[test]
@@ -22,12 +22,7 @@ fn kalman_mode_trots_on_its_own_estimate() {
         ..ControllerConfig::default()
     };
     let dt = config.control_dt;
-    let mut controller = Controller::new(model.clone(), config.clone()).expect("controller");
-    let mut sim = common::SrbSim::standing(
-        model,
-        controller.stand_joint_positions(),
-        config.body_height,
-    );
+    let (mut controller, mut sim) = common::controller_and_standing_sim(model, &config);
     let speed = 0.5;
     let (stand_ticks, walk_ticks) = ((1.5 / dt) as usize, (4.0 / dt) as usize);
     let mut previous_velocity = Vector3::from(sim.state().base_linear_velocity);

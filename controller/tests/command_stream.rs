@@ -10,8 +10,8 @@ mod common;
 use std::io::Write;
 
 use quad_controller::{
-    Command, Controller, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference,
-    TerrainPlane, HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE,
+    Command, ControllerConfig, FsmState, GaitKind, HeightMap, ModeRequest, Reference, TerrainPlane,
+    HEIGHT_MAP_CELLS, HEIGHT_MAP_SIZE,
 };
 
 /// FNV-1a over the bits of every field of every command (except the wall-clock solve time).
@@ -107,15 +107,10 @@ fn run(s: &Scenario) -> (u64, FsmState) {
         ..ControllerConfig::default()
     };
     let dt = config.control_dt;
-    let mut controller = Controller::new(model.clone(), config.clone()).expect("controller");
+    let (mut controller, mut sim) = common::controller_and_standing_sim(model, &config);
     controller
         .set_input_period(s.input_period)
         .expect("valid period");
-    let mut sim = common::SrbSim::standing(
-        model,
-        controller.stand_joint_positions(),
-        config.body_height,
-    );
     sim.set_slope(s.slope_x, dt);
     let mut hash = StreamHash::new(s.name);
     // Passive for 20 ticks, stand-up, stand until 1.5 s, then walk.

@@ -47,12 +47,7 @@ fn trot_and_record(
 ) -> (Controller, ControllerState, Vec<TickInputs>, Vec<Vec<u64>>) {
     let model = common::model();
     let dt = config.control_dt;
-    let mut controller = Controller::new(model.clone(), config.clone()).expect("controller");
-    let mut sim = common::SrbSim::standing(
-        model,
-        controller.stand_joint_positions(),
-        config.body_height,
-    );
+    let (mut controller, mut sim) = common::controller_and_standing_sim(model, config);
     let stand_ticks = (1.5 / dt) as usize;
     let save_tick = stand_ticks + (save_after / dt) as usize;
     let end_tick = save_tick + (record / dt) as usize;

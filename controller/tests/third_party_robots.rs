@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 
 use quad_controller::robot_config::{KneeDirection, PACKAGE_PATH_ENV};
 use quad_controller::{
-    Controller, ControllerConfig, FsmState, Leg, ModeRequest, PackagePath, Reference, RobotConfig,
-    RobotModel, TerrainPlane, NUM_JOINTS,
+    ControllerConfig, FsmState, Leg, ModeRequest, PackagePath, Reference, RobotConfig, RobotModel,
+    NUM_JOINTS,
 };
 
 const INSTALL_HINT: &str = "install the robot models: `.venv/bin/pip install example-robot-data==6.0.0 --no-deps` \
@@ -311,22 +311,11 @@ fn controller_stands_still_on_the_rigid_body_simulation() {
             ..ControllerConfig::default()
         };
         let dt = config.control_dt;
-        let mut controller = Controller::new(model.clone(), config.clone()).expect("controller");
-        let mut sim = common::SrbSim::standing(
-            model,
-            controller.stand_joint_positions(),
-            config.body_height,
-        );
+        let (mut controller, mut sim) = common::controller_and_standing_sim(model, &config);
         let reference = Reference {
-            x: 0.0,
-            y: 0.0,
-            yaw: 0.0,
-            vx: 0.0,
-            vy: 0.0,
-            yaw_rate: 0.0,
             body_height: config.body_height,
-            terrain: TerrainPlane::default(),
             mode: ModeRequest::Stand,
+            ..Reference::default()
         };
         let mut worst_height_error = 0.0f64;
         for tick in 0..(2.0 / dt) as usize {

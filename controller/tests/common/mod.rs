@@ -3,7 +3,8 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use quad_controller::{
-    Command, ImuReading, Leg, RobotModel, RobotState, GRAVITY, NUM_JOINTS, NUM_LEGS,
+    Command, Controller, ControllerConfig, ImuReading, Leg, RobotModel, RobotState, GRAVITY,
+    NUM_JOINTS, NUM_LEGS,
 };
 
 pub fn urdf_text() -> String {
@@ -13,6 +14,21 @@ pub fn urdf_text() -> String {
 
 pub fn model() -> RobotModel {
     RobotModel::from_urdf_str(&urdf_text()).expect("the repository URDF loads")
+}
+
+/// A controller for `model` with `config`, and the simulation standing in its stand pose at
+/// `config.body_height`.
+pub fn controller_and_standing_sim(
+    model: RobotModel,
+    config: &ControllerConfig,
+) -> (Controller, SrbSim) {
+    let controller = Controller::new(model.clone(), config.clone()).expect("controller");
+    let sim = SrbSim::standing(
+        model,
+        controller.stand_joint_positions(),
+        config.body_height,
+    );
+    (controller, sim)
 }
 
 /// Single rigid body (total mass, composite inertia at the standing pose) pushed by the
