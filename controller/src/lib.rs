@@ -47,6 +47,7 @@ pub mod math;
 pub mod model;
 pub mod mpc;
 mod mpc_schedule;
+mod statics;
 mod validation;
 
 pub use api::*;
