@@ -376,7 +376,10 @@ controller_config! {
         swing_height: f64 = 0.08,
             fmi "gait.swingHeight", range limits::SWING_HEIGHT, unit "m",
             "Swing-foot apex height";
-        /// Friction coefficient used by the MPC's friction pyramid.
+        /// Friction coefficient used by the MPC's friction pyramid. Below the ground's μ on purpose
+        /// (a safety factor of 0.75 on the μ = 0.8 of issue 19's inclines): planned at the real μ
+        /// the forces sit on the cone's edge, stance feet slip (2–18 cm per stance) and 20° down
+        /// falls (docs/slopes.md, fix 4).
         mu: f64 = 0.6,
             fmi "mpc.mu", range limits::MU, unit "",
             "Friction coefficient of the MPC friction pyramid";

@@ -77,7 +77,7 @@ impl Controller {
         let stages = Stages {
             footholds: FootholdPlanner::new(&config, nominal_feet_body, model.foot_radius()),
             mpc: MpcScheduler::new(&config, model.total_mass(), inertia, com_offset_body)?,
-            legs: LegControl::new(&model, &config, stand_joint_positions),
+            legs: LegControl::new(&model, &config, stand_joint_positions, com_offset_body),
         };
         Ok(Controller {
             estimator: StateEstimator::new(&model, &config),
@@ -247,7 +247,13 @@ impl Controller {
             .fsm
             .check_transition(&self.stages, &estimate, reference)
         {
-            self.fsm.enter(transition.to, &mut self.stages, &estimate);
+            self.fsm.enter(
+                transition.to,
+                &self.model,
+                &mut self.stages,
+                &estimate,
+                reference,
+            );
             self.last_transition = Some(transition);
         }
         // The state runs the gait, footholds, MPC scheduling and leg laws it needs.

@@ -66,6 +66,8 @@ const SWING_CLEARANCE_SAMPLES: std::ops::RangeInclusive<u32> = 2..=8;
 pub struct MotionTarget {
     /// Base xy, world frame, m.
     pub xy: [f64; 2],
+    /// Roll, rad.
+    pub roll: f64,
     /// Yaw, rad.
     pub yaw: f64,
     /// Velocity xy, world frame, m/s.

@@ -4,16 +4,18 @@
 //! fixed-base model) carries the leg's own weight so that the base receives exactly `f` minus the
 //! leg weight. Swing legs track the swing trajectory in joint space:
 //! `τ = M(q) q̈_ref + h(q, q̇) + K_p (q_ref − q) + K_d (q̇_ref − q̇)` with `q_ref` from IK. Also the
-//! stand-up interpolation, joint damping, and the final clamp to the URDF effort limits.
+//! stand-up (joint targets from the feet and a base pose, a statically balanced feed-forward),
+//! joint damping, and the final clamp to the URDF effort limits.
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::api::{Leg, RobotState, NUM_JOINTS, NUM_LEGS};
+use crate::api::{Leg, RobotState, GRAVITY, NUM_JOINTS, NUM_LEGS};
 use crate::config::ControllerConfig;
 use crate::estimate::{leg_slice, Estimate};
 use crate::gait::SwingSample;
 use crate::model::RobotModel;
+use crate::statics::{static_vertical_forces, BasePose};
 
 /// Joint damping per inertia and input period at most (k_d·T/M_ii): a held velocity feedback with
 /// k_d·T/M_ii above 2 reverses the joint's velocity every period, and the joint chatters.
@@ -37,17 +39,22 @@ pub struct LegControl {
     kp_stand: [f64; 3],
     kd_stand: [f64; 3],
     damping_kd: f64,
+    /// Least vertical force on a foot in the stand-up's weight distribution, N.
+    f_min: f64,
+    /// CoM offset from the base origin, base frame, m.
+    com_offset_body: Vector3<f64>,
     /// How long each state given to `step` stays in force (0: a fresh state every tick).
     input_period_s: f64,
 }
 
 impl LegControl {
     /// The torque laws of `model` with the gains of `config`; `stand_joint_positions` is the
-    /// standing pose (index 3·leg + j).
+    /// standing pose (index 3·leg + j), whose CoM is at `com_offset_body` from the base origin.
     pub fn new(
         model: &RobotModel,
         config: &ControllerConfig,
         stand_joint_positions: [f64; NUM_JOINTS],
+        com_offset_body: Vector3<f64>,
     ) -> Self {
         LegControl {
             effort_limits: model.effort_limits(),
@@ -59,6 +66,8 @@ impl LegControl {
             kp_stand: config.kp_stand,
             kd_stand: config.kd_stand,
             damping_kd: config.damping_kd,
+            f_min: config.f_min,
+            com_offset_body,
             input_period_s: 0.0,
         }
     }
@@ -71,6 +80,11 @@ impl LegControl {
     /// Joint angles of the standing pose, index 3·leg + j.
     pub fn stand_joint_positions(&self) -> [f64; NUM_JOINTS] {
         self.stand_joint_positions
+    }
+
+    /// CoM offset from the base origin in the standing pose, base frame, m.
+    pub fn com_offset_body(&self) -> Vector3<f64> {
+        self.com_offset_body
     }
 
     /// Lower and upper joint limits, index 3·leg + j, rad.
@@ -183,33 +197,65 @@ impl LegControl {
         q
     }
 
-    /// Stand-up: joint PD towards `start + (stand − start)·s` plus the feed-forward of a vertical
-    /// ground force `weight_share` per foot. Returns the torques and the forces assumed.
+    /// Stand-up joint targets: for each leg, the joints that keep its foot at `feet[leg]`
+    /// (world frame) with the base at `pose`; where that is out of reach, the pose at entry
+    /// `start` interpolated by `s` towards the standing pose in joint space.
+    pub fn stand_up_joint_targets(
+        &self,
+        model: &RobotModel,
+        pose: &BasePose,
+        feet: &[Vector3<f64>; NUM_LEGS],
+        start: &[f64; NUM_JOINTS],
+        s: f64,
+    ) -> [f64; NUM_JOINTS] {
+        let rt = pose.rotation().transpose();
+        let mut targets = [0.0; NUM_JOINTS];
+        for leg in Leg::ALL {
+            let base = 3 * leg.index();
+            let p_body = rt * (feet[leg.index()] - pose.position);
+            let solution = model
+                .try_inverse_kinematics(leg, [p_body.x, p_body.y, p_body.z])
+                .filter(|q| q.iter().all(|v| v.is_finite()));
+            for j in 0..3 {
+                let i = base + j;
+                targets[i] = match solution {
+                    Some(q) => q[j].clamp(self.lower_limits[i], self.upper_limits[i]),
+                    None => start[i] + (self.stand_joint_positions[i] - start[i]) * s,
+                };
+            }
+        }
+        targets
+    }
+
+    /// Stand-up: joint PD towards `q_ref` plus the feed-forward of vertical ground forces that
+    /// carry the share `s` of the weight with no moment about the CoM over the measured feet
+    /// (`static_vertical_forces`). Returns the torques and the forces assumed.
     pub fn stand_up_torques(
         &self,
         model: &RobotModel,
         estimate: &Estimate,
-        start: &[f64; NUM_JOINTS],
+        q_ref: &[f64; NUM_JOINTS],
         s: f64,
-        weight_share: f64,
     ) -> ([f64; NUM_JOINTS], [[f64; 3]; NUM_LEGS]) {
+        let com = estimate.position + estimate.rotation * self.com_offset_body;
+        let weight = model.total_mass() * GRAVITY * s;
+        let vertical = static_vertical_forces(&estimate.feet_world, &com, weight, self.f_min * s);
         let mut torques = [0.0; NUM_JOINTS];
         let mut forces = [[0.0; 3]; NUM_LEGS];
         for leg in Leg::ALL {
             let l = leg.index();
-            let ground_force = Vector3::new(0.0, 0.0, weight_share);
+            let ground_force = Vector3::new(0.0, 0.0, vertical[l]);
             let foot_force_body = estimate.rotation.transpose() * (-ground_force);
             let jac = Matrix3::from(model.foot_jacobian_body(leg, estimate.q[l])).transpose();
             let feed_forward = jac.transpose() * foot_force_body;
             let mass = model.mass_matrix(leg, estimate.q[l]);
             for j in 0..3 {
                 let i = 3 * l + j;
-                let q_ref = start[i] + (self.stand_joint_positions[i] - start[i]) * s;
                 let (kp, kd) = self.held_gains(self.kp_stand[j], self.kd_stand[j], mass[(j, j)]);
                 torques[i] =
-                    kp * (q_ref - estimate.q[l][j]) - kd * estimate.dq[l][j] + feed_forward[j];
+                    kp * (q_ref[i] - estimate.q[l][j]) - kd * estimate.dq[l][j] + feed_forward[j];
             }
-            forces[l] = [0.0, 0.0, weight_share];
+            forces[l] = [0.0, 0.0, vertical[l]];
         }
         (torques, forces)
     }

@@ -49,6 +49,7 @@ pub mod model;
 pub mod mpc;
 mod mpc_schedule;
 pub mod robot_config;
+mod statics;
 mod validation;
 
 pub use api::*;

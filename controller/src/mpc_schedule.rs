@@ -240,7 +240,7 @@ impl MpcScheduler {
             let vz =
                 reference.terrain.slope_x * velocity_k.x + reference.terrain.slope_y * velocity_k.y;
             self.reference[k] = [
-                0.0,
+                target.roll,
                 pitch,
                 yaw_k,
                 com_k.x,

@@ -63,6 +63,7 @@ impl Locomotion {
         self.track_contact_edges(estimate, contacts);
         let target = MotionTarget {
             xy: [reference.x, reference.y],
+            roll: 0.0,
             yaw: reference.yaw,
             velocity: [reference.vx, reference.vy],
             yaw_rate: reference.yaw_rate,

@@ -19,6 +19,7 @@ use crate::gait::Gait;
 use crate::leg_control::LegControl;
 use crate::model::RobotModel;
 use crate::mpc_schedule::MpcScheduler;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use damping::Damping;
@@ -117,13 +118,27 @@ struct FaultMonitor {
     joint_limit_margin: f64,
 }
 
+/// Angle between the body's z axis and the unit vector `normal`, rad.
+fn tilt_from(estimate: &Estimate, normal: &Vector3<f64>) -> f64 {
+    let body_z = estimate.rotation.column(2);
+    body_z.dot(normal).clamp(-1.0, 1.0).acos()
+}
+
 impl FaultMonitor {
-    /// Tilt or joint-limit fault, with a reason for the log.
-    fn check(&self, estimate: &Estimate, legs: &LegControl) -> Option<String> {
-        let tilt = estimate.rotation[(2, 2)].clamp(-1.0, 1.0).acos();
-        if tilt > self.max_tilt {
+    /// Tilt or joint-limit fault, with a reason for the log. The tilt is measured from the
+    /// ground's normal under the feet (`normal`, the MPC's friction normal), not from world
+    /// vertical: a body parallel to a 30° incline has not tilted, and measured from vertical it
+    /// would have only 0.9 − 0.52 rad left for transients (docs/slopes.md, 3e).
+    fn check(
+        &self,
+        estimate: &Estimate,
+        legs: &LegControl,
+        normal: &Vector3<f64>,
+    ) -> Option<String> {
+        let tilt = tilt_from(estimate, normal);
+        if tilt.is_nan() || tilt > self.max_tilt {
             return Some(format!(
-                "tilt check: base tilted {tilt:.3} rad, more than max.tilt {:.3} rad",
+                "tilt check: base tilted {tilt:.3} rad from the ground's normal, more than max.tilt {:.3} rad",
                 self.max_tilt
             ));
         }
@@ -205,7 +220,11 @@ impl Fsm {
         let fault = match self.current {
             FsmState::Passive | FsmState::Damping => None,
             FsmState::StandUp | FsmState::Stand | FsmState::Locomotion => {
-                self.faults.check(estimate, &stages.legs)
+                let normal =
+                    stages
+                        .footholds
+                        .friction_normal(reference, estimate, [true; NUM_LEGS]);
+                self.faults.check(estimate, &stages.legs, &normal)
             }
         };
         let mode = reference.mode;
@@ -229,15 +248,22 @@ impl Fsm {
 
     /// Enters `next`: resets the state time, makes the MPC solve on the next balancing tick and
     /// runs the state's entry actions.
-    pub fn enter(&mut self, next: FsmState, stages: &mut Stages, estimate: &Estimate) {
+    pub fn enter(
+        &mut self,
+        next: FsmState,
+        model: &RobotModel,
+        stages: &mut Stages,
+        estimate: &Estimate,
+        reference: &Reference,
+    ) {
         tracing::debug!(from = ?self.current, to = ?next, "FSM transition");
         self.current = next;
         self.state_time = 0.0;
         stages.mpc.solve_on_next_update();
         match next {
             FsmState::Passive => self.passive.enter(stages),
-            FsmState::StandUp => self.stand_up.enter(estimate),
-            FsmState::Stand => self.stand.enter(estimate),
+            FsmState::StandUp => self.stand_up.enter(model, stages, estimate, reference),
+            FsmState::Stand => self.stand.enter(stages, estimate),
             FsmState::Locomotion => self.locomotion.enter(estimate),
             FsmState::Damping => self.damping.enter(stages),
         }
@@ -274,4 +300,99 @@ impl Fsm {
 /// Feet reported while no foot is planned: where they are.
 fn measured_feet(estimate: &Estimate) -> [[f64; 3]; NUM_LEGS] {
     estimate.feet_world.map(|f| [f.x, f.y, f.z])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::rpy_of;
+    use nalgebra::Rotation3;
+
+    fn estimate_with(rotation: Rotation3<f64>) -> Estimate {
+        let rotation = *rotation.matrix();
+        Estimate {
+            rotation,
+            rpy: rpy_of(&rotation),
+            position: Vector3::zeros(),
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+            q: [[0.0; 3]; NUM_LEGS],
+            dq: [[0.0; 3]; NUM_LEGS],
+            feet_world: [Vector3::zeros(); NUM_LEGS],
+            gravity_body: [0.0; 3],
+        }
+    }
+
+    fn monitor() -> FaultMonitor {
+        FaultMonitor {
+            max_tilt: 0.9,
+            joint_limit_margin: 0.15,
+        }
+    }
+
+    fn legs() -> LegControl {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
+        let model = RobotModel::from_urdf_file(&path).expect("the repository's URDF loads");
+        let config = ControllerConfig::default();
+        LegControl::new(&model, &config, [0.0; NUM_JOINTS], Vector3::zeros())
+    }
+
+    /// `estimate` with every joint in the middle of its range (no joint-limit fault).
+    fn within_limits(mut estimate: Estimate, legs: &LegControl) -> Estimate {
+        let (lower, upper) = legs.joint_limits();
+        for (l, q) in estimate.q.iter_mut().enumerate() {
+            for (j, angle) in q.iter_mut().enumerate() {
+                *angle = 0.5 * (lower[3 * l + j] + upper[3 * l + j]);
+            }
+        }
+        estimate
+    }
+
+    #[test]
+    fn the_tilt_is_measured_from_the_terrain_planes_normal() {
+        let slope = 30f64.to_radians();
+        // The plane rises along +x; a body parallel to it is pitched nose up (negative pitch).
+        let normal = Vector3::new(-slope.tan(), 0.0, 1.0).normalize();
+        let parallel = estimate_with(Rotation3::from_euler_angles(0.0, -slope, 0.0));
+        assert!(tilt_from(&parallel, &normal) < 1e-12);
+        let level = estimate_with(Rotation3::identity());
+        assert!((tilt_from(&level, &normal) - slope).abs() < 1e-12);
+    }
+
+    #[test]
+    fn on_a_30_degree_plane_the_tilt_check_allows_the_full_margin_from_the_plane() {
+        let slope = 30f64.to_radians();
+        let normal = Vector3::new(-slope.tan(), 0.0, 1.0).normalize();
+        let (monitor, legs) = (monitor(), legs());
+        // Rolled 0.6 rad on the plane: 0.6 rad from its normal, 0.86 rad from world vertical
+        // (beyond the 0.9 − 0.52 rad a check from vertical alone would leave).
+        let rolled = within_limits(
+            estimate_with(Rotation3::from_euler_angles(0.6, -slope, 0.0)),
+            &legs,
+        );
+        assert!(monitor.check(&rolled, &legs, &normal).is_none());
+        // Rolled 1.0 rad on the plane: a fault.
+        let over = within_limits(
+            estimate_with(Rotation3::from_euler_angles(1.0, -slope, 0.0)),
+            &legs,
+        );
+        let fault = monitor.check(&over, &legs, &normal);
+        assert!(fault.is_some_and(|reason| reason.contains("tilt check")));
+    }
+
+    #[test]
+    fn on_flat_ground_the_tilt_check_is_the_tilt_from_vertical() {
+        let (monitor, legs) = (monitor(), legs());
+        let vertical = Vector3::z();
+        let rolled = within_limits(
+            estimate_with(Rotation3::from_euler_angles(0.85, 0.0, 0.0)),
+            &legs,
+        );
+        assert!(monitor.check(&rolled, &legs, &vertical).is_none());
+        let fallen = within_limits(
+            estimate_with(Rotation3::from_euler_angles(0.0, -0.95, 0.0)),
+            &legs,
+        );
+        assert!(monitor.check(&fallen, &legs, &vertical).is_some());
+    }
 }

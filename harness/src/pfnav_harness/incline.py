@@ -311,7 +311,7 @@ def evaluate(
     # while standing up has fallen too.
     verdict = judge_fall(log, terrain, FallThresholds(), tilt_from=0.0)
     fell, fall_time, fall_reason = verdict.fell, verdict.fall_time, verdict.reason
-    fell_before_walk = fall_time is not None and fall_time < t[k_walk]
+    fell_before_walk = bool(fall_time is not None and fall_time < t[k_walk])
     if fell_before_walk:
         fall_reason = "before the walk: " + fall_reason
     height = pos[:, 2] - ground
