@@ -374,7 +374,7 @@ impl Planner {
 /// Continues `path` from where it entered the goal region straight to the goal's centre, when
 /// that segment is free: a plan that ends on the region's rim leaves a robot no room for tracking
 /// or localisation error, and it stops just outside as often as just inside.
-fn walk_into_goal(grid: &PlanningGrid, path: &mut Vec<Point>, goal: &GoalRegion) {
+pub fn walk_into_goal(grid: &PlanningGrid, path: &mut Vec<Point>, goal: &GoalRegion) {
     let Some(&last) = path.last() else {
         return;
     };
