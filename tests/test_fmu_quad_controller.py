@@ -338,17 +338,21 @@ def test_fmutool_check_finds_no_problems(fmu_file: Path) -> None:
 def test_package_layout_and_description(fmu_file: Path, fmu_model_description: Any) -> None:
     with zipfile.ZipFile(fmu_file) as archive:
         names = set(archive.namelist())
-        urdf = archive.read("resources/quadruped.urdf")
+        urdf = archive.read("resources/robot/robot.urdf")
+        robot_config = archive.read("resources/robot/robot.toml").decode()
         config = json.loads(archive.read("resources/controller.json"))
     assert {
         "modelDescription.xml",
         "binaries/linux64/QuadController.so",
-        "resources/quadruped.urdf",
+        "resources/robot/robot.toml",
+        "resources/robot/robot.urdf",
         "resources/controller.json",
         "documentation/index.html",
     } <= names
     assert all("\\" not in n for n in names)
+    # Our URDF has no meshes, so the bundled copy is the file itself; the config names the copy.
     assert urdf == (REPO / "robot" / "quadruped.urdf").read_bytes()
+    assert 'urdf = "robot.urdf"' in robot_config
     md = fmu_model_description
     assert md.fmiVersion == "2.0"
     assert md.coSimulation.modelIdentifier == "QuadController"

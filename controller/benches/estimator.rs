@@ -10,8 +10,8 @@ use quad_controller::estimator::{StancePlan, StateEstimator};
 use quad_controller::{Controller, ControllerConfig, RobotModel, RobotState};
 
 fn bench_estimator(c: &mut Criterion) {
-    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
-    let model = RobotModel::from_urdf_file(&urdf).expect("URDF");
+    let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    let model = RobotModel::from_config_file(&robot).expect("URDF");
     let stand = Controller::new(model.clone(), ControllerConfig::default())
         .expect("controller")
         .stand_joint_positions();

@@ -28,8 +28,8 @@ struct Problem {
 }
 
 fn robot() -> RobotModel {
-    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
-    RobotModel::from_urdf_file(&urdf).expect("URDF")
+    let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    RobotModel::from_config_file(&robot).expect("URDF")
 }
 
 impl Problem {

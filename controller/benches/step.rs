@@ -7,8 +7,8 @@ use quad_controller::{
 };
 
 fn bench_step(c: &mut Criterion) {
-    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
-    let model = RobotModel::from_urdf_file(&urdf).expect("URDF");
+    let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    let model = RobotModel::from_config_file(&robot).expect("URDF");
     let config = ControllerConfig {
         gait_period: 1.0e4,
         mpc_every_ticks: usize::MAX,

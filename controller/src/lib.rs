@@ -50,6 +50,7 @@ pub mod mpc;
 mod mpc_schedule;
 pub mod robot_config;
 mod statics;
+pub mod tuning;
 mod validation;
 
 pub use api::*;

@@ -271,7 +271,7 @@ fn urdf_missing_a_leg_is_a_clear_error() {
     let start = text.find("<!-- RL leg -->").expect("RL section");
     let end = text.find("</robot>").expect("end");
     let without_rl = format!("{}{}", &text[..start], &text[end..]);
-    match RobotModel::from_urdf_str(&without_rl)
+    match common::our_robot_with_urdf(&without_rl)
         .as_ref()
         .map_err(ModelError::innermost)
     {
@@ -279,7 +279,7 @@ fn urdf_missing_a_leg_is_a_clear_error() {
         other => panic!("expected Missing, got {other:?}"),
     }
     let renamed = text.replace("FL_knee_joint", "FL_elbow_joint");
-    match RobotModel::from_urdf_str(&renamed)
+    match common::our_robot_with_urdf(&renamed)
         .as_ref()
         .map_err(ModelError::innermost)
     {
@@ -287,23 +287,24 @@ fn urdf_missing_a_leg_is_a_clear_error() {
         other => panic!("expected Missing, got {other:?}"),
     }
     let no_sphere = text.replace("<collision><origin xyz=\"0 0 0\" rpy=\"0 0 0\"/><geometry><sphere radius=\"0.02\"/></geometry></collision>", "");
-    match RobotModel::from_urdf_str(&no_sphere) {
+    match common::our_robot_with_urdf(&no_sphere) {
         Err(ModelError::Config { reason, .. }) => {
             assert!(reason.contains("foot radius"), "{reason}")
         }
         other => panic!("expected a config error, got {other:?}"),
     }
     assert!(matches!(
-        RobotModel::from_urdf_str("<robot")
+        common::our_robot_with_urdf("<robot")
             .as_ref()
             .map_err(ModelError::innermost),
         Err(ModelError::Parse(_))
     ));
-    let missing_file = RobotModel::from_urdf_file(std::path::Path::new("/nonexistent/robot.urdf"));
+    let missing_file =
+        RobotModel::from_config_file(std::path::Path::new("/nonexistent/robot.toml"));
     assert!(matches!(missing_file, Err(ModelError::Io { .. })));
     let negative_mass = text.replacen("<mass value=\"5.0\"/>", "<mass value=\"-5.0\"/>", 1);
     assert!(matches!(
-        RobotModel::from_urdf_str(&negative_mass)
+        common::our_robot_with_urdf(&negative_mass)
             .as_ref()
             .map_err(ModelError::innermost),
         Err(ModelError::InvalidValue(_))
@@ -311,13 +312,13 @@ fn urdf_missing_a_leg_is_a_clear_error() {
 }
 
 #[test]
-fn repository_robot_config_describes_the_repository_urdf() {
+fn repository_robot_config_gives_the_same_model_from_its_file_and_from_its_texts() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
     let from_config = RobotModel::from_config_file(&path).expect("robot/quadruped.toml loads");
-    let compiled_in = common::model();
-    assert_eq!(from_config.total_mass(), compiled_in.total_mass());
-    assert_eq!(from_config.effort_limits(), compiled_in.effort_limits());
-    assert_eq!(from_config.foot_radius(), compiled_in.foot_radius());
+    let from_texts = common::model();
+    assert_eq!(from_config.total_mass(), from_texts.total_mass());
+    assert_eq!(from_config.effort_limits(), from_texts.effort_limits());
+    assert_eq!(from_config.foot_radius(), from_texts.foot_radius());
     // The controller's default standing height is our robot's configured one.
     assert_eq!(
         from_config.stand_height(),
@@ -327,7 +328,7 @@ fn repository_robot_config_describes_the_repository_urdf() {
         let q = [0.2, 0.7, -1.4];
         assert_eq!(
             from_config.foot_position_body(leg, q),
-            compiled_in.foot_position_body(leg, q)
+            from_texts.foot_position_body(leg, q)
         );
     }
 }

@@ -433,3 +433,61 @@ fn inverse_kinematics_handles_offset_hips_and_slanted_links() {
         "{foot:?} vs {nominal:?}"
     );
 }
+
+#[test]
+fn the_crouch_is_all_four_legs_or_none_and_inside_the_joint_limits() {
+    let urdf = tiny_urdf();
+    let model = RobotModel::from_config_str(&tiny_config(), &urdf).expect("tiny robot");
+    assert_eq!(model.crouch_joint_positions(), None);
+    let with_crouch = |crouch: &[&str; 4]| {
+        let mut config = tiny_config();
+        for (leg, angles) in ["FR", "FL", "RR", "RL"].iter().zip(crouch) {
+            let header = format!("[legs.{leg}]\n");
+            if !angles.is_empty() {
+                config = config.replace(&header, &format!("{header}crouch = [{angles}]\n"));
+            }
+        }
+        config
+    };
+    let crouch = [
+        "0.1, 0.8, -1.6",
+        "-0.1, 0.8, -1.6",
+        "0, -0.8, 1.6",
+        "0, -0.8, 1.6",
+    ];
+    let model =
+        RobotModel::from_config_str(&with_crouch(&crouch), &urdf).expect("crouch on four legs");
+    let pose = model.crouch_joint_positions().expect("crouch");
+    assert_eq!(&pose[..6], &[0.1, 0.8, -1.6, -0.1, 0.8, -1.6]);
+    assert_eq!(&pose[6..], &[0.0, -0.8, 1.6, 0.0, -0.8, 1.6]);
+    assert_config_error(
+        &with_crouch(&["0, 0.8, -1.6", "", "", ""]),
+        &urdf,
+        "`legs.FL.crouch` is missing",
+    );
+    assert_config_error(
+        &with_crouch(&[
+            "0, 0.8, -1.6",
+            "0, 0.8, -1.6",
+            "0, 0.8, -2.9",
+            "0, 0.8, -1.6",
+        ]),
+        &urdf,
+        "`legs.RR.crouch`: -2.9 rad for joint `rr_j3` is outside its limits",
+    );
+    assert_config_error(
+        &with_crouch(&[
+            "0, 0.8, nan",
+            "0, 0.8, -1.6",
+            "0, 0.8, -1.6",
+            "0, 0.8, -1.6",
+        ]),
+        &urdf,
+        "`legs.FR.crouch` is not finite",
+    );
+    assert_config_error(
+        &with_crouch(&["0, 0.8", "0, 0.8, -1.6", "0, 0.8, -1.6", "0, 0.8, -1.6"]),
+        &urdf,
+        "expected exactly 3 values",
+    );
+}

@@ -14,8 +14,10 @@ use fmi::fmi2::instance::{CoSimulation, Common, InstanceCS};
 use quad_controller::{
     Controller, ControllerConfig, Reference, RobotModel, RobotState, NUM_JOINTS,
 };
-use quad_controller_fmu::bundle::{repo_root, shared_library_next_to, write_fmu, BundleInputs};
-use quad_controller_fmu::variables::{by_name, table, Causality, ScalarType};
+use quad_controller_fmu::bundle::{
+    default_robot_config, shared_library_next_to, write_fmu, BundleInputs,
+};
+use quad_controller_fmu::variables::{Causality, ScalarType, VariableTable};
 
 const DT: f64 = 0.001;
 /// Ticks until the robot stands (stand-up takes 1 s), so every variant measures the MPC stance.
@@ -32,7 +34,11 @@ fn standing(model: &RobotModel) -> (RobotState, Reference) {
     (state, Reference::default())
 }
 
-fn real_inputs(state: &RobotState, reference: &Reference) -> (Vec<u32>, Vec<f64>) {
+fn real_inputs(
+    table: &VariableTable,
+    state: &RobotState,
+    reference: &Reference,
+) -> (Vec<u32>, Vec<f64>) {
     let mut vrs = Vec::new();
     let mut values = Vec::new();
     let mut fields: Vec<(String, f64)> = Vec::new();
@@ -51,15 +57,15 @@ fn real_inputs(state: &RobotState, reference: &Reference) -> (Vec<u32>, Vec<f64>
     fields.push(("ref.x".into(), reference.x));
     fields.push(("ref.y".into(), reference.y));
     for (name, value) in fields {
-        vrs.push(by_name(&name).expect("input name").value_reference);
+        vrs.push(table.by_name(&name).expect("input name").value_reference);
         values.push(value);
     }
     (vrs, values)
 }
 
 fn bench(c: &mut Criterion) {
-    let model = RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))
-        .expect("URDF");
+    let model = RobotModel::from_config_file(&default_robot_config()).expect("robot config");
+    let table = VariableTable::new(&model, &ControllerConfig::for_robot(&model)).expect("table");
     let (state, reference) = standing(&model);
 
     let mut direct =
@@ -89,14 +95,15 @@ fn bench(c: &mut Criterion) {
     instance.setup_experiment(None, 0.0, None).expect("setup");
     instance.enter_initialization_mode().expect("enter");
     instance.exit_initialization_mode().expect("exit");
-    let (vrs, values) = real_inputs(&state, &reference);
+    let (vrs, values) = real_inputs(&table, &state, &reference);
     instance.set_real(&vrs, &values).expect("set");
     let mut time = 0.0;
     for _ in 0..WARM_UP_TICKS {
         instance.do_step(time, DT, true).expect("warm-up");
         time += DT;
     }
-    let torque_vrs: Vec<u32> = table()
+    let torque_vrs: Vec<u32> = table
+        .rows()
         .iter()
         .filter(|v| v.causality == Causality::Output && v.scalar_type() == ScalarType::Real)
         .take(NUM_JOINTS)

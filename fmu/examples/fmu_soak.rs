@@ -14,8 +14,8 @@ use anyhow::{bail, Context, Result};
 use fmi::fmi2::import::Fmi2Import;
 use fmi::fmi2::instance::{CoSimulation, Common, InstanceCS};
 use quad_controller::{Controller, ControllerConfig, RobotModel, NUM_JOINTS};
-use quad_controller_fmu::bundle::repo_root;
-use quad_controller_fmu::variables::by_name;
+use quad_controller_fmu::bundle::{default_robot_config, repo_root};
+use quad_controller_fmu::variables::VariableTable;
 
 fn rss_kib() -> Result<u64> {
     let status =
@@ -32,7 +32,15 @@ fn rss_kib() -> Result<u64> {
 }
 
 fn vr(name: &str) -> Result<u32> {
-    Ok(by_name(name)
+    static TABLE: std::sync::OnceLock<Result<VariableTable, String>> = std::sync::OnceLock::new();
+    let table = TABLE
+        .get_or_init(|| {
+            VariableTable::for_robot_config(&default_robot_config()).map_err(|e| e.to_string())
+        })
+        .as_ref()
+        .map_err(|e| anyhow::anyhow!("our robot's variable table: {e}"))?;
+    Ok(table
+        .by_name(name)
         .with_context(|| format!("variable {name}"))?
         .value_reference)
 }
@@ -72,7 +80,7 @@ fn main() -> Result<()> {
         );
     }
     let config = ControllerConfig::default();
-    let model = RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))?;
+    let model = RobotModel::from_config_file(&default_robot_config())?;
     let stand = Controller::new(model, config.clone())?.stand_joint_positions();
 
     let import: Fmi2Import = fmi::import::from_path(&fmu)?;

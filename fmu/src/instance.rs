@@ -10,8 +10,8 @@ use crate::logger::Logger;
 use crate::resources::Resources;
 use crate::saved_state::InstanceState;
 use crate::variables::{
-    check_value, initial_command, initial_inputs, read_input, read_output, read_parameter, table,
-    write_input, write_parameter, Binding, Causality, Inputs, ScalarType, Value,
+    check_value, read_input, read_output, read_parameter, write_input, write_parameter, Binding,
+    Causality, Inputs, ScalarType, Value, Variable,
 };
 use crate::FmuError;
 
@@ -70,7 +70,8 @@ impl Instance {
     /// A fresh instance in state `instantiated`, inputs at their start values, parameters from
     /// `resources/controller.json`.
     pub fn new(resources: Resources, logger: Logger) -> Instance {
-        let (state, reference) = initial_inputs();
+        let (state, reference) = resources.table.initial_inputs();
+        let command = resources.table.initial_command();
         let config = resources.config.clone();
         Instance {
             logger,
@@ -82,7 +83,7 @@ impl Instance {
                 reference,
                 ..Inputs::default()
             },
-            command: initial_command(),
+            command,
             controller: None,
             start_time: 0.0,
             stop_time: None,
@@ -174,7 +175,7 @@ impl Instance {
         if !times.iter().chain(&state.stop_time).all(|t| t.is_finite()) {
             return refuse("non-finite time".to_owned());
         }
-        crate::variables::check_parameters(&state.config)
+        crate::variables::check_parameters(&self.resources.table, &state.config)
             .map_err(|e| FmuError::SavedState(format!("parameters: {e}")))?;
         let controller = match &state.controller {
             Some(saved) => {
@@ -293,7 +294,7 @@ impl Instance {
             ],
         )?;
         for (k, &vr) in vrs.iter().enumerate() {
-            let variable = lookup(vr, expected)?;
+            let variable = lookup(&self.resources.table, vr, expected)?;
             let value = match variable.binding {
                 Binding::Parameter { field, element } => {
                     Some(read_parameter(field, element, &self.config))
@@ -325,7 +326,7 @@ impl Instance {
         )?;
         let mut checked = Vec::with_capacity(vrs.len());
         for (&vr, &value) in vrs.iter().zip(values) {
-            let variable = lookup(vr, value.scalar_type())?;
+            let variable = lookup(&self.resources.table, vr, value.scalar_type())?;
             if variable.causality == Causality::Output {
                 return Err(FmuError::NotSettable {
                     name: variable.name.clone(),
@@ -493,9 +494,13 @@ fn log_transition(logger: &Logger, time: f64, transition: Option<&FsmTransition>
 }
 
 /// The table row of `vr` if it exists and has type `expected`.
-fn lookup(vr: u32, expected: ScalarType) -> Result<&'static crate::variables::Variable, FmuError> {
-    table()
-        .get(vr as usize)
+fn lookup(
+    table: &crate::variables::VariableTable,
+    vr: u32,
+    expected: ScalarType,
+) -> Result<&Variable, FmuError> {
+    table
+        .get(vr)
         .filter(|v| v.scalar_type() == expected)
         .ok_or(FmuError::UnknownValueReference { vr, expected })
 }

@@ -4,7 +4,7 @@ use std::collections::BTreeSet;
 use std::fmt::Write;
 
 use crate::logger::LOG_CATEGORIES;
-use crate::variables::{enum_types, table, Causality, Variable};
+use crate::variables::{enum_types, Causality, Variable, VariableTable};
 use crate::{DEFAULT_STEP_SIZE, DEFAULT_STOP_TIME, GUID, MODEL_IDENTIFIER};
 
 /// Escapes text for XML attribute values and element content.
@@ -111,8 +111,8 @@ fn utc_date_time(seconds: i64) -> String {
     )
 }
 
-/// The complete `modelDescription.xml` text.
-pub fn model_description_xml() -> String {
+/// The complete `modelDescription.xml` text of `table`'s robot.
+pub fn model_description_xml(table: &VariableTable) -> String {
     let mut out = String::new();
     out.push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     let _ = writeln!(
@@ -120,11 +120,12 @@ pub fn model_description_xml() -> String {
         "<fmiModelDescription fmiVersion=\"2.0\" modelName=\"{MODEL_IDENTIFIER}\" guid=\"{GUID}\" \
          description=\"{}\" author=\"pfnav\" version=\"{}\" generationTool=\"quad-controller-fmu bundle-fmu\" \
          generationDateAndTime=\"{}\" variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">",
-        xml_escape(
+        xml_escape(&format!(
             "Quadruped controller stack (gait FSM, convex MPC on ground reaction forces, leg torque control) \
              as an FMI 2.0 Co-Simulation slave. Frames: world x east, y north, z up; base quaternion (w,x,y,z) \
-             rotates body to world; base linear and angular velocities in the world frame."
-        ),
+             rotates body to world; base linear and angular velocities in the world frame. Robot: {} \
+             (resources/robot/)."
+        ,table.robot_name())),
         env!("CARGO_PKG_VERSION"),
         generation_date_and_time(),
     );
@@ -137,7 +138,7 @@ pub fn model_description_xml() -> String {
          canGetAndSetFMUstate=\"true\" canSerializeFMUstate=\"true\" providesDirectionalDerivative=\"false\"/>"
     );
 
-    let units: BTreeSet<_> = table().iter().filter_map(|v| v.unit).collect();
+    let units: BTreeSet<_> = table.rows().iter().filter_map(|v| v.unit).collect();
     out.push_str("  <UnitDefinitions>\n");
     for unit in units {
         let name = xml_escape(unit.name());
@@ -191,7 +192,7 @@ pub fn model_description_xml() -> String {
     );
 
     out.push_str("  <ModelVariables>\n");
-    for v in table() {
+    for v in table.rows() {
         let _ = writeln!(out, "    <!-- index {} -->", v.index());
         scalar_variable(&mut out, v);
     }
@@ -203,7 +204,8 @@ pub fn model_description_xml() -> String {
     // false algebraic loops). The initial unknowns are the calculated outputs (no continuous
     // states, no calculated parameters); before the first doStep they are the passive zero
     // command, independent of every input and parameter.
-    let outputs: Vec<&Variable> = table()
+    let outputs: Vec<&Variable> = table
+        .rows()
         .iter()
         .filter(|v| v.causality == Causality::Output)
         .collect();
@@ -227,20 +229,22 @@ pub fn model_description_xml() -> String {
     out
 }
 
-/// `documentation/index.html`: what the FMU does and the variable table.
-pub fn documentation_html() -> String {
+/// `documentation/index.html`: what the FMU does and the variable table of `table`'s robot.
+pub fn documentation_html(table: &VariableTable) -> String {
     let mut out = String::new();
     let _ = write!(
         out,
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{MODEL_IDENTIFIER}</title></head><body>\n\
-         <h1>{MODEL_IDENTIFIER} (FMI 2.0 Co-Simulation)</h1>\n<p>{}</p>\n",
+         <h1>{MODEL_IDENTIFIER} (FMI 2.0 Co-Simulation)</h1>\n<p>Robot: {} (its URDF, robot config and \
+         meshes are in resources/robot/).</p>\n<p>{}</p>\n",
+        xml_escape(table.robot_name()),
         xml_escape(crate::TIMING_DOC)
     );
     out.push_str(
         "<table border=\"1\"><tr><th>name</th><th>vr</th><th>causality</th><th>variability</th>\
          <th>type</th><th>start</th><th>min</th><th>max</th><th>unit</th><th>description</th></tr>\n",
     );
-    for v in table() {
+    for v in table.rows() {
         let _ = writeln!(
             out,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
@@ -264,10 +268,11 @@ pub fn documentation_html() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::variables::{by_name, our_table, robot_model, table};
 
     #[test]
     fn xml_lists_every_variable_and_output_once() {
-        let xml = model_description_xml();
+        let xml = model_description_xml(our_table());
         assert_eq!(xml.matches("<ScalarVariable ").count(), table().len());
         let outputs = table()
             .iter()
@@ -323,7 +328,7 @@ mod tests {
 
     #[test]
     fn inputs_and_parameters_have_ranges_and_every_variable_a_description() {
-        let xml = model_description_xml();
+        let xml = model_description_xml(our_table());
         for v in table() {
             assert!(!v.description.trim().is_empty(), "{}", v.name);
             let limited = matches!(
@@ -336,8 +341,8 @@ mod tests {
                 assert!(v.min.is_some() && v.max.is_some(), "{}", v.name);
             }
         }
-        let model = crate::variables::robot_model();
-        let knee = crate::variables::by_name("joint.q[3]").unwrap();
+        let model = robot_model();
+        let knee = by_name("joint.q[3]").unwrap();
         assert_eq!(
             (knee.min, knee.max),
             (Some(model.lower_limits()[2]), Some(model.upper_limits()[2]))

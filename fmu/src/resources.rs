@@ -6,13 +6,20 @@
 //! to [`PathBuf`], depends on the host.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use quad_controller::{ControllerConfig, RobotModel};
 
+use crate::variables::VariableTable;
 use crate::FmuError;
 
-/// File name of the robot model inside `resources/` (a copy of `robot/quadruped.urdf`).
-pub const URDF_FILE: &str = "quadruped.urdf";
+/// Folder inside `resources/` that holds the robot: [`ROBOT_CONFIG_FILE`], [`URDF_FILE`] and the
+/// meshes the URDF names (under `meshes/`, referenced relative to the URDF).
+pub const ROBOT_DIR: &str = "robot";
+/// The robot config inside [`ROBOT_DIR`]; its `urdf` key names [`URDF_FILE`].
+pub const ROBOT_CONFIG_FILE: &str = "robot.toml";
+/// The robot's URDF inside [`ROBOT_DIR`].
+pub const URDF_FILE: &str = "robot.urdf";
 /// File name of the default controller configuration inside `resources/` (JSON of
 /// `ControllerConfig`); parameters set by the importer override it.
 pub const CONFIG_FILE: &str = "controller.json";
@@ -217,15 +224,28 @@ fn percent_decode(text: &str) -> Result<Vec<u8>, String> {
 /// What `fmi2Instantiate` needs from `resources/`.
 #[derive(Clone, Debug)]
 pub struct Resources {
-    /// The robot model parsed from `quadruped.urdf`.
+    /// The robot model of `robot/robot.toml` and `robot/robot.urdf`.
     pub model: RobotModel,
     /// The configuration from `controller.json`.
     pub config: ControllerConfig,
-    /// CRC-32 of `quadruped.urdf` (saved FMU states name the robot they were taken with).
+    /// The variable table of this robot and configuration.
+    pub table: Arc<VariableTable>,
+    /// CRC-32 of the robot config and URDF texts (saved FMU states name the robot they were
+    /// taken with).
     pub robot_crc: u32,
 }
 
-/// Loads and checks `quadruped.urdf` and `controller.json` from `dir`.
+/// CRC-32 that identifies a robot description: its config text, a NUL, its URDF text.
+pub fn robot_crc(config_toml: &str, urdf_xml: &str) -> u32 {
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(config_toml.as_bytes());
+    hasher.update(&[0]);
+    hasher.update(urdf_xml.as_bytes());
+    hasher.finalize()
+}
+
+/// Loads and checks the robot (`robot/robot.toml`, `robot/robot.urdf`) and `controller.json` from
+/// `dir`, and builds their variable table.
 pub fn load(dir: &Path) -> Result<Resources, FmuError> {
     if !dir.is_dir() {
         return Err(FmuError::Resources(format!(
@@ -233,22 +253,29 @@ pub fn load(dir: &Path) -> Result<Resources, FmuError> {
             dir.display()
         )));
     }
-    let read = |name: &str| {
-        let path = dir.join(name);
+    let read = |path: PathBuf| {
         std::fs::read_to_string(&path)
             .map_err(|e| FmuError::Resources(format!("cannot read {}: {e}", path.display())))
     };
-    let urdf = read(URDF_FILE)?;
-    let model = RobotModel::from_urdf_str(&urdf)
-        .map_err(|e| FmuError::Resources(format!("{URDF_FILE}: {e}")))?;
-    let config: ControllerConfig = serde_json::from_str(&read(CONFIG_FILE)?)
+    let robot_dir = dir.join(ROBOT_DIR);
+    let config_toml = read(robot_dir.join(ROBOT_CONFIG_FILE))?;
+    let urdf = read(robot_dir.join(URDF_FILE))?;
+    let model = RobotModel::from_named_texts(
+        &config_toml,
+        &format!("{ROBOT_DIR}/{ROBOT_CONFIG_FILE}"),
+        &urdf,
+        &format!("{ROBOT_DIR}/{URDF_FILE}"),
+    )
+    .map_err(|e| FmuError::Resources(e.to_string()))?;
+    let config: ControllerConfig = serde_json::from_str(&read(dir.join(CONFIG_FILE))?)
         .map_err(|e| FmuError::Resources(format!("{CONFIG_FILE}: {e}")))?;
-    crate::variables::check_parameters(&config)
+    let table = VariableTable::new(&model, &config)
         .map_err(|e| FmuError::Resources(format!("{CONFIG_FILE}: {e}")))?;
     Ok(Resources {
         model,
         config,
-        robot_crc: crc32fast::hash(urdf.as_bytes()),
+        table: Arc::new(table),
+        robot_crc: robot_crc(&config_toml, &urdf),
     })
 }
 
@@ -372,11 +399,7 @@ mod tests {
 
     #[test]
     fn a_shipped_configuration_outside_the_ranges_is_refused() {
-        let dir = tempfile::tempdir().unwrap();
-        let urdf = crate::bundle::repo_root()
-            .join("robot")
-            .join("quadruped.urdf");
-        std::fs::copy(urdf, dir.path().join(URDF_FILE)).unwrap();
+        let dir = our_resources();
         let write = |config: &ControllerConfig| {
             std::fs::write(
                 dir.path().join(CONFIG_FILE),
@@ -402,6 +425,50 @@ mod tests {
         });
         let err = load(dir.path()).unwrap_err().to_string();
         assert!(err.contains("mpc.everyTicks"), "{err}");
+    }
+
+    fn our_resources() -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        crate::bundle::write_resources(
+            &crate::bundle::default_robot_config(),
+            &quad_controller::PackagePath::default(),
+            dir.path(),
+        )
+        .unwrap();
+        dir
+    }
+
+    #[test]
+    fn a_bad_robot_in_the_resources_is_named_by_its_file() {
+        let dir = our_resources();
+        let robot = dir.path().join(ROBOT_DIR);
+        let loaded = load(dir.path()).unwrap();
+        assert_eq!(loaded.table.robot_name(), loaded.model.name());
+        let urdf = std::fs::read_to_string(robot.join(URDF_FILE)).unwrap();
+        // A 16-DOF robot: one more movable joint than the legs' twelve.
+        let extra = urdf.replace(
+            "</robot>",
+            "<link name=\"tail\"/><joint name=\"tail_joint\" type=\"revolute\"><parent link=\"base\"/>\
+             <child link=\"tail\"/><axis xyz=\"0 1 0\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint></robot>",
+        );
+        std::fs::write(robot.join(URDF_FILE), extra).unwrap();
+        let err = load(dir.path()).unwrap_err().to_string();
+        assert!(
+            err.contains("robot/robot.urdf") && err.contains("tail_joint"),
+            "{err}"
+        );
+        std::fs::write(robot.join(URDF_FILE), &urdf).unwrap();
+        let config = std::fs::read_to_string(robot.join(ROBOT_CONFIG_FILE)).unwrap();
+        std::fs::write(
+            robot.join(ROBOT_CONFIG_FILE),
+            config.replace("FL_knee_joint", "FL_elbow_joint"),
+        )
+        .unwrap();
+        let err = load(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("FL_elbow_joint"), "{err}");
+        std::fs::remove_file(robot.join(ROBOT_CONFIG_FILE)).unwrap();
+        let err = load(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("robot/robot.toml"), "{err}");
     }
 
     #[test]

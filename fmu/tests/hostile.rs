@@ -10,9 +10,9 @@ use fmi::fmi2::import::Fmi2Import;
 use fmi::fmi2::instance::{CoSimulation, Common, InstanceCS};
 use quad_controller::{ControllerConfig, GaitKind};
 use quad_controller_fmu::budget::max_ticks_per_step;
-use quad_controller_fmu::variables::{table, Binding, Value};
+use quad_controller_fmu::variables::{Binding, Value};
 
-use support::{errors_of, fmu_path, install_logger, vr};
+use support::{errors_of, fmu_path, install_logger, table, vr};
 
 /// Longest any call may take, s.
 const CALL_LIMIT_S: f64 = 1.0;

@@ -13,8 +13,8 @@ use crate::{Controller, GaitKind, ModeRequest, Reference};
 const DT: f64 = 0.001;
 
 fn model() -> RobotModel {
-    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
-    RobotModel::from_urdf_file(&urdf).expect("URDF")
+    let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    RobotModel::from_config_file(&robot).expect("URDF")
 }
 
 fn kalman_config() -> ControllerConfig {

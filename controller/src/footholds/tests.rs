@@ -6,8 +6,8 @@ use crate::{Controller, ControllerConfig, RobotModel};
 /// The pruned foothold search returns bit for bit what evaluating every candidate returns.
 #[test]
 fn pruned_foothold_search_equals_the_exhaustive_search() {
-    let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
-    let model = RobotModel::from_urdf_file(&urdf).expect("URDF");
+    let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    let model = RobotModel::from_config_file(&robot).expect("URDF");
     let config = ControllerConfig::default();
     let radius = model.foot_radius();
     let controller = Controller::new(model, config.clone()).expect("controller");

@@ -331,8 +331,9 @@ mod tests {
     }
 
     fn legs() -> LegControl {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.urdf");
-        let model = RobotModel::from_urdf_file(&path).expect("the repository's URDF loads");
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+        let model =
+            RobotModel::from_config_file(&path).expect("the repository's robot config loads");
         let config = ControllerConfig::default();
         LegControl::new(&model, &config, [0.0; NUM_JOINTS], Vector3::zeros())
     }

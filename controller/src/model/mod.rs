@@ -155,6 +155,7 @@ pub struct RobotModel {
     legs: [LegChain; NUM_LEGS],
     foot_radius: f64,
     stand_height: f64,
+    crouch: Option<[f64; NUM_JOINTS]>,
 }
 
 fn to_array3(v: &Vector3<f64>) -> [f64; 3] {
@@ -188,6 +189,12 @@ impl RobotModel {
     /// Nominal height of the base origin above flat ground when standing (robot config), m.
     pub fn stand_height(&self) -> f64 {
         self.stand_height
+    }
+
+    /// The crouch a simulation places the robot in before its stand-up (robot config key
+    /// `legs.*.crouch`), rad, index 3·leg + j; `None` unless every leg gives one.
+    pub fn crouch_joint_positions(&self) -> Option<[f64; NUM_JOINTS]> {
+        self.crouch
     }
 
     /// Effort limits (URDF, or the robot config's overrides), N·m, index 3·leg + j.

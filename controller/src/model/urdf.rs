@@ -9,13 +9,8 @@ use std::path::Path;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::{ChainJoint, LegChain, LegGeometry, MassProperties, RobotModel, Transform};
-use crate::api::{Leg, ModelError};
+use crate::api::{Leg, ModelError, NUM_JOINTS};
 use crate::robot_config::{LegConfig, PackagePath, RobotConfig};
-
-/// Our own robot's config, used by [`RobotModel::from_urdf_str`] and
-/// [`RobotModel::from_urdf_file`] until every caller passes a config.
-const DEFAULT_CONFIG_TOML: &str = include_str!("../../../robot/quadruped.toml");
-const DEFAULT_CONFIG_LABEL: &str = "robot/quadruped.toml (compiled in)";
 
 /// Principal moments may break the triangle inequality by this relative amount (rounding in
 /// published values) before the inertia is refused as physically impossible.
@@ -516,6 +511,45 @@ fn foot_radius(tree: &Tree<'_>, config: &RobotConfig) -> Result<Result<f64, Stri
     })
 }
 
+/// The config's crouch as 12 joint angles: all four legs or none, inside the joint limits.
+fn crouch_pose(
+    config: &RobotConfig,
+    lower: &[f64; NUM_JOINTS],
+    upper: &[f64; NUM_JOINTS],
+) -> Result<Option<[f64; NUM_JOINTS]>, String> {
+    let given: Vec<Leg> = Leg::ALL
+        .into_iter()
+        .filter(|leg| config.legs.get(*leg).crouch.is_some())
+        .collect();
+    if given.is_empty() {
+        return Ok(None);
+    }
+    let mut pose = [0.0; NUM_JOINTS];
+    for leg in Leg::ALL {
+        let leg_config = config.legs.get(leg);
+        let Some(angles) = leg_config.crouch else {
+            return Err(format!(
+                "key `legs.{}.crouch` is missing while other legs give one; give all four or none",
+                leg.name()
+            ));
+        };
+        for (j, angle) in angles.into_iter().enumerate() {
+            let i = 3 * leg.index() + j;
+            if !(lower[i]..=upper[i]).contains(&angle) {
+                return Err(format!(
+                    "key `legs.{}.crouch`: {angle} rad for joint `{}` is outside its limits [{}, {}]",
+                    leg.name(),
+                    leg_config.joints[j],
+                    lower[i],
+                    upper[i]
+                ));
+            }
+            pose[i] = angle;
+        }
+    }
+    Ok(Some(pose))
+}
+
 impl RobotModel {
     /// Load a robot config file and the URDF it names; `package://` URIs resolve through
     /// [`PackagePath::from_env`].
@@ -541,9 +575,20 @@ impl RobotModel {
     /// A model from the texts of a robot config and of its URDF (the config's `urdf` key is not
     /// read: the caller already has the document, e.g. from the FMU's resources).
     pub fn from_config_str(config_toml: &str, urdf_xml: &str) -> Result<Self, ModelError> {
+        Self::from_named_texts(config_toml, "robot config text", urdf_xml, "URDF text")
+    }
+
+    /// [`RobotModel::from_config_str`] with the names error messages give the two texts (e.g.
+    /// the files they were read from).
+    pub fn from_named_texts(
+        config_toml: &str,
+        config_origin: &str,
+        urdf_xml: &str,
+        urdf_origin: &str,
+    ) -> Result<Self, ModelError> {
         let sources = Sources {
-            config: "robot config text",
-            urdf: "URDF text",
+            config: config_origin,
+            urdf: urdf_origin,
         };
         let config = RobotConfig::from_toml_str(config_toml, sources.config)?;
         Self::build(&config, urdf_xml, &sources)
@@ -556,30 +601,6 @@ impl RobotModel {
             urdf: "URDF text",
         };
         Self::build(config, urdf_xml, &sources)
-    }
-
-    /// Our own robot's URDF document, described by the compiled-in `robot/quadruped.toml`.
-    pub fn from_urdf_str(xml: &str) -> Result<Self, ModelError> {
-        let config = RobotConfig::from_toml_str(DEFAULT_CONFIG_TOML, DEFAULT_CONFIG_LABEL)?;
-        let sources = Sources {
-            config: DEFAULT_CONFIG_LABEL,
-            urdf: "URDF text",
-        };
-        Self::build(&config, xml, &sources)
-    }
-
-    /// Read our own robot's URDF file, described by the compiled-in `robot/quadruped.toml`.
-    pub fn from_urdf_file(path: &Path) -> Result<Self, ModelError> {
-        let xml = std::fs::read_to_string(path).map_err(|e| ModelError::Io {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?;
-        let config = RobotConfig::from_toml_str(DEFAULT_CONFIG_TOML, DEFAULT_CONFIG_LABEL)?;
-        let sources = Sources {
-            config: DEFAULT_CONFIG_LABEL,
-            urdf: &path.display().to_string(),
-        };
-        Self::build(&config, &xml, &sources)
     }
 
     fn build(config: &RobotConfig, xml: &str, sources: &Sources<'_>) -> Result<Self, ModelError> {
@@ -666,6 +687,12 @@ impl RobotModel {
             legs,
             foot_radius,
             stand_height: config.stand_height,
+            crouch: None,
+        };
+        let model = RobotModel {
+            crouch: crouch_pose(config, &model.lower_limits(), &model.upper_limits())
+                .map_err(in_config)?,
+            ..model
         };
         if config.stand_height <= foot_radius {
             return Err(in_config(format!(

@@ -61,6 +61,10 @@ pub struct LegConfig {
     pub foot_offset: Option<[f64; 3]>,
     /// Knee bending direction.
     pub knee_points: KneeDirection,
+    /// Joint angles (abduction, hip, knee), rad, of the crouch a simulation places the robot in
+    /// before its stand-up; inside the joint limits. The controller itself does not read it.
+    #[serde(default, deserialize_with = "optional_exactly")]
+    pub crouch: Option<[f64; 3]>,
 }
 
 /// The four legs under the controller's leg names.
@@ -195,12 +199,17 @@ impl RobotConfig {
         }
         for leg in Leg::ALL {
             let config = self.legs.get(leg);
-            if let Some(offset) = config.foot_offset {
-                if offset.iter().any(|v| !v.is_finite()) {
-                    return Err(format!(
-                        "key `legs.{}.foot_offset` is not finite: {offset:?}",
-                        leg.name()
-                    ));
+            for (key, values) in [
+                ("foot_offset", config.foot_offset),
+                ("crouch", config.crouch),
+            ] {
+                if let Some(values) = values {
+                    if values.iter().any(|v| !v.is_finite()) {
+                        return Err(format!(
+                            "key `legs.{}.{key}` is not finite: {values:?}",
+                            leg.name()
+                        ));
+                    }
                 }
             }
         }

@@ -12,8 +12,18 @@ pub fn urdf_text() -> String {
     std::fs::read_to_string(path).expect("robot/quadruped.urdf is readable")
 }
 
+fn our_config_text() -> String {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+    std::fs::read_to_string(path).expect("robot/quadruped.toml is readable")
+}
+
+/// Our robot's config applied to `urdf` (an edited copy of our URDF in the error tests).
+pub fn our_robot_with_urdf(urdf: &str) -> Result<RobotModel, quad_controller::ModelError> {
+    RobotModel::from_config_str(&our_config_text(), urdf)
+}
+
 pub fn model() -> RobotModel {
-    RobotModel::from_urdf_str(&urdf_text()).expect("the repository URDF loads")
+    our_robot_with_urdf(&urdf_text()).expect("the repository robot loads")
 }
 
 /// A controller for `model` with `config`, and the simulation standing in its stand pose at

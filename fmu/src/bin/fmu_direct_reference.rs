@@ -8,8 +8,9 @@
 //! dt); without it, a fresh state every tick) and prints
 //! `{"total_mass": m, "stand_joint_positions": [..12], "control_dt": dt,
 //! "commands": [Command after each segment, ...]}` (an empty segment list gives the model data only).
-//! Options: `--urdf PATH` (default `robot/quadruped.urdf`), `--config PATH` (JSON
-//! `ControllerConfig`; default `ControllerConfig::default()`, the FMU's `resources/controller.json`).
+//! Options: `--robot PATH` (a robot config; default `robot/quadruped.toml`), `--config PATH` (JSON
+//! `ControllerConfig`; default `ControllerConfig::for_robot`, what `bundle-fmu --robot` ships as
+//! the FMU's `resources/controller.json`).
 
 use std::io::Read;
 use std::path::PathBuf;
@@ -19,7 +20,7 @@ use clap::Parser;
 use quad_controller::{
     Command, Controller, ControllerConfig, Reference, RobotModel, RobotState, NUM_JOINTS,
 };
-use quad_controller_fmu::bundle::repo_root;
+use quad_controller_fmu::bundle::default_robot_config;
 use serde::{Deserialize, Serialize};
 
 #[derive(Deserialize)]
@@ -51,28 +52,28 @@ struct Response {
 #[derive(Parser)]
 #[command(name = "fmu-direct-reference")]
 struct Args {
-    /// The robot [default: <repo>/robot/quadruped.urdf].
+    /// The robot config [default: <repo>/robot/quadruped.toml].
     #[arg(long)]
-    urdf: Option<PathBuf>,
-    /// A JSON `ControllerConfig` [default: `ControllerConfig::default()`, the FMU's
+    robot: Option<PathBuf>,
+    /// A JSON `ControllerConfig` [default: `ControllerConfig::for_robot`, the FMU's
     /// resources/controller.json].
     #[arg(long = "config")]
     config_path: Option<PathBuf>,
 }
 
 fn main() -> Result<()> {
-    let Args { urdf, config_path } = Args::parse();
-    let urdf = urdf.unwrap_or_else(|| repo_root().join("robot").join("quadruped.urdf"));
+    let Args { robot, config_path } = Args::parse();
+    let robot = robot.unwrap_or_else(default_robot_config);
+    let model = RobotModel::from_config_file(&robot)
+        .with_context(|| format!("loading {}", robot.display()))?;
     let config = match config_path {
         Some(path) => {
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("reading {}", path.display()))?;
             serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
         }
-        None => ControllerConfig::default(),
+        None => ControllerConfig::for_robot(&model),
     };
-    let model =
-        RobotModel::from_urdf_file(&urdf).with_context(|| format!("loading {}", urdf.display()))?;
     let mut input = String::new();
     std::io::stdin()
         .read_to_string(&mut input)

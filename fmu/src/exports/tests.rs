@@ -71,17 +71,10 @@ fn wrong_guid_type_or_name_give_null() {
 /// A live instance on the repository's robot, from `fmi2Instantiate` with a resources folder
 /// written for the test.
 fn instantiate(dir: &std::path::Path, name: &std::ffi::CStr) -> crate::ffi::Fmi2Component {
-    use crate::resources::{CONFIG_FILE, URDF_FILE};
-    std::fs::copy(
-        crate::bundle::repo_root()
-            .join("robot")
-            .join("quadruped.urdf"),
-        dir.join(URDF_FILE),
-    )
-    .unwrap();
-    std::fs::write(
-        dir.join(CONFIG_FILE),
-        crate::bundle::default_config_json().unwrap(),
+    crate::bundle::write_resources(
+        &crate::bundle::default_robot_config(),
+        &quad_controller::PackagePath::default(),
+        dir,
     )
     .unwrap();
     let uri = std::ffi::CString::new(format!("file://{}", dir.display())).unwrap();

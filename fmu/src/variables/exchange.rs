@@ -9,7 +9,7 @@ use quad_controller::{
 };
 use serde::{Deserialize, Serialize};
 
-use super::{table, Binding, Value, Variable};
+use super::{Binding, Value, Variable, VariableTable};
 use crate::FmuError;
 
 /// Reads element `element` of the config field `field` (index into
@@ -77,8 +77,8 @@ pub fn check_value(variable: &Variable, value: Value) -> Result<(), FmuError> {
 
 /// Checks every parameter of `config` against its range: the `controller.json` shipped in the
 /// resources must lie in the same envelope as values set through `fmi2Set*`.
-pub fn check_parameters(config: &ControllerConfig) -> Result<(), FmuError> {
-    for v in table() {
+pub fn check_parameters(table: &VariableTable, config: &ControllerConfig) -> Result<(), FmuError> {
+    for v in table.rows() {
         if let Binding::Parameter { field, element } = v.binding {
             check_value(v, read_parameter(field, element, config))?;
         }

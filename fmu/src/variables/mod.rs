@@ -1,5 +1,6 @@
 //! The one table of FMU variables. `modelDescription.xml`, the HTML documentation and every
-//! `fmi2Get*`/`fmi2Set*` call are driven by it; there is no second list to keep in sync.
+//! `fmi2Get*`/`fmi2Set*` call are driven by it; there is no second list to keep in sync. It is
+//! declared once (`table.rs`) and built for the robot an FMU carries ([`VariableTable`]).
 //!
 //! Value references are the table index (unique across types), so the `index` attribute used in
 //! `<ModelStructure>` is always `value_reference + 1`.
@@ -7,8 +8,6 @@
 //! This module holds what a row is ([`Variable`], [`Binding`]) and how to look rows up; the
 //! submodules hold the FMI types, the enumerations, the table's declarations and the value
 //! exchange with the controller, all re-exported here so callers see one `variables` path.
-
-use std::sync::OnceLock;
 
 use quad_controller::{
     Command, Controller, ControllerConfig, EstimateReport, FsmState, Reference, RobotModel,
@@ -29,6 +28,8 @@ pub use exchange::{
     write_parameter, Inputs,
 };
 pub use types::{Causality, ScalarType, Unit, Value, Variability};
+
+use crate::FmuError;
 
 /// What a variable is connected to inside the FMU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -175,76 +176,152 @@ impl Variable {
     }
 }
 
-/// The outputs before the first doStep: no torque, no contact scheduled, FSM passive.
-pub fn initial_command() -> Command {
-    Command {
-        joint_torques: [0.0; NUM_JOINTS],
-        contacts: [false; NUM_LEGS],
-        fsm_state: FsmState::Passive,
-        desired_forces: [[0.0; 3]; NUM_LEGS],
-        desired_foot_positions: [[0.0; 3]; NUM_LEGS],
-        mpc_solve_time_s: 0.0,
-        mpc_solved: false,
-        estimate: initial_estimate(),
-    }
+/// The variable table of one robot: the rows (names, value references and types are the same for
+/// every robot; joint ranges, effort limits and start values are the robot's) and the inputs of a
+/// fresh instance. `modelDescription.xml` is written from it by `bundle-fmu`, and an instance
+/// rebuilds it at `fmi2Instantiate` from the robot and `controller.json` in its resources, so
+/// the two cannot disagree.
+#[derive(Clone, Debug)]
+pub struct VariableTable {
+    robot_name: String,
+    rows: Vec<Variable>,
+    initial_state: RobotState,
+    initial_reference: Reference,
 }
 
-/// The estimate outputs before the first doStep: the start pose of [`initial_inputs`] at rest.
-fn initial_estimate() -> EstimateReport {
-    let (state, _) = initial_inputs();
-    EstimateReport {
-        position: state.base_position,
-        ..EstimateReport::default()
-    }
-}
-
-/// The robot the variable table describes: `robot/quadruped.urdf`, compiled in. The bundle ships
-/// the same file as `resources/quadruped.urdf`; the joint ranges and the standing start pose of
-/// the table come from it.
-pub fn robot_model() -> &'static RobotModel {
-    static MODEL: OnceLock<RobotModel> = OnceLock::new();
-    MODEL.get_or_init(|| {
-        RobotModel::from_urdf_str(ROBOT_URDF)
-            .unwrap_or_else(|e| panic!("the compiled-in robot/quadruped.urdf is invalid: {e}"))
-    })
-}
-
-/// `robot/quadruped.urdf` as compiled into the FMU.
-pub const ROBOT_URDF: &str = include_str!("../../../robot/quadruped.urdf");
-
-/// The inputs of a fresh instance (also the XML `start` values): the robot standing still on
-/// flat ground at z = 0 in its nominal stance, so that a run with no inputs set stands up and
-/// holds the stand. Joint angles are the controller's standing pose (inverse kinematics of the
-/// nominal feet at the default `stand.bodyHeight`), the base is at that height with identity
-/// orientation, every velocity is zero; the reference is the controller's default (mode Stand,
-/// flat terrain at z = 0, default body height).
-pub fn initial_inputs() -> (RobotState, Reference) {
-    static INPUTS: OnceLock<(RobotState, Reference)> = OnceLock::new();
-    *INPUTS.get_or_init(|| {
-        let config = ControllerConfig::default();
-        let body_height = config.body_height;
-        let controller = Controller::new(robot_model().clone(), config).unwrap_or_else(|e| {
-            panic!("the default configuration cannot stand the compiled-in robot: {e}")
-        });
-        let state = RobotState {
-            base_position: [0.0, 0.0, body_height],
+impl VariableTable {
+    /// The table of `model` with `config` as the parameters' start values. The start inputs are
+    /// the robot standing still on flat ground at z = 0 in its nominal stance, so that a run with
+    /// no inputs set stands up and holds the stand: joint angles are the controller's standing
+    /// pose at `config.body_height`, the base is at that height with identity orientation,
+    /// every velocity is zero; the reference is the controller's default (mode Stand, flat
+    /// terrain at z = 0, default body height). Fails when `config` cannot stand the robot.
+    pub fn new(model: &RobotModel, config: &ControllerConfig) -> Result<VariableTable, FmuError> {
+        let mut table = VariableTable {
+            robot_name: model.name().to_owned(),
+            rows: Vec::new(),
+            initial_state: RobotState::default(),
+            initial_reference: Reference::default(),
+        };
+        // The parameters' ranges do not depend on the start pose: check them first, so that a
+        // bad value is named by its FMI variable rather than by the controller's refusal.
+        table.rows = table::build_table(model, config, &table);
+        check_parameters(&table, config)?;
+        let controller = Controller::new(model.clone(), config.clone()).map_err(|e| {
+            FmuError::Resources(format!("the configuration cannot stand the robot: {e}"))
+        })?;
+        table.initial_state = RobotState {
+            base_position: [0.0, 0.0, config.body_height],
             joint_positions: controller.stand_joint_positions(),
             ..RobotState::default()
         };
-        (state, Reference::default())
-    })
+        table.rows = table::build_table(model, config, &table);
+        Ok(table)
+    }
+
+    /// The table of the robot described by the robot config at `path` (its URDF resolved as
+    /// [`RobotModel::from_config_file`] does), with [`ControllerConfig::for_robot`] as the
+    /// parameters' start values: what `bundle-fmu --robot` puts into an FMU.
+    pub fn for_robot_config(path: &std::path::Path) -> Result<VariableTable, FmuError> {
+        let model =
+            RobotModel::from_config_file(path).map_err(|e| FmuError::Resources(e.to_string()))?;
+        VariableTable::new(&model, &ControllerConfig::for_robot(&model))
+    }
+
+    /// The robot's name (the URDF's `<robot name>`).
+    pub fn robot_name(&self) -> &str {
+        &self.robot_name
+    }
+
+    /// All rows, in value-reference order.
+    pub fn rows(&self) -> &[Variable] {
+        &self.rows
+    }
+
+    /// The row of value reference `vr`.
+    pub fn get(&self, vr: u32) -> Option<&Variable> {
+        self.rows.get(usize::try_from(vr).ok()?)
+    }
+
+    /// Finds a variable by name (linear; meant for tests and tools, not the hot path).
+    pub fn by_name(&self, name: &str) -> Option<&Variable> {
+        self.rows.iter().find(|v| v.name == name)
+    }
+
+    /// The inputs of a fresh instance (also the XML `start` values).
+    pub fn initial_inputs(&self) -> (RobotState, Reference) {
+        (self.initial_state, self.initial_reference)
+    }
+
+    /// The outputs before the first doStep: no torque, no contact scheduled, FSM passive, the
+    /// estimate at the start pose at rest.
+    pub fn initial_command(&self) -> Command {
+        Command {
+            joint_torques: [0.0; NUM_JOINTS],
+            contacts: [false; NUM_LEGS],
+            fsm_state: FsmState::Passive,
+            desired_forces: [[0.0; 3]; NUM_LEGS],
+            desired_foot_positions: [[0.0; 3]; NUM_LEGS],
+            mpc_solve_time_s: 0.0,
+            mpc_solved: false,
+            estimate: EstimateReport {
+                position: self.initial_state.base_position,
+                ..EstimateReport::default()
+            },
+        }
+    }
 }
 
-/// The table, built once.
-pub fn table() -> &'static [Variable] {
-    static TABLE: OnceLock<Vec<Variable>> = OnceLock::new();
-    TABLE.get_or_init(table::build_table)
-}
+/// The table of the repository's own robot (`robot/quadruped.toml`), for unit tests.
+#[cfg(test)]
+mod our_robot {
+    use std::sync::OnceLock;
 
-/// Finds a variable by name (linear; meant for tests and tools, not the hot path).
-pub fn by_name(name: &str) -> Option<&'static Variable> {
-    table().iter().find(|v| v.name == name)
+    use quad_controller::{Command, Reference, RobotModel, RobotState};
+
+    use super::{Variable, VariableTable};
+
+    pub fn robot_model() -> &'static RobotModel {
+        static MODEL: OnceLock<RobotModel> = OnceLock::new();
+        MODEL.get_or_init(|| {
+            RobotModel::from_config_file(
+                &crate::bundle::repo_root()
+                    .join("robot")
+                    .join("quadruped.toml"),
+            )
+            .expect("robot/quadruped.toml loads")
+        })
+    }
+
+    pub fn our_table() -> &'static VariableTable {
+        static TABLE: OnceLock<VariableTable> = OnceLock::new();
+        TABLE.get_or_init(|| {
+            let model = robot_model();
+            VariableTable::new(model, &quad_controller::ControllerConfig::for_robot(model))
+                .expect("the default tuning stands our robot")
+        })
+    }
+
+    pub fn table() -> &'static [Variable] {
+        our_table().rows()
+    }
+
+    pub fn by_name(name: &str) -> Option<&'static Variable> {
+        our_table().by_name(name)
+    }
+
+    pub fn initial_inputs() -> (RobotState, Reference) {
+        our_table().initial_inputs()
+    }
+
+    pub fn initial_command() -> Command {
+        our_table().initial_command()
+    }
 }
+#[cfg(test)]
+pub(crate) use our_robot::{
+    by_name, initial_command, initial_inputs, our_table, robot_model, table,
+};
 
 #[cfg(test)]
 mod tests;

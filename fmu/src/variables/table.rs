@@ -8,10 +8,11 @@ use quad_controller::{
     HEIGHT_MAP_SIZE, NUM_JOINTS,
 };
 
+use quad_controller::RobotModel;
+
 use super::{
-    enum_type, initial_command, initial_inputs, read_parameter, robot_model, Binding, Causality,
-    Unit, Value, Variability, Variable, ESTIMATOR_KIND_TYPE, FSM_STATE_TYPE, GAIT_KIND_TYPE,
-    MODE_REQUEST_TYPE,
+    enum_type, read_parameter, Binding, Causality, Unit, Value, Variability, Variable,
+    VariableTable, ESTIMATOR_KIND_TYPE, FSM_STATE_TYPE, GAIT_KIND_TYPE, MODE_REQUEST_TYPE,
 };
 
 struct TableBuilder {
@@ -110,8 +111,7 @@ impl TableBuilder {
     }
 
     /// One parameter per element of every field of [`ControllerConfig::FIELDS`], in order.
-    fn parameters(&mut self) {
-        let config = ControllerConfig::default();
+    fn parameters(&mut self, config: &ControllerConfig) {
         for (field, f) in ControllerConfig::FIELDS.iter().enumerate() {
             let (min, max) = f.range();
             let unit = f.unit.map(|name| {
@@ -125,7 +125,7 @@ impl TableBuilder {
                     f.fmi_element_name(element),
                     Causality::Parameter,
                     Variability::Fixed,
-                    read_parameter(field, element, &config),
+                    read_parameter(field, element, config),
                     f.element_description(element),
                     unit,
                     (Some(min), Some(max)),
@@ -148,15 +148,20 @@ fn joint_label(index: usize) -> String {
     Leg::ALL[index / 3].joint_label(index % 3)
 }
 
-pub(super) fn build_table() -> Vec<Variable> {
+/// The rows for `model`, parameters starting at `config`, inputs and outputs at the start values
+/// of `start` (whose rows are not read).
+pub(super) fn build_table(
+    model: &RobotModel,
+    config: &ControllerConfig,
+    start: &VariableTable,
+) -> Vec<Variable> {
     use Unit::*;
     let mut t = TableBuilder { rows: Vec::new() };
-    let (state, reference) = initial_inputs();
-    let command = initial_command();
+    let (state, reference) = start.initial_inputs();
+    let command = start.initial_command();
     // Joint ranges from the URDF: positions and velocities are the region the controller is
     // designed for (documented, not refused, see `Variable::range_is_enforced`); torques are
     // clamped to the effort limits.
-    let model = robot_model();
     let (lower, upper) = (model.lower_limits(), model.upper_limits());
     let (velocity, effort) = (model.velocity_limits(), model.effort_limits());
 
@@ -473,6 +478,6 @@ pub(super) fn build_table() -> Vec<Variable> {
 
     // Parameters are all fixed: `Controller` is built from them in fmi2ExitInitializationMode
     // (MPC matrices, standing pose, gait) and offers no way to change them afterwards.
-    t.parameters();
+    t.parameters(config);
     t.rows
 }

@@ -151,7 +151,7 @@ fn every_parameter_has_a_range_holding_its_start_value() {
         );
         check_value(v, v.start).unwrap_or_else(|e| panic!("{e}"));
     }
-    check_parameters(&ControllerConfig::default()).unwrap();
+    check_parameters(our_table(), &ControllerConfig::default()).unwrap();
 }
 
 #[test]
@@ -197,13 +197,8 @@ fn values_just_outside_a_range_and_non_finite_values_are_refused() {
 /// height the legs reach); those work with a matching partner.
 #[test]
 fn every_range_end_point_builds_a_controller() {
-    use quad_controller::{Controller, RobotModel};
-    let model = RobotModel::from_urdf_file(
-        &crate::bundle::repo_root()
-            .join("robot")
-            .join("quadruped.urdf"),
-    )
-    .unwrap();
+    use quad_controller::Controller;
+    let model = robot_model().clone();
     for (v, field, element) in parameters() {
         let (min, max) = field.range();
         let index = ControllerConfig::FIELDS

@@ -8,8 +8,10 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
 use quad_controller::{Controller, ControllerConfig, Reference, RobotModel, RobotState};
-use quad_controller_fmu::bundle::{repo_root, shared_library_next_to, write_fmu, BundleInputs};
-use quad_controller_fmu::variables::by_name;
+use quad_controller_fmu::bundle::{
+    default_robot_config, shared_library_next_to, write_fmu, BundleInputs,
+};
+use quad_controller_fmu::variables::{Variable, VariableTable};
 
 /// Error messages the FMU sent to the importer's logger (the `fmi` crate forwards them to `log`),
 /// as `instance: message`.
@@ -60,9 +62,22 @@ pub fn errors_of(instance: &str) -> Vec<String> {
     logged_since(0, instance)
 }
 
+/// The variable table of the FMU the tests bundle (our robot).
+pub fn table() -> &'static [Variable] {
+    our_table().rows()
+}
+
+fn our_table() -> &'static VariableTable {
+    static TABLE: OnceLock<VariableTable> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        VariableTable::for_robot_config(&default_robot_config()).expect("our robot's table")
+    })
+}
+
 /// The value reference of the FMU variable `name` (panics when there is none).
 pub fn vr(name: &str) -> u32 {
-    by_name(name)
+    our_table()
+        .by_name(name)
         .unwrap_or_else(|| panic!("variable {name}"))
         .value_reference
 }
@@ -87,8 +102,7 @@ pub fn fmu_path() -> &'static Path {
 
 /// The robot model shipped in the FMU's resources.
 pub fn model() -> RobotModel {
-    RobotModel::from_urdf_file(&repo_root().join("robot").join("quadruped.urdf"))
-        .expect("robot/quadruped.urdf")
+    RobotModel::from_config_file(&default_robot_config()).expect("robot/quadruped.toml")
 }
 
 /// A direct controller with the FMU's default parameters.
