@@ -202,6 +202,14 @@ impl RobotFiles {
             .map_err(|e| robot_error(e.to_string()))?;
         let urdf_text = String::from_utf8(read(&urdf_path)?)
             .map_err(|_| robot_error(format!("{}: not UTF-8 text", urdf_path.display())))?;
+        // Checked as the user's files first, so that an error names them, not the copies.
+        RobotModel::from_named_texts(
+            &config_text,
+            &config_path.display().to_string(),
+            &urdf_text,
+            &urdf_path.display().to_string(),
+        )
+        .map_err(|e| robot_error(e.to_string()))?;
         let robot = urdf_rs::read_from_string(&urdf_text)
             .map_err(|e| robot_error(format!("{}: {e}", urdf_path.display())))?;
         let urdf_dir = urdf_path.parent().unwrap_or_else(|| Path::new("."));
