@@ -10,9 +10,10 @@ resolved through the description's package folders, joints, feet and base by the
 mapped by name (DART orders DOFs by its own rules). What the controller's model treats as a
 massless frame (a link without `<inertial>`, or listed in `massless_links`) is made massless here
 too: DART would give a link without `<inertial>` 1 kg. Collisions of the robot are its primitive
-shapes (boxes, cylinders, spheres) and one sphere per foot at the foot point; mesh collision
-shapes are dropped (docs/robots.md: ODE's mesh–mesh contact with the terrain mesh is slow and
-unreliable), a foot without a sphere collision gets one of the config's `foot_radius`.
+shapes (boxes, cylinders, spheres), a sphere per foot at the foot point (one of the config's
+`foot_radius` where the URDF's foot has none) and, for mesh collision shapes, their bounding
+boxes (none on the lower legs): ODE's mesh–mesh contact with the terrain mesh doubles the cost of
+a standing robot (measured in docs/robots.md).
 
 `WorldSnapshot` (fork a run after stand-up) holds everything that decides the world's future as
 plain arrays: every skeleton's generalized positions and velocities, the world time, the torques
@@ -40,6 +41,8 @@ from .robot import NUM_JOINTS, RobotDescription
 from .scenario import Terrain
 
 log = logging.getLogger(__name__)
+
+MESH_COLLISION_MODES = ("boxes", "meshes")
 
 
 @dataclass(frozen=True)
@@ -299,7 +302,12 @@ class WorldSnapshot:
 
 
 class QuadrupedWorld:
-    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs."""
+    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs.
+
+    `mesh_collisions`: "boxes" (default) turns the robot's mesh collision shapes into their bounding
+    boxes (none on the lower legs), "meshes" keeps them as the URDF has them (slower; for comparing,
+    scripts/bench_robot_collisions.py).
+    """
 
     def __init__(
         self,
@@ -310,9 +318,12 @@ class QuadrupedWorld:
         friction: float = 0.8,
         enforce_joint_limits: bool = True,
         payload: Payload | None = None,
+        mesh_collisions: str = "boxes",
     ) -> None:
         if not (time_step > 0.0 and math.isfinite(time_step)):
             raise SimulationError(f"physics time step must be positive, got {time_step}")
+        if mesh_collisions not in MESH_COLLISION_MODES:
+            raise SimulationError(f"unknown mesh collision mode '{mesh_collisions}' (choose from {', '.join(MESH_COLLISION_MODES)})")
         self.terrain = terrain
         self.description = robot
         self.world = dart.simulation.World()
@@ -353,7 +364,7 @@ class QuadrupedWorld:
         lower_legs = set()
         for name in robot.joint_names[2::3]:
             lower_legs.update(body.getName() for body in welded_bodies(skeleton.getJoint(name).getChildBodyNode()))
-        boxed, dropped = replace_mesh_collisions(skeleton, lower_legs)
+        boxed, dropped = replace_mesh_collisions(skeleton, lower_legs) if mesh_collisions == "boxes" else ([], [])
         if boxed or dropped:
             log.info(
                 "%s: mesh collisions replaced by their bounding boxes on %d links (%s), dropped on the lower legs (%s)",
