@@ -26,8 +26,15 @@ from pfnav_harness.scenario import Terrain
 from pfnav_harness.world import MESH_COLLISION_MODES, QuadrupedWorld
 
 
-def measure(robot: RobotDescription, mode: str, limp: bool, cache: Path) -> tuple[float, float, list[str]]:
-    world = QuadrupedWorld(Terrain((0.0, 0.0), 0.125, np.zeros((24, 24))), robot, cache, mesh_collisions=mode)
+def measure(
+    robot: RobotDescription, mode: str, limp: bool, cache: Path
+) -> tuple[float, float, list[str]]:
+    world = QuadrupedWorld(
+        Terrain((0.0, 0.0), 0.125, np.zeros((24, 24))),
+        robot,
+        cache,
+        mesh_collisions=mode,
+    )
     world.place(1.5, 1.5, 0.0, clearance=0.05 if limp else 0.002)
     scale = world.mass / 12.0
     steps = 1500 if limp else 1000
@@ -38,18 +45,28 @@ def measure(robot: RobotDescription, mode: str, limp: bool, cache: Path) -> tupl
             world.apply_torques(np.zeros(12))
         else:
             s = world.state()
-            world.apply_torques(150.0 * scale * (robot.crouch - s.joint_positions) - 3.0 * scale * s.joint_velocities)
+            world.apply_torques(
+                150.0 * scale * (robot.crouch - s.joint_positions)
+                - 3.0 * scale * s.joint_velocities
+            )
         world.step()
-        touched |= {body.getName() for body in world.world.getLastCollisionResult().getCollidingBodyNodes()}
+        touched |= {
+            body.getName()
+            for body in world.world.getLastCollisionResult().getCollidingBodyNodes()
+        }
     wall = (time.perf_counter() - begin) / (steps * world.time_step)
     return wall, float(world.state().position[2]), sorted(touched - {"terrain"})
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("configs", nargs="+", type=Path, help="robot configs")
     args = parser.parse_args()
-    print(f"{'robot':<14} {'collisions':<10} {'case':<9} {'wall s / sim s':>14} {'base z [m]':>10}  links touching the ground")
+    print(
+        f"{'robot':<14} {'collisions':<10} {'case':<9} {'wall s / sim s':>14} {'base z [m]':>10}  links touching the ground"
+    )
     try:
         with tempfile.TemporaryDirectory(prefix="pfnav_collisions_") as tmp:
             for config in args.configs:
@@ -58,7 +75,10 @@ def main() -> int:
                     for limp in (False, True):
                         wall, height, touched = measure(robot, mode, limp, Path(tmp))
                         case = "limp" if limp else "standing"
-                        print(f"{config.stem:<14} {mode:<10} {case:<9} {wall:>14.3f} {height:>10.3f}  {', '.join(touched)}", flush=True)
+                        print(
+                            f"{config.stem:<14} {mode:<10} {case:<9} {wall:>14.3f} {height:>10.3f}  {', '.join(touched)}",
+                            flush=True,
+                        )
     except HarnessError as err:
         print(f"bench_robot_collisions: error: {err}", file=sys.stderr)
         return err.exit_code

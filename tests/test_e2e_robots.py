@@ -32,12 +32,24 @@ def fmu_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("name", ["go1", "a1", "solo12"])
-def test_third_party_robot_stands_up_and_trots(name: str, fmu_file: Path, fmu_cache: Path, tmp_path: Path) -> None:
-    robot = RobotDescription.load(paths.repo_root() / "robot" / "third_party" / f"{name}.toml", [PACKAGE_ROOT])
+def test_third_party_robot_stands_up_and_trots(
+    name: str, fmu_file: Path, fmu_cache: Path, tmp_path: Path
+) -> None:
+    robot = RobotDescription.load(
+        paths.repo_root() / "robot" / "third_party" / f"{name}.toml", [PACKAGE_ROOT]
+    )
     assert not is_default_robot(robot)
     fmu = fmu_for_robot(robot, fmu_cache)
     assert fmu != fmu_file and fmu.parent == fmu_cache
-    run = run_incline(0.0, "up", fmu, robot, tmp_path, distance=WALK, config=CoSimConfig(settle_time=0.5))
+    run = run_incline(
+        0.0,
+        "up",
+        fmu,
+        robot,
+        tmp_path,
+        distance=WALK,
+        config=CoSimConfig(settle_time=0.5),
+    )
     outcome = run.outcome
     assert outcome.stood_up, outcome
     assert not outcome.fell, outcome

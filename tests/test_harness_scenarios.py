@@ -55,7 +55,10 @@ def test_the_paper_scenarios_are_the_planners(
 
 @pytest.mark.parametrize("name", paper_scenario_names())
 def test_exported_scenario_is_a_standable_world(
-    name: str, paper_scenarios: dict[str, Scenario], robot: RobotDescription, tmp_path: Path
+    name: str,
+    paper_scenarios: dict[str, Scenario],
+    robot: RobotDescription,
+    tmp_path: Path,
 ) -> None:
     scenario = paper_scenarios[name]
     terrain = scenario.terrain

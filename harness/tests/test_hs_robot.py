@@ -318,3 +318,32 @@ def test_a_pd_crouch_holds_the_robot_up_after_a_drop(name: str, tmp_path: Path) 
     assert world.foot_contacts().all()
     assert world.foot_positions()[:, 2].min() > robot.foot_radius - 0.005, "no foot sinks into the ground"
     assert touched <= {*robot.foot_links, "terrain"}, f"only the feet touch the ground: {sorted(touched)}"
+
+
+def test_mangled_configs_load_or_fail_with_a_config_error(tmp_path: Path) -> None:
+    """300 seeded mutations of our config (lines dropped, duplicated, values replaced by other TOML values): each loads or
+    raises RobotConfigError naming the file, never another exception."""
+    rng = np.random.default_rng(19)
+    lines = OUR_CONFIG.splitlines()
+    values = ['"x"', "0", "-1.5", "nan", "true", "[]", "[1, 2]", '["a", "b", "c"]', "{ a = 1 }", "[[1, 2, 3]]", '"package://"', '"/"']
+    config = copy_our_robot(tmp_path / "robot")
+    outcomes = {"loaded": 0, "refused": 0}
+    for _ in range(300):
+        mutated = list(lines)
+        for _ in range(int(rng.integers(1, 4))):
+            k = int(rng.integers(len(mutated)))
+            kind = int(rng.integers(3))
+            if kind == 0:
+                del mutated[k]
+            elif kind == 1:
+                mutated.insert(k, mutated[k])
+            elif "=" in mutated[k]:
+                mutated[k] = mutated[k].split("=")[0] + "= " + values[int(rng.integers(len(values)))]
+        config.write_text("\n".join(mutated) + "\n")
+        try:
+            RobotDescription.load(config)
+            outcomes["loaded"] += 1
+        except RobotConfigError as err:
+            assert str(config) in str(err)
+            outcomes["refused"] += 1
+    assert outcomes["refused"] > 100 and outcomes["loaded"] > 10, outcomes
