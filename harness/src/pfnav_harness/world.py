@@ -12,8 +12,8 @@ massless frame (a link without `<inertial>`, or listed in `massless_links`) is m
 too: DART would give a link without `<inertial>` 1 kg. Collisions of the robot are its primitive
 shapes (boxes, cylinders, spheres), a sphere per foot at the foot point (one of the config's
 `foot_radius` where the URDF's foot has none) and, for mesh collision shapes, their bounding
-boxes (none on the lower legs): ODE's mesh–mesh contact with the terrain mesh doubles the cost of
-a standing robot (measured in docs/robots.md).
+boxes (none on the lower legs): ODE's mesh–mesh contact with the terrain mesh costs a standing
+Solo-12 1.8× the time (measured in docs/robots.md).
 
 `WorldSnapshot` (fork a run after stand-up) holds everything that decides the world's future as
 plain arrays: every skeleton's generalized positions and velocities, the world time, the torques
@@ -133,7 +133,7 @@ def replace_mesh_collisions(skeleton: dart.dynamics.Skeleton, lower_legs: set[st
 
     The lower legs (the knees' child links and what is welded to them, feet included) collide
     through the foot spheres only: a box around a lower-leg mesh would reach the ground beside the
-    foot. Visuals stay. Returns the links given a box and the links left without their mesh.
+    foot. Returns the links given a box and the links left without their mesh.
     """
     boxed: list[str] = []
     dropped: list[str] = []
@@ -144,11 +144,11 @@ def replace_mesh_collisions(skeleton: dart.dynamics.Skeleton, lower_legs: set[st
             if node.getCollisionAspect() is None or not isinstance(shape, dart.dynamics.MeshShape):
                 continue
             node.removeCollisionAspect()
-            if body.getName() in lower_legs:
-                dropped.append(body.getName())
-                continue
             bounds = shape.getBoundingBox()
             low, high = np.asarray(bounds.getMin()), np.asarray(bounds.getMax())
+            if body.getName() in lower_legs or not np.all(high - low > 0.0):
+                dropped.append(body.getName())
+                continue
             box = body.createShapeNode(dart.dynamics.BoxShape(high - low))
             transform = node.getRelativeTransform()
             box.setRelativeRotation(transform.rotation())
