@@ -23,6 +23,7 @@ from pfnav_harness.cosim import CoSimConfig, CoSimulation
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.pipeline import export_scenario
 from pfnav_harness.planner_client import DEFAULT_LCM_URL, Plan, plan_scenario
+from pfnav_harness.robot_fmu import robot_and_fmu
 from pfnav_harness.scenario import Scenario
 
 
@@ -72,10 +73,9 @@ def main() -> int:
     parser.add_argument("--lcm-url", default=DEFAULT_LCM_URL)
     args = parser.parse_args()
     try:
-        fmu = paths.fmu_path()
-        urdf = paths.urdf_path()
         with tempfile.TemporaryDirectory(prefix="pfnav_bench_") as tmp:
             work = Path(tmp)
+            robot, fmu = robot_and_fmu(None, work / "cache")
             scenario = export_scenario(
                 paths.pf_plan_path(), args.scenario, work / "scenarios"
             )
@@ -97,7 +97,7 @@ def main() -> int:
             for step in (float(s) for s in args.comm_steps.split(",")):
                 config = CoSimConfig(comm_step=step, max_duration=args.seconds)
                 with CoSimulation(
-                    scenario, plan, fmu, urdf, work / "cache", config
+                    scenario, plan, fmu, robot, work / "cache", config
                 ) as sim:
                     result = sim.run()
                 per = result.timing.per_sim_second()

@@ -17,6 +17,9 @@ FMU (`target/fmu/QuadController.fmu`, or $PFNAV_FMU). `--set NAME=VALUE` changes
 Usage:
     .venv/bin/python scripts/bench_slopes.py                      # 10/20/30° × up/down/across, μ = 0.8
     .venv/bin/python scripts/bench_slopes.py --angles 20 --directions across --set stand.kp[1]=200
+    .venv/bin/python scripts/bench_slopes.py --robot robot/third_party/go1.toml   # another robot (PFNAV_PACKAGE_PATH)
+
+Another robot than ours runs on an FMU bundled for it by bundle-fmu (cached in OUT/cache).
 """
 
 from __future__ import annotations
@@ -37,7 +40,6 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from pfnav_harness import paths
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.incline import (
     DIRECTIONS,
@@ -47,6 +49,7 @@ from pfnav_harness.incline import (
     InclineRun,
     run_incline,
 )
+from pfnav_harness.robot_fmu import robot_and_fmu
 from tqdm import tqdm
 
 # Links listed in the table: those touching the ground until this long after a fall, the first few.
@@ -277,14 +280,19 @@ def main() -> int:
         default=Path("out/slopes"),
         help="output folder (default out/slopes)",
     )
+    parser.add_argument(
+        "--robot",
+        type=Path,
+        default=None,
+        help="robot config (default $PFNAV_ROBOT, else robot/quadruped.toml)",
+    )
     args = parser.parse_args()
     if not (math.isfinite(args.friction) and args.friction > 0.0):
         parser.error(f"--friction must be positive, got {args.friction}")
     parameters = dict(args.parameters)
     try:
-        fmu = paths.fmu_path()
-        urdf = paths.urdf_path()
         args.out.mkdir(parents=True, exist_ok=True)
+        robot, fmu = robot_and_fmu(args.robot, args.out / "cache")
         cases = [(a, d) for a in args.angles for d in args.directions]
         runs: list[InclineRun] = []
         with (
@@ -298,7 +306,7 @@ def main() -> int:
                         angle,
                         direction,
                         fmu,
-                        urdf,
+                        robot,
                         Path(tmp),
                         friction=args.friction,
                         distance=args.distance,
@@ -321,6 +329,7 @@ def main() -> int:
         f"Incline benchmark, {now}",
         "",
         f"- machine: {machine()}",
+        f"- robot: {robot.config_path} (URDF {robot.urdf_path})",
         f"- controller: {fmu} (sha256 {file_digest(fmu)}), parameters changed: {changed}",
         f"- friction μ = {args.friction:g} (feet and ground), walk {args.distance:g} m (horizontal) at {args.speed:g} m/s after the harness's stand-up",
         f"- passed: {sum(o.passed and o.walked >= 2.5 for o in outcomes)} of {len(outcomes)} (stood up, no fall, ≥ 2.5 m walked); wall {sum(o.wall_time for o in outcomes):.1f} s",

@@ -28,6 +28,7 @@ from pathlib import Path
 from pfnav_harness import paths
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.planner_client import DEFAULT_LCM_URL
+from pfnav_harness.robot_fmu import robot_and_fmu
 from pfnav_harness.sweep.cli import _lcm_planner
 from pfnav_harness.sweep.cluster import dask_client
 from pfnav_harness.sweep.driver import prepare_courses, run_sweep
@@ -67,9 +68,10 @@ def main() -> int:
         return 2
     try:
         spec = dataclasses.replace(load_spec(args.spec), runs=args.runs)
-        artifacts = Artifacts(paths.fmu_path(), paths.urdf_path(), paths.pf_plan_path())
         with tempfile.TemporaryDirectory(prefix="pfnav_bench_sweep_") as tmp:
             work = Path(tmp)
+            robot, fmu = robot_and_fmu(None, work / "cache")
+            artifacts = Artifacts(fmu, robot, paths.pf_plan_path())
             planned = SweepStore.create(work / "planned", spec)
             courses = prepare_courses(spec, planned, artifacts.pf_plan or paths.pf_plan_path(), _lcm_planner(args.lcm_url, False), work / "scenarios")
             load_before = os.getloadavg()

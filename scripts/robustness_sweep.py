@@ -25,6 +25,7 @@ from pfnav_harness.cosim import CoSimConfig, CoSimulation
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.pipeline import export_scenario
 from pfnav_harness.planner_client import DEFAULT_LCM_URL, plan_scenario
+from pfnav_harness.robot_fmu import robot_and_fmu
 
 
 def main() -> int:
@@ -44,6 +45,7 @@ def main() -> int:
     try:
         with tempfile.TemporaryDirectory(prefix="pfnav_sweep_") as tmp:
             work = Path(tmp)
+            robot, fmu = robot_and_fmu(None, work / "cache")
             falls = runs = 0
             for seed in seeds:
                 scenario = export_scenario(paths.pf_plan_path(), args.scenario, work / f"scenarios_{seed}", seed=seed)
@@ -51,7 +53,7 @@ def main() -> int:
                 label = args.scenario if seed is None else f"{args.scenario} seed {seed}"
                 for offset in offsets:
                     config = CoSimConfig(comm_step=args.comm_step)
-                    with CoSimulation(scenario, plan, paths.fmu_path(), paths.urdf_path(), work / "cache", config) as sim:
+                    with CoSimulation(scenario, plan, fmu, robot, work / "cache", config) as sim:
                         sim.world.place(float(plan.x[0]) + offset, float(plan.y[0]) - offset, float(plan.yaw[0]))
                         start = time.perf_counter()
                         result = sim.run()

@@ -30,6 +30,7 @@ from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.fmu_runner import FmuContract, read_contract
 from pfnav_harness.pipeline import export_scenario
 from pfnav_harness.planner_client import Plan, PlannerClient
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
 
 
@@ -83,8 +84,9 @@ def fmu_contract(fmu_file: Path) -> FmuContract:
 
 
 @pytest.fixture(scope="session")
-def urdf_file() -> Path:
-    return _artifact(paths.urdf_path)
+def robot() -> RobotDescription:
+    """Our robot (robot/quadruped.toml, the robot of the default FMU), whatever $PFNAV_ROBOT says."""
+    return RobotDescription.load(paths.default_robot_config_path())
 
 
 @pytest.fixture(scope="session")

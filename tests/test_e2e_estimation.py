@@ -24,6 +24,7 @@ from pfnav_harness.errors import SimulationError
 from pfnav_harness.estimation_metrics import estimation_errors
 from pfnav_harness.pipeline import simulate
 from pfnav_harness.planner_client import Plan
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
 
 SHORT_SECONDS = 5.0
@@ -36,7 +37,7 @@ def test_short_kalman_run(
     plan_for: Callable[[str, str], Plan],
     paper_scenarios: dict[str, Scenario],
     fmu_file: Path,
-    urdf_file: Path,
+    robot: RobotDescription,
     tmp_path: Path,
 ) -> None:
     name = "mountain_pass"
@@ -51,7 +52,7 @@ def test_short_kalman_run(
         paper_scenarios[name],
         plan_for(name, "astar"),
         fmu_file,
-        urdf_file,
+        robot,
         tmp_path,
         config,
         show_progress=False,

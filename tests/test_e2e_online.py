@@ -16,6 +16,7 @@ from pfnav_harness.online import OnlineConfig
 from pfnav_harness.pipeline import export_scenario, simulate, simulate_online
 from pfnav_harness.planner_client import PlannerClient, StartPose
 from pfnav_harness.pushes import PushSchedule, parse_push
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
 
 
@@ -28,7 +29,7 @@ def test_surprise_trench_is_seen_and_walked_around_while_bad_updates_are_refused
     planner: PlannerClient,
     surprise: Scenario,
     fmu_file: Path,
-    urdf_file: Path,
+    robot: RobotDescription,
     tmp_path: Path,
 ) -> None:
     config = CoSimConfig(follow="feedback", stand_time=1.5, max_duration=16.0)
@@ -37,7 +38,7 @@ def test_surprise_trench_is_seen_and_walked_around_while_bad_updates_are_refused
         planner,
         surprise,
         fmu_file,
-        urdf_file,
+        robot,
         tmp_path,
         config,
         online,
@@ -94,7 +95,7 @@ def test_a_pushed_robot_heads_for_the_goal_from_where_it_landed(
     planner: PlannerClient,
     paper_scenarios: dict[str, Scenario],
     fmu_file: Path,
-    urdf_file: Path,
+    robot: RobotDescription,
     tmp_path: Path,
 ) -> None:
     scenario = paper_scenarios["c_shape"]
@@ -118,7 +119,7 @@ def test_a_pushed_robot_heads_for_the_goal_from_where_it_landed(
         scenario,
         answer.plan,
         fmu_file,
-        urdf_file,
+        robot,
         tmp_path,
         config,
         show_progress=False,

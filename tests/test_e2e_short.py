@@ -17,6 +17,7 @@ from pfnav_harness.cosim import CoSimConfig
 from pfnav_harness.fmu_runner import read_contract
 from pfnav_harness.pipeline import simulate
 from pfnav_harness.planner_client import Plan
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario, paper_scenario_names
 
 SHORT_SECONDS = 6.0
@@ -30,7 +31,7 @@ def test_short_pf_run(
     plan_for: Callable[[str, str], Plan],
     paper_scenarios: dict[str, Scenario],
     fmu_file: Path,
-    urdf_file: Path,
+    robot: RobotDescription,
     tmp_path: Path,
 ) -> None:
     scenario = paper_scenarios[name]
@@ -40,7 +41,7 @@ def test_short_pf_run(
         scenario,
         plan,
         fmu_file,
-        urdf_file,
+        robot,
         tmp_path,
         config,
         tmp_path / "run.npz",

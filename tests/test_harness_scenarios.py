@@ -9,12 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pfnav_harness.pipeline import export_scenario
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import (
     Scenario,
     paper_scenario_names,
     planner_scenario_names,
 )
-from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld
+from pfnav_harness.world import QuadrupedWorld
 
 
 def test_the_paper_scenarios_are_the_planners(
@@ -54,7 +55,10 @@ def test_the_paper_scenarios_are_the_planners(
 
 @pytest.mark.parametrize("name", paper_scenario_names())
 def test_exported_scenario_is_a_standable_world(
-    name: str, paper_scenarios: dict[str, Scenario], urdf_file: Path, tmp_path: Path
+    name: str,
+    paper_scenarios: dict[str, Scenario],
+    robot: RobotDescription,
+    tmp_path: Path,
 ) -> None:
     scenario = paper_scenarios[name]
     terrain = scenario.terrain
@@ -67,12 +71,12 @@ def test_exported_scenario_is_a_standable_world(
     vertices = terrain.vertices()
     np.testing.assert_array_equal(vertices[:, 2], terrain.heights.ravel())
 
-    world = QuadrupedWorld(terrain, urdf_file, tmp_path)
+    world = QuadrupedWorld(terrain, robot, tmp_path)
     world.place(scenario.start[0], scenario.start[1], scenario.start_yaw)
     for _ in range(800):
         s = world.state()
         world.apply_torques(
-            150.0 * (DEFAULT_STANCE - s.joint_positions) - 3.0 * s.joint_velocities
+            150.0 * (robot.crouch - s.joint_positions) - 3.0 * s.joint_velocities
         )
         world.step()
     s = world.state()

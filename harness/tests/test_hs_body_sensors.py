@@ -11,8 +11,13 @@ import pytest
 from pfnav_harness import paths
 from pfnav_harness.body_sensors import ADIS16470, AS5047P, BodySensorConfig, BodySensors, quaternion_to_matrix
 from pfnav_harness.errors import SimulationError
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
-from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld, rotation_to_quaternion
+from pfnav_harness.world import QuadrupedWorld, rotation_to_quaternion
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
+CROUCH = ROBOT.crouch
 
 DT = 0.001
 IDEAL = BodySensorConfig(imu_noise_scale=0.0, quantize_joints=False)
@@ -24,7 +29,7 @@ def _state(quat: np.ndarray | None = None, vel: np.ndarray | None = None, omega:
     state[3:7] = (1.0, 0.0, 0.0, 0.0) if quat is None else quat
     state[7:10] = 0.0 if vel is None else vel
     state[10:13] = 0.0 if omega is None else omega
-    state[13:25] = DEFAULT_STANCE if q is None else q
+    state[13:25] = CROUCH if q is None else q
     state[25:37] = np.linspace(-1.0, 1.0, 12)
     return state
 
@@ -43,7 +48,7 @@ def test_level_robot_at_rest_reads_gravity_up_and_no_rotation() -> None:
         r = sensors.sample(k * DT, _state())
     np.testing.assert_allclose(r.gyro, 0.0, atol=1e-15)
     np.testing.assert_allclose(r.acc, (0.0, 0.0, 9.81), atol=1e-12)
-    np.testing.assert_array_equal(r.joint_q, DEFAULT_STANCE)
+    np.testing.assert_array_equal(r.joint_q, CROUCH)
     assert not r.fix_valid
 
 
@@ -181,13 +186,13 @@ def test_bad_sample_period_is_refused() -> None:
 
 def test_dart_acceleration_equals_the_velocity_difference_the_imu_uses(ramp_scenario: Scenario, tmp_path: Path) -> None:
     """Why the IMU differences velocities: DART's body acceleration after a step is exactly Δv/dt, impacts included."""
-    world = QuadrupedWorld(ramp_scenario.terrain, paths.urdf_path(), tmp_path, DT)
+    world = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path, DT)
     world.place(1.5, 1.0, 0.2, clearance=0.03)
     impacts = 0
     for _ in range(250):
         q = world.robot.getPositions()[world.joint_dofs]
         dq = world.robot.getVelocities()[world.joint_dofs]
-        world.apply_torques(150.0 * (DEFAULT_STANCE - q) - 4.0 * dq)
+        world.apply_torques(150.0 * (CROUCH - q) - 4.0 * dq)
         before = np.array(world.base.getLinearVelocity())
         world.step()
         after = np.array(world.base.getLinearVelocity())

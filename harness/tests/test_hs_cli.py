@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from pfnav_harness import paths
+
 FAKE_PF_PLAN = textwrap.dedent(
     """\
     import json, sys
@@ -64,6 +66,26 @@ def test_missing_fmu(fake_tools: dict[str, str], tmp_path: Path) -> None:
     env = {**fake_tools, "PFNAV_FMU": str(tmp_path / "nowhere" / "QuadController.fmu")}
     proc = run_cli(env, "run", "--scenario", "ramp", "--out", str(tmp_path / "out"), cwd=tmp_path)
     assert_clean_failure(proc, 3, "controller FMU not found")
+
+
+def test_bad_robot_configs_fail_before_any_work(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    """--robot (and PFNAV_ROBOT) name a robot config; a bad one is one clear line, a robot not ours needs bundle-fmu."""
+    proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--robot", str(tmp_path / "nowhere.toml"), "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 7, "nowhere.toml: cannot read it")
+    ours = paths.default_robot_config_path()
+    bad = tmp_path / "bad" / "robot.toml"
+    bad.parent.mkdir()
+    (bad.parent / "quadruped.urdf").write_bytes((ours.parent / "quadruped.urdf").read_bytes())
+    bad.write_text(ours.read_text().replace("stand_height = 0.28", "stand_heigth = 0.28"))
+    proc = run_cli(fake_tools, "demo", "--robot", str(bad), "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 7, "unknown key `stand_heigth`")
+    proc = run_cli({**fake_tools, "PFNAV_ROBOT": str(bad)}, "run", "--scenario", "ramp", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 7, "unknown key `stand_heigth`")
+    bad.write_text(ours.read_text().replace("stand_height = 0.28", "stand_height = 0.3"))
+    env = {**fake_tools, "PFNAV_BUNDLE_FMU": str(tmp_path / "no-bundle-fmu")}
+    proc = run_cli(env, "run", "--scenario", "ramp", "--robot", str(bad), "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 3, "is not ours, so its FMU has to be bundled: bundle-fmu binary")
+    assert "silent service starting" not in proc.stderr  # no service was started
 
 
 def test_unknown_scenario(fake_tools: dict[str, str], tmp_path: Path) -> None:

@@ -15,9 +15,13 @@ from pfnav_harness.errors import SimulationError
 from pfnav_harness.metrics import TraversabilityField, compute_metrics
 from pfnav_harness.planner_client import Plan
 from pfnav_harness.report import RunRecord, write_report
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
 from pfnav_harness.state_log import CHANNEL, robot_state_type, write_state_log
-from pfnav_harness.world import DEFAULT_STANCE
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
+CROUCH = ROBOT.crouch
 
 
 class PdStandIn:
@@ -42,7 +46,7 @@ class PdStandIn:
         self.steps.append((time, step))
         q = self.inputs.view(fr.JOINT_Q)
         dq = self.inputs.view(fr.JOINT_DQ)
-        self.torques[:] = self.kp * (DEFAULT_STANCE - q) - self.kd * dq
+        self.torques[:] = self.kp * (CROUCH - q) - self.kd * dq
 
     def read_outputs(self) -> None:
         pass
@@ -84,7 +88,7 @@ def standing_plan(x: float, y: float) -> Plan:
 def test_master_steps_logs_and_closes(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
     stand_in = PdStandIn(fmu_contract)
     config = CoSimConfig(comm_step=0.004, stand_time=0.2, settle_time=0.3)
-    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=stand_in) as sim:
+    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=stand_in) as sim:
         assert sim.duration() == pytest.approx(1.5)
         result = sim.run()
     assert stand_in.closed
@@ -136,7 +140,7 @@ def test_master_steps_logs_and_closes(ramp_scenario: Scenario, fmu_contract: fr.
 def test_a_collapsing_robot_is_stopped_early_as_a_fall(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
     limp = PdStandIn(fmu_contract, kp=0.0, kd=0.0)
     config = CoSimConfig(stand_time=0.0, settle_time=5.0, after_fall=0.2)
-    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=limp) as sim:
+    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=limp) as sim:
         result = sim.run()
     assert result.stop_reason.startswith("fell at")
     assert result.timing.simulated < 2.0
@@ -148,4 +152,4 @@ def test_bad_configs_are_rejected(ramp_scenario: Scenario, tmp_path: Path) -> No
     with pytest.raises(SimulationError, match="positive"):
         CoSimConfig(physics_dt=0.0).validate()
     with pytest.raises(SimulationError, match="FMU path or a controller"):
-        CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path)
+        CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path)

@@ -21,7 +21,11 @@ from pfnav_harness.errors import HarnessError, SimulationError
 from pfnav_harness.estimation_metrics import compute_estimation_metrics, estimation_section, has_estimate
 from pfnav_harness.metrics import RunMetrics
 from pfnav_harness.report import RunRecord
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
 
 WALK_START = 2.0
 
@@ -174,7 +178,7 @@ def test_kalman_mode_feeds_sensor_readings_and_logs_the_estimate(ramp_scenario: 
     stand_in = EstimatingStandIn(_fake_contract())
     sensors = BodySensorConfig(seed=2, fix_rate=2.0, fix_noise=0.01)
     config = CoSimConfig(comm_step=0.002, stand_time=0.5, settle_time=1.0, estimator="kalman", body_sensors=sensors)
-    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=stand_in) as sim:
+    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=stand_in) as sim:
         result = sim.run()
     log = result.log
     assert stand_in.estimator_mode == "kalman"
@@ -208,7 +212,7 @@ def test_kalman_mode_feeds_sensor_readings_and_logs_the_estimate(ramp_scenario: 
 def test_the_contact_sensor_reports_the_feet_dart_finds_on_the_ground(ramp_scenario: Scenario, tmp_path: Path) -> None:
     stand_in = EstimatingStandIn(_fake_contract())
     config = CoSimConfig(stand_time=0.2, settle_time=0.2, max_duration=0.6, estimator="kalman", body_sensors=BodySensorConfig(contact_sensor=True))
-    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=stand_in) as sim:
+    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=stand_in) as sim:
         log = sim.run().log
     # The PD stand-in keeps all four feet down; the input agrees with the contacts DART logged.
     np.testing.assert_array_equal(stand_in.estimation.contact, [1, 1, 1, 1])
@@ -219,7 +223,7 @@ def test_the_contact_sensor_reports_the_feet_dart_finds_on_the_ground(ramp_scena
 def test_ground_truth_mode_touches_no_estimator_variables(ramp_scenario: Scenario, tmp_path: Path) -> None:
     stand_in = PdStandIn(_fake_contract())  # has no enable_estimation: must not be asked
     config = CoSimConfig(stand_time=0.1, settle_time=0.1, max_duration=0.3)
-    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), tmp_path, config, controller=stand_in) as sim:
+    with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=stand_in) as sim:
         log = sim.run().log
     assert str(log["estimator"]) == "groundTruth" and not has_estimate(log)
 

@@ -22,8 +22,13 @@ from pfnav_harness.cosim import PREFIX_FRICTION, CoSimConfig, CoSimulation, Fork
 from pfnav_harness.errors import SimulationError
 from pfnav_harness.planner_client import Plan
 from pfnav_harness.pushes import PushSchedule, horizontal_push
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
-from pfnav_harness.world import DEFAULT_STANCE, Payload, QuadrupedWorld
+from pfnav_harness.world import Payload, QuadrupedWorld
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
+CROUCH = ROBOT.crouch
 
 
 class StatefulStandIn:
@@ -58,7 +63,7 @@ class StatefulStandIn:
         q = self.inputs.view(fr.JOINT_Q)
         dq = self.inputs.view(fr.JOINT_DQ)
         walking = self._mode == self.contract.mode.Locomotion
-        target = DEFAULT_STANCE + (0.1 * np.sin(0.02 * self._steps) if walking else 0.0)
+        target = CROUCH + (0.1 * np.sin(0.02 * self._steps) if walking else 0.0)
         error = target - q
         self._integral += error * step
         tau = 100.0 * error - 3.0 * dq + 40.0 * self._integral
@@ -131,7 +136,7 @@ def config(**changes: Any) -> CoSimConfig:
 
 
 def simulation(scenario: Scenario, contract: fr.FmuContract, folder: Path, cfg: CoSimConfig) -> CoSimulation:
-    return CoSimulation(scenario, standing_plan(1.5, 1.0), None, paths.urdf_path(), folder, cfg, controller=StatefulStandIn(contract))  # type: ignore[arg-type]
+    return CoSimulation(scenario, standing_plan(1.5, 1.0), None, ROBOT, folder, cfg, controller=StatefulStandIn(contract))  # type: ignore[arg-type]
 
 
 def assert_same_log(a: RunResult, b: RunResult) -> None:
@@ -146,7 +151,7 @@ def test_world_snapshot_restores_bit_exactly(ramp_scenario: Scenario, tmp_path: 
     """t → t + 0.5 s twice from one snapshot, in the same world and in a fresh one: the same states bit for bit."""
 
     def make() -> QuadrupedWorld:
-        world = QuadrupedWorld(ramp_scenario.terrain, paths.urdf_path(), tmp_path)
+        world = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path)
         world.place(1.5, 1.0, 0.3)
         return world
 
@@ -156,7 +161,7 @@ def test_world_snapshot_restores_bit_exactly(ramp_scenario: Scenario, tmp_path: 
         states, contacts = np.zeros((steps, 37)), np.zeros((steps, 4), dtype=bool)
         for k in range(steps):
             world.state_vector(state)
-            world.apply_torques(120.0 * (DEFAULT_STANCE - state[13:25]) - 3.0 * state[25:37] + 5.0 * np.sin(0.01 * k + np.arange(12)))
+            world.apply_torques(120.0 * (CROUCH - state[13:25]) - 3.0 * state[25:37] + 5.0 * np.sin(0.01 * k + np.arange(12)))
             world.step()
             states[k], contacts[k] = state, world.foot_contacts()
         return states, contacts
@@ -236,20 +241,31 @@ def test_forks_refuse_what_they_cannot_continue(ramp_scenario: Scenario, fmu_con
         sim.run_from(fork)
 
 
-def test_the_fork_key_names_the_robot_by_its_urdf_content(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
-    original = paths.urdf_path().read_text()
-    copy = tmp_path / "copy" / "robot.urdf"
-    copy.parent.mkdir()
-    copy.write_text(original)
+def test_the_fork_key_names_the_robot_by_its_config_and_urdf_content(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    """A copy of the robot elsewhere is the same robot; an edited URDF or config at the same path is another."""
+    folder = tmp_path / "copy"
+    folder.mkdir()
+    config_text = ROBOT.config_text
+    urdf_text = ROBOT.urdf_path.read_text()
+    config_copy = folder / ROBOT.config_path.name
+    urdf_copy = folder / ROBOT.urdf_path.name
+    config_copy.write_text(config_text)
+    urdf_copy.write_text(urdf_text)
     cfg = config()
 
-    def key(urdf: Path) -> str:
-        sim = CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, urdf, tmp_path, cfg, controller=StatefulStandIn(fmu_contract))  # type: ignore[arg-type]
+    def key(robot: RobotDescription) -> str:
+        sim = CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, robot, tmp_path, cfg, controller=StatefulStandIn(fmu_contract))  # type: ignore[arg-type]
         with sim:
             return sim.fork_key()
 
-    assert key(copy) == key(paths.urdf_path())
-    heavier = original.replace('<mass value="5.0"/>', '<mass value="5.5"/>', 1)
-    assert heavier != original
-    copy.write_text(heavier)
-    assert key(copy) != key(paths.urdf_path())
+    ours = key(ROBOT)
+    assert key(RobotDescription.load(config_copy)) == ours
+    heavier = urdf_text.replace('<mass value="5.0"/>', '<mass value="5.5"/>', 1)
+    assert heavier != urdf_text
+    urdf_copy.write_text(heavier)
+    assert key(RobotDescription.load(config_copy)) != ours
+    urdf_copy.write_text(urdf_text)
+    higher = config_text.replace("stand_height = 0.28", "stand_height = 0.29")
+    assert higher != config_text
+    config_copy.write_text(higher)
+    assert key(RobotDescription.load(config_copy)) != ours

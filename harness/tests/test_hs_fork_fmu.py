@@ -18,8 +18,12 @@ from pfnav_harness.body_sensors import BodySensorConfig
 from pfnav_harness.cosim import CoSimConfig, CoSimulation, RunResult, prefix_config
 from pfnav_harness.errors import SimulationError
 from pfnav_harness.planner_client import Plan
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
-from pfnav_harness.world import DEFAULT_STANCE
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
+CROUCH = ROBOT.crouch
 
 DT = 0.001
 
@@ -34,7 +38,7 @@ def set_standing_inputs(fmu: fr.ControllerFmu) -> None:
     values.values[:] = 0.0
     values.view(fr.BASE_POS)[:] = (0.0, 0.0, 0.3)
     values.view(fr.BASE_QUAT)[:] = (1.0, 0.0, 0.0, 0.0)
-    values.view(fr.JOINT_Q)[:] = DEFAULT_STANCE
+    values.view(fr.JOINT_Q)[:] = CROUCH
     values.values[values.index("ref.vx")] = 0.3
 
 
@@ -126,7 +130,7 @@ def test_forked_runs_equal_the_full_run_with_the_fmu(estimator: str, ramp_scenar
     )
 
     def simulation(cfg: CoSimConfig) -> CoSimulation:
-        return CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), paths.fmu_path(), paths.urdf_path(), tmp_path, cfg)
+        return CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), paths.fmu_path(), ROBOT, tmp_path, cfg)
 
     with simulation(config) as sim:
         full = sim.run()

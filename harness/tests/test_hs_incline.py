@@ -27,7 +27,11 @@ from pfnav_harness.incline import (
     straight_plan,
     support_margin,
 )
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.world import QuadrupedWorld
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
 
 # Steepest slope the current controller stands up and walks on in all three directions.
 PASSING_ANGLE = 20.0
@@ -102,13 +106,14 @@ def test_a_rolling_foot_does_not_slip_and_a_sliding_one_does() -> None:
     rolling = _foot_track(n, 0.0, 0.001, radius)
     sliding = _foot_track(n, 0.0005, 0.0, radius)
     up = np.array([0.0, 0.0, 1.0])
-    (rolled,) = stance_slips(scheduled, touching, *rolling, radius, up, dt)
-    (slid,) = stance_slips(scheduled, touching, *sliding, radius, up, dt)
+    (rolled,) = stance_slips(scheduled, touching, *rolling, radius, up, dt, ("FR_toe",))
+    (slid,) = stance_slips(scheduled, touching, *sliding, radius, up, dt, ("FR_toe",))
+    assert rolled.foot == slid.foot == "FR_toe"
     assert rolled.slip < 1e-4
     assert slid.slip == pytest.approx(0.0005 * (n - 1))
     # Once the foot has left the ground (longer than the contact gap) its motion is not slip.
     touching[50:] = 0
-    (lifted,) = stance_slips(scheduled, touching, *sliding, radius, up, dt)
+    (lifted,) = stance_slips(scheduled, touching, *sliding, radius, up, dt, ("FR_toe",))
     assert lifted.slip == pytest.approx(0.0005 * 49)
 
 
@@ -118,7 +123,7 @@ def test_the_aligned_pose_leaves_the_support_polygon_on_a_steep_cross_slope(tmp_
     margins = {}
     for angle in (0.0, 30.0):
         scenario = incline_scenario(angle, "across")
-        world = QuadrupedWorld(scenario.terrain, paths.urdf_path(), tmp_path)
+        world = QuadrupedWorld(scenario.terrain, ROBOT, tmp_path)
         world.place(*scenario.start, scenario.start_yaw)
         margins[angle] = support_margin(world)
     assert 0.1 < margins[0.0] < 0.15
@@ -135,7 +140,7 @@ def fmu() -> Path:
 
 @pytest.mark.parametrize("direction", list(DIRECTIONS))
 def test_the_robot_stands_up_and_walks_the_slope(direction: str, fmu: Path, tmp_path: Path) -> None:
-    run = run_incline(PASSING_ANGLE, direction, fmu, paths.urdf_path(), tmp_path, friction=0.8)
+    run = run_incline(PASSING_ANGLE, direction, fmu, ROBOT, tmp_path, friction=0.8)
     outcome = run.outcome
     summary = f"{PASSING_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
     assert outcome.stood_up, summary

@@ -22,7 +22,11 @@ from pfnav_harness.cosim import CoSimConfig, CoSimulation
 from pfnav_harness.feedback_field import FeedbackField
 from pfnav_harness.reference import N_COLUMNS, T_HEIGHT, VX, VY, X, Y, Z
 from pfnav_harness.reference_source import FieldSource, yaw_of
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
 
 # Estimate − truth the stand-in reports: dx, dy, dz [m], dyaw [rad].
 OFFSET = np.array([0.12, -0.07, 0.03, 0.2])
@@ -105,7 +109,7 @@ def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_sce
     plan = standing_plan(1.2, 1.0)
     config = CoSimConfig(stand_time=0.2, max_duration=0.4, follow="feedback", estimator="kalman", body_sensors=BodySensorConfig(seed=1))
     controller = OffsetEstimateStandIn(fmu_contract)
-    with CoSimulation(ramp_scenario, plan, None, paths.urdf_path(), tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
+    with CoSimulation(ramp_scenario, plan, None, ROBOT, tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
         result = sim.run()
     truth, ref = result.log["base_pos"], result.log["ref"]
     assert len(truth) == 400
@@ -127,7 +131,7 @@ def test_without_an_estimator_nothing_is_shifted(ramp_scenario: Scenario, fmu_co
     config = CoSimConfig(stand_time=0.2, max_duration=0.3, follow="feedback")
     controller = OffsetEstimateStandIn(fmu_contract)
     controller.estimation = fr.EstimationIo.detached()  # written by the stand-in, never read by the harness
-    with CoSimulation(ramp_scenario, plan, None, paths.urdf_path(), tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
+    with CoSimulation(ramp_scenario, plan, None, ROBOT, tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
         result = sim.run()
     np.testing.assert_array_equal(result.log["ref"][:, 0], result.log["base_pos"][:, 0])
     for _, x, y, _, _, origin_x, _, _ in controller.seen[::50]:

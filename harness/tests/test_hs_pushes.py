@@ -12,8 +12,12 @@ import pytest
 from pfnav_harness import paths
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.pushes import Push, PushError, PushSchedule, parse_push, random_pushes
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Terrain
 from pfnav_harness.world import QuadrupedWorld
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
 
 
 # --- text and schedules -------------------------------------------------------------------------
@@ -130,7 +134,7 @@ def test_push_changes_the_robots_momentum_by_its_impulse(tmp_path: Path) -> None
     moves the total momentum by ~1e-4 N·s over this run: the tolerance is 2e-3 N·s (0.02 %).
     """
     terrain = Terrain((0.0, 0.0), 0.25, np.zeros((12, 12)))
-    world = QuadrupedWorld(terrain, paths.urdf_path(), tmp_path)
+    world = QuadrupedWorld(terrain, ROBOT, tmp_path)
     world.place(1.5, 1.5, 0.7)
     positions = world.robot.getPositions()
     positions[5] += 1.0  # 1 m up: 0.3 s of free fall never reaches the ground
@@ -156,7 +160,7 @@ def test_push_changes_the_robots_momentum_by_its_impulse(tmp_path: Path) -> None
 def test_trunk_force_is_set_per_step_not_accumulated(tmp_path: Path) -> None:
     """`apply_trunk_force` replaces the previous step's force and None removes it, without relying on DART's own clearing."""
     terrain = Terrain((0.0, 0.0), 0.25, np.zeros((12, 12)))
-    world = QuadrupedWorld(terrain, paths.urdf_path(), tmp_path)
+    world = QuadrupedWorld(terrain, ROBOT, tmp_path)
     world.place(1.5, 1.5, 0.0)
     base = world.base
     world.apply_trunk_force((30.0, -10.0, 0.0))

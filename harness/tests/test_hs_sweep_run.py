@@ -17,12 +17,16 @@ import pytest
 
 from pfnav_harness import paths
 from pfnav_harness.planner_client import DEFAULT_LCM_URL
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.sweep.cli import _lcm_planner, main
 from pfnav_harness.sweep.cluster import dask_client
 from pfnav_harness.sweep.driver import prepare_courses, run_sweep
 from pfnav_harness.sweep.runner import Artifacts, Course
 from pfnav_harness.sweep.spec import SweepSpec, load_spec
 from pfnav_harness.sweep.store import SweepStore, deterministic_rows
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
 
 TINY = paths.repo_root() / "sweeps" / "tiny.toml"
 
@@ -34,7 +38,7 @@ def tiny_spec() -> SweepSpec:
 
 @pytest.fixture(scope="module")
 def artifacts() -> Artifacts:
-    return Artifacts(paths.fmu_path(), paths.urdf_path(), paths.pf_plan_path())
+    return Artifacts(paths.fmu_path(), ROBOT, paths.pf_plan_path())
 
 
 @pytest.fixture(scope="module")

@@ -9,24 +9,28 @@ import pytest
 
 from pfnav_harness import paths
 from pfnav_harness.errors import SimulationError
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
-from pfnav_harness.world import DEFAULT_STANCE, Payload, QuadrupedWorld
+from pfnav_harness.world import Payload, QuadrupedWorld
+
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
+CROUCH = ROBOT.crouch
 
 
 def _settle(world: QuadrupedWorld, steps: int = 800) -> float:
     """Joint PD on the stance for `steps` physics steps; returns the base height at the end."""
     for _ in range(steps):
         s = world.state()
-        world.apply_torques(120.0 * (DEFAULT_STANCE - s.joint_positions) - 3.0 * s.joint_velocities)
+        world.apply_torques(120.0 * (CROUCH - s.joint_positions) - 3.0 * s.joint_velocities)
         world.step()
     return float(world.state().position[2])
 
 
 def test_payload_changes_the_simulated_mass_world(ramp_scenario: Scenario, tmp_path: Path) -> None:
-    urdf = paths.urdf_path()
-    plain = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path)
+    plain = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path)
     offset = (0.05, -0.02, 0.01)
-    loaded = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path, payload=Payload(0.2, offset))
+    loaded = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path, payload=Payload(0.2, offset))
     trunk = plain.trunk_mass
     assert loaded.trunk_mass == trunk
     assert loaded.mass == pytest.approx(plain.mass + 0.2 * trunk)
@@ -40,7 +44,7 @@ def test_payload_changes_the_simulated_mass_world(ramp_scenario: Scenario, tmp_p
     reduced = trunk * 0.2 * trunk / (1.2 * trunk)  # m1·m2 / (m1 + m2)
     d = np.asarray(offset)
     np.testing.assert_allclose(after - before, reduced * (d @ d * np.eye(3) - np.outer(d, d)), atol=1e-12)
-    lighter = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path, payload=Payload(-0.2))
+    lighter = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path, payload=Payload(-0.2))
     assert lighter.mass == pytest.approx(plain.mass - 0.2 * trunk)
     # The same PD stance sags more under a heavier trunk.
     for world in (plain, loaded, lighter):
@@ -55,4 +59,4 @@ def test_impossible_payloads_are_refused_world(ramp_scenario: Scenario, tmp_path
     with pytest.raises(SimulationError, match="3 finite coordinates"):
         Payload(0.1, (0.0, float("nan"), 0.0))
     with pytest.raises(SimulationError, match="without a positive inertia"):
-        QuadrupedWorld(ramp_scenario.terrain, paths.urdf_path(), tmp_path, payload=Payload(-0.5, (0.0, 0.0, 0.3)))
+        QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path, payload=Payload(-0.5, (0.0, 0.0, 0.3)))

@@ -1,4 +1,4 @@
-"""DART world: the URDF robot on the triangle-mesh terrain (needs dartpy and robot/quadruped.urdf)."""
+"""DART world: our robot (robot/quadruped.toml) on the triangle-mesh terrain (needs dartpy)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from pfnav_harness import paths
+from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario, Terrain
-from pfnav_harness.world import DEFAULT_STANCE, QuadrupedWorld, quaternion_to_rpy, rotation_to_quaternion
+from pfnav_harness.world import QuadrupedWorld, quaternion_to_rpy, rotation_to_quaternion
 
-
-@pytest.fixture(scope="module")
-def urdf() -> Path:
-    return paths.urdf_path()
+# Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
+ROBOT = RobotDescription.load(paths.default_robot_config_path())
+CROUCH = ROBOT.crouch
 
 
 def test_rotation_quaternion_round_trip() -> None:
@@ -36,10 +36,10 @@ def test_rotation_quaternion_round_trip() -> None:
         np.testing.assert_allclose(got, q if q[0] >= 0 else -q, atol=1e-12)
 
 
-def test_state_vector_matches_the_state(ramp_scenario: Scenario, urdf: Path, tmp_path: Path) -> None:
+def test_state_vector_matches_the_state(ramp_scenario: Scenario, tmp_path: Path) -> None:
     """`state_vector` (the co-simulation's allocation-free read-out, torques held between
     `apply_torques` calls) agrees with `state` while the robot tumbles through the air."""
-    world = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path)
+    world = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path)
     world.place(1.5, 1.0, 0.7)
     rng = np.random.default_rng(3)
     velocities = rng.normal(scale=2.0, size=world.robot.getNumDofs())
@@ -61,8 +61,8 @@ def test_state_vector_matches_the_state(ramp_scenario: Scenario, urdf: Path, tmp
     assert abs(quaternion_to_rpy(out[3:7])[2] - 0.7) > 1e-3  # it did rotate
 
 
-def test_placement_puts_the_lowest_foot_on_the_ground(ramp_scenario: Scenario, urdf: Path, tmp_path: Path) -> None:
-    world = QuadrupedWorld(ramp_scenario.terrain, urdf, tmp_path)
+def test_placement_puts_the_lowest_foot_on_the_ground(ramp_scenario: Scenario, tmp_path: Path) -> None:
+    world = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path)
     world.place(1.5, 1.0, 0.4, clearance=0.002)
     feet = world.foot_positions()
     gaps = feet[:, 2] - world.foot_radius - ramp_scenario.terrain.height(feet[:, 0], feet[:, 1])
@@ -75,22 +75,22 @@ def test_placement_puts_the_lowest_foot_on_the_ground(ramp_scenario: Scenario, u
     assert roll == pytest.approx(math.atan(-0.2 * math.sin(0.4) / math.hypot(1.0, 0.2 * math.cos(0.4))), abs=1e-6)
     # All four feet touch together.
     assert max(gaps) - min(gaps) < 0.01
-    np.testing.assert_allclose(state.joint_positions, DEFAULT_STANCE)
+    np.testing.assert_allclose(state.joint_positions, CROUCH)
     assert world.mass == pytest.approx(12.0)
 
 
-def test_pd_stance_stands_on_a_sloped_mesh(urdf: Path, tmp_path: Path) -> None:
+def test_pd_stance_stands_on_a_sloped_mesh(tmp_path: Path) -> None:
     """Joint PD on the crouched stance holds the 12 kg robot on a 10° mesh slope: no sinking, no falling through."""
     n, res = 40, 0.1
     xs = (np.arange(n) + 0.5) * res
     slope = math.tan(math.radians(10.0))
     terrain = Terrain((0.0, 0.0), res, np.tile(0.2 + slope * xs, (n, 1)))
-    world = QuadrupedWorld(terrain, urdf, tmp_path, friction=0.8)
+    world = QuadrupedWorld(terrain, ROBOT, tmp_path, friction=0.8)
     world.place(2.0, 2.0, 0.0)
     kp, kd = 120.0, 3.0
     for _ in range(1500):
         s = world.state()
-        world.apply_torques(kp * (DEFAULT_STANCE - s.joint_positions) - kd * s.joint_velocities)
+        world.apply_torques(kp * (CROUCH - s.joint_positions) - kd * s.joint_velocities)
         world.step()
     s = world.state()
     ground = terrain.height_at(float(s.position[0]), float(s.position[1]))

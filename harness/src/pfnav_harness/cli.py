@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import logging
 import math
 import os
 import sys
@@ -17,6 +18,7 @@ from . import paths
 from .errors import HarnessError
 from .fmu_runner import ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
+from .robot_fmu import robot_and_fmu
 from .scenario import paper_scenario_names
 
 if TYPE_CHECKING:
@@ -60,6 +62,14 @@ def check_lcm_url(url: str, allow_host_network: bool) -> None:
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("out"), help="output folder (default: out)")
+    p.add_argument(
+        "--robot",
+        type=Path,
+        default=None,
+        help="robot config: a TOML next to the robot's URDF (format in robot/README.md; package:// through $PFNAV_PACKAGE_PATH). "
+        "Default $PFNAV_ROBOT, else robot/quadruped.toml. Another robot than ours runs on an FMU bundled for it "
+        "(bundle-fmu, cached in OUT/cache)",
+    )
     p.add_argument("--duration", type=float, default=None, help="cap on simulated seconds per run (default: whole plan + settle)")
     p.add_argument("--short", action="store_true", help=f"short run: at most {SHORT_DURATION:.0f} simulated seconds per run")
     p.add_argument("--comm-step", type=float, default=0.001, help="FMU communication step, s (multiple of 1 ms; default 0.001)")
@@ -342,6 +352,8 @@ def _map_request(args: argparse.Namespace) -> tuple[Path | None, tuple[float, fl
 def execute(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     out: Path = args.out
+    # The robot and its FMU first: a bad robot config fails before any other work.
+    robot, fmu = robot_and_fmu(args.robot, out / "cache")
     map_file: Path | None = None
     map_start = map_goal = None
     if args.command == "run":
@@ -357,8 +369,6 @@ def execute(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise HarnessError(f"--duration must be positive, got {args.duration}")
     # Fail on missing build products before any planning work.
-    fmu = paths.fmu_path()
-    urdf = paths.urdf_path()
     pf_plan = paths.pf_plan_path()
 
     from .metrics import TraversabilityField
@@ -412,7 +422,7 @@ def execute(args: argparse.Namespace) -> int:
                         client,
                         scenario,
                         fmu,
-                        urdf,
+                        robot,
                         out / "cache",
                         config,
                         dataclasses.replace(online_config, method=method),
@@ -425,7 +435,16 @@ def execute(args: argparse.Namespace) -> int:
             else:
                 answer = answers[name][method]
                 outcome = simulate(
-                    scenario, answer.plan_or_raise(method), fmu, urdf, out / "cache", config, log_file, not args.no_progress, field, feedback_field=answer.field
+                    scenario,
+                    answer.plan_or_raise(method),
+                    fmu,
+                    robot,
+                    out / "cache",
+                    config,
+                    log_file,
+                    not args.no_progress,
+                    field,
+                    feedback_field=answer.field,
                 )
             rec = outcome.record(str(log_file.relative_to(out)))
             runs[name].append(rec)
@@ -438,6 +457,8 @@ def execute(args: argparse.Namespace) -> int:
     header = [
         f"Command: `pfnav-demo {' '.join(sys.argv[1:]) if sys.argv[1:] else args.command}`; FMU `{fmu.name}`, "
         f"communication step {config.comm_step * 1000:.0f} ms, physics 1 kHz (DART, ODE collision).",
+        "",
+        f"Robot: config `{robot.config_path}`, URDF `{robot.urdf_path}`.",
         "",
         (
             f"State estimate in the loop (kalman): {config.body_sensors.imu.name} IMU, {config.body_sensors.encoder.name} "
@@ -488,6 +509,8 @@ def execute(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    logging.basicConfig(format="pfnav-demo: %(message)s")
+    logging.getLogger("pfnav_harness").setLevel(logging.INFO)
     try:
         return execute(args)
     except HarnessError as err:

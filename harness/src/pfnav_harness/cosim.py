@@ -37,8 +37,9 @@ from .planner_client import Plan
 from .pushes import PushSchedule
 from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, X, Y
 from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
+from .robot import NUM_JOINTS, RobotDescription
 from .scenario import Scenario
-from .world import NUM_JOINTS, Payload, QuadrupedWorld, WorldSnapshot, quaternion_to_rpy, terrain_digest
+from .world import Payload, QuadrupedWorld, WorldSnapshot, quaternion_to_rpy, terrain_digest
 
 Progress = Callable[[float], None]
 # FMU reference input ← column of a reference row. ref.z is the height of the local terrain plane
@@ -247,7 +248,7 @@ class CoSimulation:
         scenario: Scenario,
         plan: Plan,
         fmu_path: Path | None,
-        urdf: Path,
+        robot: RobotDescription,
         cache_dir: Path,
         config: CoSimConfig | None = None,
         controller: fr.ControllerFmu | None = None,
@@ -264,7 +265,7 @@ class CoSimulation:
         self.scenario = scenario
         self.plan = plan
         self.online = online
-        self.urdf = Path(urdf)
+        self.robot = robot
         c = self.config
         self.source: TrajectorySource | FieldSource
         if c.follow == "feedback":
@@ -274,7 +275,7 @@ class CoSimulation:
             self.source = FieldSource(field, scenario.terrain, c.plane_radius, c.physics_dt, start_yaw)
         else:
             self.source = TrajectorySource(plan, scenario.terrain, c.plane_radius, c.heading_smoothing)
-        self.world = QuadrupedWorld(scenario.terrain, urdf, cache_dir, self.config.physics_dt, self.config.friction, payload=self.config.payload)
+        self.world = QuadrupedWorld(scenario.terrain, robot, cache_dir, self.config.physics_dt, self.config.friction, payload=self.config.payload)
         start_yaw = float(plan.yaw[0]) if len(plan.yaw) else scenario.start_yaw
         self.world.place(float(plan.x[0]), float(plan.y[0]), start_yaw)
         if controller is not None:
@@ -307,14 +308,13 @@ class CoSimulation:
     def fork_key(self) -> str:
         """What the prefix up to `walk_start_step` depends on, as a digest: runs with equal keys share a fork.
 
-        Covers the FMU, the robot's URDF (content), the scenario's terrain and start, the plan and the config's
-        `prefix_signature`.
+        Covers the FMU, the robot (its config, URDF and meshes by content), the scenario's terrain and start, the
+        plan and the config's `prefix_signature`.
         """
         h = hashlib.sha256()
         guid = getattr(getattr(self.fmu, "info", None), "guid", type(self.fmu).__name__)
-        # The robot by content: an edited URDF at the same path is another robot.
-        urdf_digest = hashlib.sha256(self.urdf.read_bytes()).hexdigest()
-        h.update(f"fmu={guid};urdf={urdf_digest};scenario={self.scenario.name};start_yaw={self.scenario.start_yaw!r};".encode())
+        # The robot by content: an edited config or URDF at the same path is another robot.
+        h.update(f"fmu={guid};robot={self.robot.digest};scenario={self.scenario.name};start_yaw={self.scenario.start_yaw!r};".encode())
         h.update(terrain_digest(self.scenario.terrain).encode())
         for name, values in self.plan.to_npz_dict().items():
             h.update(name.encode())

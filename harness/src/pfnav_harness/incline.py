@@ -38,8 +38,9 @@ from .cosim import CoSimConfig, CoSimulation, RunResult
 from .errors import ScenarioError, SimulationError
 from .metrics import FallThresholds, judge_fall, rms_tracking_error, roll_pitch_yaw, terrain_pitch_roll
 from .planner_client import Plan
+from .robot import RobotDescription
 from .scenario import GoalRegion, Scenario, Terrain
-from .world import FOOT_NAMES, JOINT_NAMES, QuadrupedWorld
+from .world import QuadrupedWorld
 
 FloatArray = NDArray[np.float64]
 
@@ -150,7 +151,7 @@ class WorldProbe:
         self.foot_position = np.zeros((n_steps, len(world.feet), 3))
         self.link_contacts: dict[str, list[float]] = {}
         self.count = 0
-        self._foot_names = set(FOOT_NAMES)
+        self._foot_names = set(world.description.foot_links)
         self._step = world.step
         world.step = self.step  # type: ignore[method-assign]
 
@@ -158,10 +159,7 @@ class WorldProbe:
         self._step()
         k = self.count
         if k < len(self.foot_position):
-            for i, foot in enumerate(self.world.feet):
-                transform = foot.getWorldTransform()
-                self.foot_rotation[k, i] = transform.rotation()
-                self.foot_position[k, i] = transform.translation()
+            self.foot_rotation[k], self.foot_position[k] = self.world.foot_poses()
             if k % CONTACT_PROBE_EVERY == 0:
                 result = self.world.world.getLastCollisionResult()
                 for body in result.getCollidingBodyNodes():
@@ -249,6 +247,7 @@ def stance_slips(
     foot_radius: float,
     normal: FloatArray,
     dt: float,
+    foot_names: tuple[str, ...],
 ) -> list[SlipEvent]:
     """Per stance, the largest tangential slip of the touched-down point while the foot touches.
 
@@ -279,7 +278,7 @@ def stance_slips(
             point = foot_position[span, i] + np.einsum("kab,b->ka", foot_rotation[span, i], local)
             distance = np.linalg.norm((point - contact_world) @ tangential, axis=1)
             j = int(np.argmax(distance))
-            events.append(SlipEvent(FOOT_NAMES[i], float((k0 + j) * dt), float(distance[j])))
+            events.append(SlipEvent(foot_names[i], float((k0 + j) * dt), float(distance[j])))
     return events
 
 
@@ -339,6 +338,7 @@ def evaluate(
         world.foot_radius,
         normal,
         dt,
+        world.description.foot_links,
     )
     walk_slips = [e for e in slips if e.time >= walk_start and (fall_time is None or e.time <= fall_time)]
     stand_slips = [e for e in slips if e.time < walk_start]
@@ -375,7 +375,7 @@ def evaluate(
         max_pitch_error_deg=float(pitch_error.max()) if pitch_error.size else 0.0,
         max_roll_error_deg=float(roll_error.max()) if roll_error.size else 0.0,
         peak_torque_ratio=float(ratio[peak]) if ratio.size else 0.0,
-        peak_torque_joint=JOINT_NAMES[int(peak[1])],
+        peak_torque_joint=world.description.joint_names[int(peak[1])],
         torque_saturation=saturated,
         rms_tracking_error=rms_tracking_error(log),
         non_foot_contacts=dict(sorted(((name, times[0]) for name, times in probe.link_contacts.items()), key=lambda item: item[1])),
@@ -394,7 +394,7 @@ def run_incline(
     angle_deg: float,
     direction: str,
     fmu_path: Path,
-    urdf: Path,
+    robot: RobotDescription,
     cache_dir: Path,
     friction: float = 0.8,
     distance: float = WALK_DISTANCE,
@@ -418,7 +418,7 @@ def run_incline(
             raise SimulationError(f"{fmu_path}: no parameter {STAND_HEIGHT_PARAMETER} (the nominal stand height)")
         nominal_height = float((parameters or {}).get(STAND_HEIGHT_PARAMETER, contract.parameters[STAND_HEIGHT_PARAMETER].start))
         stand_code = int(contract.fsm.Stand)
-        sim = CoSimulation(scenario, plan, None, urdf, cache_dir, config, controller=controller)
+        sim = CoSimulation(scenario, plan, None, robot, cache_dir, config, controller=controller)
     except BaseException:
         controller.close()
         raise

@@ -54,10 +54,26 @@ def pf_plan_path() -> Path:
     )
 
 
-def urdf_path() -> Path:
+def default_robot_config_path() -> Path:
+    """Our robot's config, the robot the default FMU is built for."""
+    return repo_root() / "robot" / "quadruped.toml"
+
+
+def robot_config_path() -> Path:
+    """The robot config to simulate when none is given: `PFNAV_ROBOT`, else ours."""
     return _artifact(
-        "PFNAV_URDF",
-        repo_root() / "robot" / "quadruped.urdf",
-        "robot URDF",
-        "it belongs to the repository (robot/quadruped.urdf)",
+        "PFNAV_ROBOT",
+        default_robot_config_path(),
+        "robot config",
+        "it belongs to the repository (robot/); pass a robot config (TOML, format in robot/README.md)",
+    )
+
+
+def bundle_fmu_path() -> Path:
+    """`bundle-fmu`, which writes the controller FMU for a robot config."""
+    return _artifact(
+        "PFNAV_BUNDLE_FMU",
+        repo_root() / "target" / "release" / "bundle-fmu",
+        "bundle-fmu binary (it builds the controller FMU for a robot other than ours)",
+        "build it with `cargo build --release -p quad-controller-fmu --bin bundle-fmu`",
     )

@@ -17,6 +17,7 @@ from .metrics import OnlineMetrics, RunMetrics, TraversabilityField, compute_met
 from .online import OnlineConfig, OnlineNavigator, check_first_answer
 from .planner_client import Plan, PlannerClient, StartPose
 from .report import RunRecord
+from .robot import RobotDescription
 from .scenario import Scenario, load_scenario
 from .state_log import write_state_log
 
@@ -79,7 +80,7 @@ def simulate(
     scenario: Scenario,
     plan: Plan,
     fmu: Path,
-    urdf: Path,
+    robot: RobotDescription,
     cache_dir: Path,
     config: CoSimConfig,
     log_path: Path | None = None,
@@ -92,7 +93,7 @@ def simulate(
     """Co-simulates one plan and computes its metrics (optionally saving the npz log)."""
     start = time.perf_counter()
     label = run_label(plan.method, config, online is not None)
-    with CoSimulation(scenario, plan, fmu, urdf, cache_dir, config, field=feedback_field, online=online) as sim:
+    with CoSimulation(scenario, plan, fmu, robot, cache_dir, config, field=feedback_field, online=online) as sim:
         total = sim.duration()
         desc = f"{scenario.name}/{label}"
         with tqdm(
@@ -134,7 +135,7 @@ def simulate_online(
     client: PlannerClient,
     scenario: Scenario,
     fmu: Path,
-    urdf: Path,
+    robot: RobotDescription,
     cache_dir: Path,
     config: CoSimConfig,
     online_config: OnlineConfig,
@@ -158,6 +159,6 @@ def simulate_online(
     first = navigator.start(start.x, start.y, start.yaw, timeout=plan_timeout, retries=retries)
     check_first_answer(first, method)
     assert first.plan is not None
-    outcome = simulate(scenario, first.plan, fmu, urdf, cache_dir, config, log_path, show_progress, field, feedback_field=first.field, online=navigator)
+    outcome = simulate(scenario, first.plan, fmu, robot, cache_dir, config, log_path, show_progress, field, feedback_field=first.field, online=navigator)
     outcome.online = compute_online_metrics(outcome.result.log, navigator.replans, field, full_plan, online_config)
     return outcome

@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 
 from .estimation_metrics import EstimationMetrics, estimation_section
 from .metrics import OnlineMetrics, RunMetrics
+from .robot import JOINT_ROLES, LEG_LABELS
 from .scenario import Scenario, Terrain
-from .world import LEGS
 
 METHOD_COLOURS = {"pf": "tab:red", "astar": "tab:blue", "dijkstra": "tab:green", "pf-feedback": "tab:purple", "pf-online": "tab:orange"}
 METHOD_LABELS = {"pf": "P-F", "astar": "A*", "dijkstra": "Dijkstra", "pf-feedback": "P-F feedback", "pf-online": "P-F online"}
@@ -121,11 +121,10 @@ def plot_torques(run: RunRecord, path: Path) -> None:
     t = run.log["t"]
     tau = run.log["tau"]
     fig, axes = plt.subplots(4, 1, figsize=(8, 7.5), sharex=True)
-    names = ("abduction", "hip", "knee")
     for leg in range(4):
-        for j in range(3):
-            axes[leg].plot(t, tau[:, 3 * leg + j], lw=0.6, label=names[j])
-        axes[leg].set_ylabel(f"{LEGS[leg]} [N·m]")
+        for j, role in enumerate(JOINT_ROLES):
+            axes[leg].plot(t, tau[:, 3 * leg + j], lw=0.6, label=role)
+        axes[leg].set_ylabel(f"{LEG_LABELS[leg]} [N·m]")
     axes[0].legend(fontsize=8, ncol=3, loc="upper right")
     axes[0].set_title(f"{run.metrics.scenario} / {_label(run.metrics.method)}: joint torques (∫τ²dt = {run.metrics.effort:.0f} N²m²s)")
     axes[-1].set_xlabel("t [s]")
@@ -152,7 +151,7 @@ def plot_contacts(run: RunRecord, path: Path, window: float = 3.0) -> None:
             ts, base + 0.5, base + 0.5 + 0.4 * actual[:, leg], step="post", color="tab:green", alpha=0.8, label="touching (DART)" if leg == 0 else None
         )
     ax.set_yticks([3.5, 2.5, 1.5, 0.5])
-    ax.set_yticklabels(LEGS)
+    ax.set_yticklabels(LEG_LABELS)
     ax.set_xlabel("t [s]")
     ax.set_title(f"{run.metrics.scenario} / {_label(run.metrics.method)}: foot contacts")
     ax.legend(fontsize=8, loc="upper right", ncol=2)

@@ -1,9 +1,19 @@
-"""The DART physics world: the scenario's terrain as a triangle mesh and the quadruped URDF on it.
+"""The DART physics world: the scenario's terrain as a triangle mesh and the robot of a robot config on it.
 
 dartpy 6.20 facts this module relies on (see shared notes): the PyPI wheel has no HeightmapShape
 binding, so the terrain is an OBJ mesh in a one-link URDF with a fixed root; ODE is the only
 detector that keeps spheres on meshes; FreeJoint velocities are world-frame; `setForces` is
 cleared by every `world.step()`, so torques are written every physics step.
+
+The robot comes from a `RobotDescription` (robot.py): its URDF loaded by DART with `package://`
+resolved through the description's package folders, joints, feet and base by the config's names,
+mapped by name (DART orders DOFs by its own rules). What the controller's model treats as a
+massless frame (a link without `<inertial>`, or listed in `massless_links`) is made massless here
+too: DART would give a link without `<inertial>` 1 kg. Collisions of the robot are its primitive
+shapes (boxes, cylinders, spheres), a sphere per foot at the foot point (one of the config's
+`foot_radius` where the URDF's foot has none) and, for mesh collision shapes, their bounding
+boxes (none on the lower legs): ODE's mesh–mesh contact with the terrain mesh costs a standing
+Solo-12 1.8× the time (measured in docs/robots.md).
 
 `WorldSnapshot` (fork a run after stand-up) holds everything that decides the world's future as
 plain arrays: every skeleton's generalized positions and velocities, the world time, the torques
@@ -16,7 +26,9 @@ fresh world gives the same trajectory bit for bit (test_hs_fork).
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,27 +37,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import SimulationError
+from .robot import NUM_JOINTS, RobotDescription
 from .scenario import Terrain
 
-LEGS = ("FR", "FL", "RR", "RL")
-JOINT_KINDS = ("hip_abd", "hip_flex", "knee")
-JOINT_NAMES = tuple(f"{leg}_{kind}_joint" for leg in LEGS for kind in JOINT_KINDS)
-FOOT_NAMES = tuple(f"{leg}_foot" for leg in LEGS)
-NUM_JOINTS = 12
+log = logging.getLogger(__name__)
 
-# A crouched stance (abduction 0, hip 0.8 rad, knee −1.6 rad) puts each foot under its hip; the
-# robot is placed in it so that the controller's stand-up starts from a physical configuration.
-DEFAULT_STANCE = np.tile(np.array([0.0, 0.8, -1.6]), 4)
+MESH_COLLISION_MODES = ("boxes", "meshes")
 
 
 @dataclass(frozen=True)
 class Payload:
     """Mass added to (or, negative, taken from) the trunk, as a point mass at `offset`.
 
-    `mass_fraction` is relative to the trunk link's own mass (0.2 = 20 % heavier); `offset` (m) is
-    in the trunk's body frame (x forward, y left, z up) from the trunk's centre of mass. The trunk
-    stays one rigid body: its mass, centre of mass and inertia become those of trunk + payload, so
-    the controller, which assumes the nominal trunk, sees a model error, as with a real load.
+    `mass_fraction` is relative to the trunk's mass (0.2 = 20 % heavier); `offset` (m) is in the
+    base link's frame (x forward, y left, z up) from the trunk's centre of mass. The trunk is the
+    base link and every link welded to it; the payload joins the heaviest of them, which stays one
+    rigid body: its mass, centre of mass and inertia become those of it + payload, so the
+    controller, which assumes the nominal trunk, sees a model error, as with a real load.
     """
 
     mass_fraction: float = 0.0
@@ -59,15 +67,25 @@ class Payload:
         object.__setattr__(self, "offset", tuple(float(v) for v in self.offset))
 
 
-def add_payload(body: dart.dynamics.BodyNode, payload: Payload) -> None:
-    """Makes `body` the rigid union of itself and the payload's point mass (parallel-axis theorem)."""
+def add_payload(body: dart.dynamics.BodyNode, payload: Payload, trunk_mass: float, trunk_com: NDArray[np.float64], offset: NDArray[np.float64]) -> None:
+    """Makes `body` the rigid union of itself and the payload's point mass (parallel-axis theorem).
+
+    The point mass is `payload.mass_fraction · trunk_mass` at `trunk_com + offset`, both in `body`'s
+    frame (`trunk_com`: the centre of mass of the whole trunk, `body` one of its links; `offset`:
+    the payload's offset turned into `body`'s frame).
+    """
     inertia = body.getInertia()
     mass = float(inertia.getMass())
     com = np.asarray(inertia.getLocalCOM(), dtype=np.float64)
     moment = np.asarray(inertia.getMoment(), dtype=np.float64)
-    extra = payload.mass_fraction * mass
+    extra = payload.mass_fraction * trunk_mass
     total = mass + extra
-    point = com + np.asarray(payload.offset)
+    point = trunk_com + offset
+    if not total > 0.0:
+        raise SimulationError(
+            f"payload {payload.mass_fraction:+.0%} of the trunk's {trunk_mass:.3f} kg is more than its heaviest link '{body.getName()}' "
+            f"({mass:.3f} kg) has: take less mass away"
+        )
     new_com = (mass * com + extra * point) / total
 
     def shifted(m: float, d: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -80,6 +98,84 @@ def add_payload(body: dart.dynamics.BodyNode, payload: Payload) -> None:
             "take less mass away, or closer to the centre of mass"
         )
     body.setInertia(dart.dynamics.Inertia(total, new_com, new_moment))
+
+
+def load_robot_skeleton(robot: RobotDescription) -> dart.dynamics.Skeleton:
+    """The robot's URDF as a DART skeleton with a free root joint, `package://` files resolved.
+
+    The `<visual>` elements are left out: nothing is rendered, and loading the visual meshes of a
+    published model (Collada files of tens of MB) takes seconds. The text is parsed with the
+    URDF's own location as base URI, so relative mesh paths resolve as in the file.
+    """
+    try:
+        root = ET.parse(robot.urdf_path).getroot()
+    except (ET.ParseError, OSError) as err:
+        raise SimulationError(f"cannot read the robot URDF {robot.urdf_path}: {err}") from err
+    for parent in list(root.iter()):
+        for visual in parent.findall("visual"):
+            parent.remove(visual)
+    loader = dart.utils.DartLoader()
+    for name, folder in robot.package_dirs:
+        loader.addPackageDirectory(name, str(folder.resolve()))
+    skeleton = loader.parseSkeletonString(ET.tostring(root, encoding="unicode"), dart.common.Uri(robot.urdf_path.resolve().as_uri()))
+    if skeleton is None:
+        raise SimulationError(f"DART could not parse the robot URDF {robot.urdf_path} (robot config {robot.config_path})")
+    return skeleton
+
+
+def make_massless(body: dart.dynamics.BodyNode) -> None:
+    """A frame without mass, as the controller's model has it (welded to a body with mass, so DART stays well-posed)."""
+    body.setInertia(dart.dynamics.Inertia(0.0, np.zeros(3), np.zeros((3, 3))))
+
+
+def replace_mesh_collisions(skeleton: dart.dynamics.Skeleton, lower_legs: set[str]) -> tuple[list[str], list[str]]:
+    """Mesh collision shapes become primitive stand-ins: their bounding box, or nothing on the links in `lower_legs`.
+
+    The lower legs (the knees' child links and what is welded to them, feet included) collide
+    through the foot spheres only: a box around a lower-leg mesh would reach the ground beside the
+    foot. Returns the links given a box and the links left without their mesh.
+    """
+    boxed: list[str] = []
+    dropped: list[str] = []
+    for i in range(skeleton.getNumBodyNodes()):
+        body = skeleton.getBodyNode(i)
+        for node in body.getShapeNodes():
+            shape = node.getShape()
+            if node.getCollisionAspect() is None or not isinstance(shape, dart.dynamics.MeshShape):
+                continue
+            node.removeCollisionAspect()
+            bounds = shape.getBoundingBox()
+            low, high = np.asarray(bounds.getMin()), np.asarray(bounds.getMax())
+            if body.getName() in lower_legs or not np.all(high - low > 0.0):
+                dropped.append(body.getName())
+                continue
+            box = body.createShapeNode(dart.dynamics.BoxShape(high - low))
+            transform = node.getRelativeTransform()
+            box.setRelativeRotation(transform.rotation())
+            box.setRelativeTranslation(transform.rotation() @ (0.5 * (low + high)) + transform.translation())
+            box.createCollisionAspect()
+            box.createDynamicsAspect()
+            boxed.append(body.getName())
+    return boxed, dropped
+
+
+def add_foot_sphere(foot: dart.dynamics.BodyNode, radius: float, offset: NDArray[np.float64]) -> None:
+    """A collision sphere of `radius` centred on the foot point (`offset` in the foot link's frame)."""
+    node = foot.createShapeNode(dart.dynamics.SphereShape(radius))
+    node.setRelativeTranslation(np.asarray(offset, dtype=np.float64))
+    node.createCollisionAspect()
+    node.createDynamicsAspect()
+
+
+def welded_bodies(root: dart.dynamics.BodyNode) -> list[dart.dynamics.BodyNode]:
+    """`root` and every body fixed to it through weld joints (fixed URDF joints), root first."""
+    bodies = [root]
+    for body in bodies:
+        for k in range(body.getNumChildBodyNodes()):
+            child = body.getChildBodyNode(k)
+            if isinstance(child.getParentJoint(), dart.dynamics.WeldJoint):
+                bodies.append(child)
+    return bodies
 
 
 @dataclass
@@ -206,21 +302,30 @@ class WorldSnapshot:
 
 
 class QuadrupedWorld:
-    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs."""
+    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs.
+
+    `mesh_collisions`: "boxes" (default) turns the robot's mesh collision shapes into their bounding
+    boxes (none on the lower legs), "meshes" keeps them as the URDF has them (slower; for comparing,
+    scripts/bench_robot_collisions.py).
+    """
 
     def __init__(
         self,
         terrain: Terrain,
-        urdf: Path,
+        robot: RobotDescription,
         cache_dir: Path,
         time_step: float = 0.001,
         friction: float = 0.8,
         enforce_joint_limits: bool = True,
         payload: Payload | None = None,
+        mesh_collisions: str = "boxes",
     ) -> None:
         if not (time_step > 0.0 and math.isfinite(time_step)):
             raise SimulationError(f"physics time step must be positive, got {time_step}")
+        if mesh_collisions not in MESH_COLLISION_MODES:
+            raise SimulationError(f"unknown mesh collision mode '{mesh_collisions}' (choose from {', '.join(MESH_COLLISION_MODES)})")
         self.terrain = terrain
+        self.description = robot
         self.world = dart.simulation.World()
         self.world.setTimeStep(time_step)
         self.world.setGravity(np.array([0.0, 0.0, -9.81]))
@@ -228,43 +333,86 @@ class QuadrupedWorld:
         self.terrain_skeleton = load_terrain_skeleton(terrain, cache_dir, friction)
         self.world.addSkeleton(self.terrain_skeleton)
 
-        robot = dart.utils.DartLoader().parseSkeleton(dart.common.Uri(Path(urdf).resolve().as_uri()))
-        if robot is None:
-            raise SimulationError(f"DART could not parse the robot URDF {urdf}")
-        self.robot = robot
-        self.base = robot.getBodyNode("base")
+        skeleton = load_robot_skeleton(robot)
+        self.robot = skeleton
+        where = f"{robot.urdf_path} (robot config {robot.config_path})"
+        self.base = skeleton.getBodyNode(robot.base_link)
         if self.base is None:
-            raise SimulationError(f"{urdf}: no link named 'base'")
+            raise SimulationError(f"{where}: no link named '{robot.base_link}'")
+        if self.base.getParentBodyNode() is not None:
+            raise SimulationError(f"{where}: base link '{robot.base_link}' is not the root of the URDF tree")
+        for name in robot.massless_links:
+            body = skeleton.getBodyNode(name)
+            if body is None:
+                raise SimulationError(f"{where}: no link named '{name}' (massless_links)")
+            make_massless(body)
         self.joint_dofs = np.zeros(NUM_JOINTS, dtype=np.int64)
-        for k, name in enumerate(JOINT_NAMES):
-            joint = robot.getJoint(name)
+        for k, name in enumerate(robot.joint_names):
+            joint = skeleton.getJoint(name)
             if joint is None or joint.getNumDofs() != 1:
-                raise SimulationError(f"{urdf}: missing revolute joint '{name}'")
+                raise SimulationError(f"{where}: missing revolute joint '{name}'")
             joint.setLimitEnforcement(enforce_joint_limits)
             self.joint_dofs[k] = joint.getIndexInSkeleton(0)
         self.feet = []
-        for name in FOOT_NAMES:
-            foot = robot.getBodyNode(name)
+        for name in robot.foot_links:
+            foot = skeleton.getBodyNode(name)
             if foot is None:
-                raise SimulationError(f"{urdf}: missing foot link '{name}'")
+                raise SimulationError(f"{where}: missing foot link '{name}'")
             self.feet.append(foot)
-        self.foot_radius = self._foot_radius()
-        self.trunk_mass = float(self.base.getMass())
+        self.foot_offsets = robot.foot_offsets
+        self.foot_radius = robot.foot_radius
+        lower_legs = set()
+        for name in robot.joint_names[2::3]:
+            lower_legs.update(body.getName() for body in welded_bodies(skeleton.getJoint(name).getChildBodyNode()))
+        boxed, dropped = replace_mesh_collisions(skeleton, lower_legs) if mesh_collisions == "boxes" else ([], [])
+        if boxed or dropped:
+            log.info(
+                "%s: mesh collisions replaced by their bounding boxes on %d links (%s), dropped on the lower legs (%s)",
+                robot.config_path,
+                len(boxed),
+                ", ".join(boxed) or "none",
+                ", ".join(dropped) or "none",
+            )
+        for leg, foot, offset in zip(robot.legs, self.feet, self.foot_offsets, strict=True):
+            if not leg.has_foot_sphere:
+                add_foot_sphere(foot, self.foot_radius, offset)
+        if not all(leg.has_foot_sphere for leg in robot.legs):
+            log.info("%s: foot links without a sphere collision get a sphere of foot_radius %.4g m at the foot point", robot.config_path, self.foot_radius)
+        # The trunk: the base and every link welded to it; a payload joins the heaviest of them.
+        self.trunk_bodies = welded_bodies(self.base)
+        self.trunk_body = max(self.trunk_bodies, key=lambda body: body.getMass())
+        self.trunk_mass = float(sum(body.getMass() for body in self.trunk_bodies))
+        if not self.trunk_mass > 0.0:
+            raise SimulationError(f"{where}: the trunk ('{robot.base_link}' and the links welded to it) has no mass")
         if payload is not None:
-            add_payload(self.base, payload)
-        set_friction(robot, friction)
-        self.world.addSkeleton(robot)
-        self.effort_limits = np.array([robot.getJoint(n).getForceUpperLimit(0) for n in JOINT_NAMES])
-        self._forces = np.zeros(robot.getNumDofs())
+            offset = np.asarray(payload.offset)
+            if self.trunk_body.getName() != self.base.getName():
+                # The offset is given in the base's frame.
+                rotation = np.asarray(self.trunk_body.getWorldTransform().rotation()).T @ np.asarray(self.base.getWorldTransform().rotation())
+                offset = rotation @ offset
+            add_payload(self.trunk_body, payload, self.trunk_mass, self._trunk_com(), offset)
+        # Pushes act at the trunk's centre of mass, a fixed point of the trunk body.
+        self._push_point = self._trunk_com()
+        set_friction(skeleton, friction)
+        self.world.addSkeleton(skeleton)
+        effort = np.array([skeleton.getJoint(n).getForceUpperLimit(0) for n in robot.joint_names])
+        self.effort_limits = np.tile(robot.effort_limits, len(robot.legs)) if robot.effort_limits is not None else effort
+        self._forces = np.zeros(skeleton.getNumDofs())
         # Contacts restored from a snapshot, reported until the first step of this world.
         self._restored_contacts: NDArray[np.bool_] | None = None
 
-    def _foot_radius(self) -> float:
-        for node in self.feet[0].getShapeNodes():
-            shape = node.getShape()
-            if node.getCollisionAspect() is not None and isinstance(shape, dart.dynamics.SphereShape):
-                return float(shape.getRadius())
-        raise SimulationError("the foot links need a sphere collision shape")
+    def _trunk_com(self) -> NDArray[np.float64]:
+        """The trunk's centre of mass in `trunk_body`'s frame (the welded links keep their relative poses)."""
+        body = self.trunk_body
+        if len(self.trunk_bodies) == 1:
+            # Exactly the body's own value (bit for bit as before trunks of several links).
+            return np.asarray(body.getLocalCOM(), dtype=np.float64)
+        to_body = np.linalg.inv(body.getWorldTransform().matrix())
+        moment = np.zeros(3)
+        for other in self.trunk_bodies:
+            relative = to_body @ other.getWorldTransform().matrix()
+            moment += other.getMass() * (relative[:3, :3] @ np.asarray(other.getLocalCOM()) + relative[:3, 3])
+        return moment / sum(other.getMass() for other in self.trunk_bodies)
 
     @property
     def time(self) -> float:
@@ -292,7 +440,7 @@ class QuadrupedWorld:
         With `align_with_terrain` the body is tilted like the local terrain plane, so on a slope all
         four feet land together instead of the uphill pair carrying the robot first.
         """
-        q_joints = DEFAULT_STANCE if joint_positions is None else np.asarray(joint_positions, dtype=np.float64)
+        q_joints = self.description.crouch if joint_positions is None else np.asarray(joint_positions, dtype=np.float64)
         if q_joints.shape != (NUM_JOINTS,):
             raise SimulationError(f"expected {NUM_JOINTS} joint positions, got shape {q_joints.shape}")
         pitch = roll = 0.0
@@ -311,8 +459,7 @@ class QuadrupedWorld:
         self.robot.setPositions(positions)
         self.robot.setVelocities(np.zeros(self.robot.getNumDofs()))
         gaps = []
-        for foot in self.feet:
-            p = foot.getWorldTransform().translation()
+        for p in self.foot_positions():
             gaps.append(p[2] - self.foot_radius - self.terrain.height_at(float(p[0]), float(p[1])))
         positions[5] -= min(gaps) - clearance
         self.robot.setPositions(positions)
@@ -416,12 +563,12 @@ class QuadrupedWorld:
         """
         if force is None:
             if self._trunk_force_applied:
-                self.base.clearExternalForces()
+                self.trunk_body.clearExternalForces()
                 self._trunk_force_applied = False
             return
-        self.base.clearExternalForces()
-        # Force in the world frame, point of application the trunk's own centre of mass (body frame).
-        self.base.addExtForce(np.asarray(force, dtype=np.float64), self.base.getLocalCOM(), False, True)
+        self.trunk_body.clearExternalForces()
+        # Force in the world frame, point of application the trunk's centre of mass (body frame).
+        self.trunk_body.addExtForce(np.asarray(force, dtype=np.float64), self._push_point, False, True)
         self._trunk_force_applied = True
 
     def linear_momentum(self) -> NDArray[np.float64]:
@@ -429,7 +576,18 @@ class QuadrupedWorld:
         return self.mass * np.asarray(self.robot.getCOMLinearVelocity())
 
     def foot_positions(self) -> NDArray[np.float64]:
-        return np.array([foot.getWorldTransform().translation() for foot in self.feet])
+        """The foot points (sphere centres) in the world frame, one row per leg."""
+        return self.foot_poses()[1]
+
+    def foot_poses(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The foot links' world rotations (legs × 3 × 3) and the foot points (sphere centres, legs × 3)."""
+        rotations = np.zeros((len(self.feet), 3, 3))
+        points = np.zeros((len(self.feet), 3))
+        for i, (foot, offset) in enumerate(zip(self.feet, self.foot_offsets, strict=True)):
+            transform = foot.getWorldTransform()
+            rotations[i] = transform.rotation()
+            points[i] = rotations[i] @ offset + transform.translation()
+        return rotations, points
 
     def foot_contacts(self) -> NDArray[np.bool_]:
         """Which feet touch anything, from the last collision check of the physics step."""

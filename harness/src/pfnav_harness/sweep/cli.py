@@ -81,7 +81,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.no_fork:
         spec = dataclasses.replace(spec, fork=False)
     store = SweepStore.create(args.out, spec)
-    artifacts = Artifacts(paths.fmu_path(), paths.urdf_path(), paths.pf_plan_path())
+    from ..robot_fmu import robot_and_fmu
+
+    # The robot of $PFNAV_ROBOT (default ours), on the FMU for it.
+    robot, fmu = robot_and_fmu(None, args.out / "cache")
+    artifacts = Artifacts(fmu, robot, paths.pf_plan_path())
     # The exported scenarios live on while the workers run (a shared folder for remote workers).
     work = args.out / "scenarios"
     courses = _courses(spec, store, args, work)

@@ -3,7 +3,7 @@
 Processes, not threads: each run loads its own FMU instance, and FMUs in general are not safe to
 share across threads of one process. `--scheduler ADDRESS` sends the same tasks to a running
 dask-distributed scheduler (`dask scheduler` + `dask worker --nthreads 1 ...` on the machines);
-its workers need the same paths to the FMU, the URDF and pf-plan (a shared file system).
+its workers need the same paths to the FMU, the robot config and its URDF, and pf-plan (a shared file system).
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from ..cosim import CoSimConfig, CoSimulation, ForkPoint, prefix_config, prefix_
 from ..metrics import RunMetrics, TraversabilityField, compute_metrics
 from ..planner_client import Plan
 from ..pushes import HEADING_DIRECTIONS, PushSchedule, horizontal_push
+from ..robot import RobotDescription
 from ..scenario import Scenario
 from ..world import Payload
 
@@ -40,7 +41,7 @@ class Artifacts:
     """Where a worker finds the FMU, the robot and pf-plan (resolved by the driver; workers need the same paths)."""
 
     fmu: Path
-    urdf: Path
+    robot: RobotDescription
     pf_plan: Path | None
 
 
@@ -120,7 +121,7 @@ def start_run(course: Course, artifacts: Artifacts, config: CoSimConfig, cache_d
     A forked run is continued from its fork in it (`CoSimulation.run_from`), with the run's own
     payload and friction in the world.
     """
-    return CoSimulation(course.scenario, course.plan, artifacts.fmu, artifacts.urdf, cache_dir, config)
+    return CoSimulation(course.scenario, course.plan, artifacts.fmu, artifacts.robot, cache_dir, config)
 
 
 def make_fork(task: RunTask, course: Course, artifacts: Artifacts) -> ForkPoint | PrefixFailure:

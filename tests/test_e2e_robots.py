@@ -1,0 +1,57 @@
+"""Each third-party robot walks in DART on the controller FMU bundled for it (bundle-fmu, cached per session).
+
+A flat 8 m map, the robot placed in its crouch, stand-up (1.5 s), then a straight 1 m trot at the
+planner's nominal speed (`incline.run_incline` at 0°): it stands up, does not fall and walks.
+The robots come from the PyPI package example-robot-data (scripts/requirements-robots.txt).
+"""
+
+from __future__ import annotations
+
+import sysconfig
+from pathlib import Path
+
+import pytest
+from pfnav_harness import paths
+from pfnav_harness.cosim import CoSimConfig
+from pfnav_harness.errors import MissingArtifactError
+from pfnav_harness.incline import run_incline
+from pfnav_harness.robot import RobotDescription
+from pfnav_harness.robot_fmu import fmu_for_robot, is_default_robot
+
+PACKAGE_ROOT = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"
+WALK = 1.0
+
+
+@pytest.fixture(scope="session")
+def fmu_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    try:
+        paths.bundle_fmu_path()
+    except MissingArtifactError as err:
+        pytest.fail(str(err), pytrace=False)
+    return tmp_path_factory.mktemp("robot_fmus")
+
+
+@pytest.mark.parametrize("name", ["go1", "a1", "solo12"])
+def test_third_party_robot_stands_up_and_trots(
+    name: str, fmu_file: Path, fmu_cache: Path, tmp_path: Path
+) -> None:
+    robot = RobotDescription.load(
+        paths.repo_root() / "robot" / "third_party" / f"{name}.toml", [PACKAGE_ROOT]
+    )
+    assert not is_default_robot(robot)
+    fmu = fmu_for_robot(robot, fmu_cache)
+    assert fmu != fmu_file and fmu.parent == fmu_cache
+    run = run_incline(
+        0.0,
+        "up",
+        fmu,
+        robot,
+        tmp_path,
+        distance=WALK,
+        config=CoSimConfig(settle_time=0.5),
+    )
+    outcome = run.outcome
+    assert outcome.stood_up, outcome
+    assert not outcome.fell, outcome
+    assert outcome.walked > 0.7 * WALK, outcome
+    assert outcome.non_foot_contacts == {}, outcome
