@@ -120,12 +120,16 @@ def test_package_uris_resolve_through_the_first_root_holding_the_package(tmp_pat
 
 def test_package_roots_come_from_the_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.delenv(PACKAGE_PATH_ENV, raising=False)
+    # Unset: this environment's installed packages (setup.sh installs the third-party robots there).
+    assert package_roots_from_env() == (PACKAGE_ROOT.absolute(),)
+    assert RobotDescription.load(ROBOTS / "third_party" / "a1.toml").package_roots == (PACKAGE_ROOT.absolute(),)
+    monkeypatch.setenv(PACKAGE_PATH_ENV, "")
     assert package_roots_from_env() == ()
     monkeypatch.setenv(PACKAGE_PATH_ENV, f"{tmp_path / 'a'}::{tmp_path / 'b'}:")
     assert package_roots_from_env() == (tmp_path / "a", tmp_path / "b")
     monkeypatch.setenv(PACKAGE_PATH_ENV, str(PACKAGE_ROOT))
     assert RobotDescription.load(ROBOTS / "third_party" / "a1.toml").package_roots == (PACKAGE_ROOT.absolute(),)
-    monkeypatch.delenv(PACKAGE_PATH_ENV)
+    monkeypatch.setenv(PACKAGE_PATH_ENV, str(tmp_path))
     with pytest.raises(RobotConfigError, match=f"a1.toml: key `urdf`: package `example-robot-data`.*{PACKAGE_PATH_ENV}"):
         RobotDescription.load(ROBOTS / "third_party" / "a1.toml")
 

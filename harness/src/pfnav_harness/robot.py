@@ -9,7 +9,10 @@ model (inertias, axes, limits, IK) stay with the controller, which the FMU runs 
 `package://NAME/PATH` is resolved like `PackagePath::resolve` in
 controller/src/robot_config/package_path.rs: `ROOT/NAME/PATH` of the first package root that has
 a folder `NAME`; the roots are those passed in, else `PFNAV_PACKAGE_PATH` (':'-separated, empty
-entries ignored, no roots when unset).
+entries ignored). When it is unset, the one root is where packages installed into this Python
+environment put their share folder (`site-packages/cmeel.prefix/share`: `pip install
+example-robot-data` puts the third-party robots there), so `--robot robot/third_party/go1.toml`
+works after `scripts/setup.sh` with nothing set; the bundler is given the same roots.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import sysconfig
 import tomllib
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
@@ -167,9 +171,17 @@ class RobotDescription:
         return np.array([q for leg in self.legs for q in leg.crouch], dtype=np.float64)
 
 
+def installed_package_root() -> Path:
+    """Where packages installed into this Python environment put ROS-style package folders."""
+    return Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"
+
+
 def package_roots_from_env() -> tuple[Path, ...]:
-    """The package roots listed in `PFNAV_PACKAGE_PATH` (none when unset)."""
-    value = os.environ.get(PACKAGE_PATH_ENV, "")
+    """The package roots listed in `PFNAV_PACKAGE_PATH`; when unset, `installed_package_root()` if it exists."""
+    value = os.environ.get(PACKAGE_PATH_ENV)
+    if value is None:
+        installed = installed_package_root()
+        return (installed.absolute(),) if installed.is_dir() else ()
     return tuple(Path(p).absolute() for p in value.split(os.pathsep) if p)
 
 

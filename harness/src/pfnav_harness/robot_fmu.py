@@ -52,7 +52,13 @@ def fmu_for_robot(robot: RobotDescription, cache_dir: Path) -> Path:
     partial = cache_dir / f"{target.stem}.{os.getpid()}.partial.fmu"
     command = [str(bundler), "--robot", str(robot.config_path), "--binaries-from", str(default_fmu), "--out", str(partial)]
     # bundle-fmu resolves the config's package:// names through the same roots as the harness.
-    env = {**os.environ, PACKAGE_PATH_ENV: os.pathsep.join(str(root) for root in robot.package_roots)}
+    # No backtrace: the error's own text names the item and the file.
+    env = {
+        **os.environ,
+        PACKAGE_PATH_ENV: os.pathsep.join(str(root) for root in robot.package_roots),
+        "RUST_BACKTRACE": "0",
+        "RUST_LIB_BACKTRACE": "0",
+    }
     try:
         done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=BUNDLE_TIMEOUT, check=False)
     except (OSError, subprocess.TimeoutExpired) as err:
@@ -60,9 +66,9 @@ def fmu_for_robot(robot: RobotDescription, cache_dir: Path) -> Path:
         raise SimulationError(f"bundle-fmu could not bundle the FMU for {robot.config_path}: {err}") from err
     if done.returncode != 0 or not partial.is_file():
         partial.unlink(missing_ok=True)
-        detail = (done.stderr or done.stdout).strip().splitlines()[-5:]
+        detail = " / ".join(line.strip() for line in (done.stderr or done.stdout).strip().splitlines() if line.strip())
         raise SimulationError(
-            f"bundle-fmu failed (exit {done.returncode}) for the robot config {robot.config_path}: " + " / ".join(detail) + f"\ncommand: {' '.join(command)}"
+            f"bundle-fmu failed (exit {done.returncode}) for the robot config {robot.config_path}: {detail}\ncommand: {' '.join(command)}"
         )
     os.replace(partial, target)
     return target
