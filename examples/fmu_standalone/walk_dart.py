@@ -1,6 +1,8 @@
 """The controller FMU driving a simulated robot, with no harness: fmpy + dartpy + numpy (+ matplotlib).
 
-The plant is the robot of robot/quadruped.urdf on flat ground, simulated by DART at 1 kHz. Each
+The plant is the robot the FMU carries (its `resources/robot/`: the robot config, the URDF and its
+meshes; `bundle-fmu --robot CONFIG` makes the FMU of another robot) on flat ground, simulated by
+DART at 1 kHz: joints, feet, base link and the crouch it starts from are read from that config. Each
 millisecond the script writes the measured state into the FMU's inputs, calls fmi2DoStep(1 ms),
 and applies the FMU's joint torques to the DART body. The robot starts crouched on the ground;
 the mode request is Stand for `--stand` seconds (the FSM goes Passive → StandUp → Stand), then
@@ -8,6 +10,7 @@ Locomotion with a forward reference velocity `--vx` for `--walk` seconds (trot).
 
     .venv/bin/python examples/fmu_standalone/walk_dart.py                      # 1.5 s stand + 3 s trot
     .venv/bin/python examples/fmu_standalone/walk_dart.py --vx 0 --plot out.png  # trot in place
+    .venv/bin/python examples/fmu_standalone/walk_dart.py --fmu Go1.fmu             # another robot's FMU
 
 Prints a table (time, FSM state, trunk height, torque norm, x, trot steps so far) and saves a plot of trunk height and
 FSM state; `--csv` writes every millisecond. Exits with status 1 if the trunk falls (lower than
@@ -25,6 +28,9 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
+import tomllib
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,16 +41,47 @@ from fmpy.fmi2 import FMU2Slave
 from numpy.typing import NDArray
 
 REPO = Path(__file__).resolve().parents[2]
-LEGS = ("FR", "FL", "RR", "RL")
-# FMU joint i (1-based) = 3·leg + {abduction, hip flexion, knee} + 1.
-JOINT_NAMES = tuple(f"{leg}_{kind}_joint" for leg in LEGS for kind in ("hip_abd", "hip_flex", "knee"))
-CROUCHED = np.tile([0.0, 1.2, -2.4], 4)  # feet under the hips, trunk low: the pose stand-up starts from
+LEGS = ("FR", "FL", "RR", "RL")  # the controller's leg order
 DT = 0.001  # physics step = FMU communication step
 FRICTION = 0.8
 TROT_PAIRS = ("1001", "0110")  # stance legs FR FL RR RL of the two trot phases (diagonal pairs)
 
 
-def build_world(urdf: Path) -> tuple[Any, Any, Any, NDArray[np.intp]]:
+@dataclass(frozen=True)
+class Robot:
+    """What this script needs of the robot config in the FMU's resources (format: robot/README.md)."""
+
+    urdf: Path
+    base_link: str
+    joints: tuple[str, ...]  # FMU joint i (1-based) = 3·leg + {abduction, hip, knee} + 1
+    feet: tuple[str, ...]
+    foot_radius: float
+    crouch: NDArray[np.float64]  # the pose the stand-up starts from
+
+
+def robot_of_fmu(unzipped: Path) -> Robot:
+    folder = unzipped / "resources" / "robot"
+    config = tomllib.loads((folder / "robot.toml").read_text())
+    legs = [config["legs"][leg] for leg in LEGS]
+    if any("crouch" not in leg for leg in legs):
+        raise SystemExit(f"{folder / 'robot.toml'}: every leg needs a `crouch` (the pose the robot is set down in)")
+    feet = tuple(leg["foot_link"] for leg in legs)
+    radius = config.get("foot_radius")
+    if radius is None:  # the foot link's sphere collision
+        links = {link.get("name"): link for link in ET.parse(folder / "robot.urdf").getroot().findall("link")}
+        spheres = links[feet[0]].findall("collision/geometry/sphere")
+        radius = float(spheres[0].get("radius", "nan")) if spheres else float("nan")
+    return Robot(
+        urdf=folder / config["urdf"],
+        base_link=config["base_link"],
+        joints=tuple(joint for leg in legs for joint in leg["joints"]),
+        feet=feet,
+        foot_radius=float(radius),
+        crouch=np.array([q for leg in legs for q in leg["crouch"]], dtype=np.float64),
+    )
+
+
+def build_world(spec: Robot) -> tuple[Any, Any, Any, NDArray[np.intp]]:
     """A DART world with a flat ground (top face z = 0) and the robot; returns world, robot, base, joint DOF indices."""
     world = dart.simulation.World()
     world.setTimeStep(DT)
@@ -61,29 +98,29 @@ def build_world(urdf: Path) -> tuple[Any, Any, Any, NDArray[np.intp]]:
     box.createDynamicsAspect().setFrictionCoeff(FRICTION)
     world.addSkeleton(ground)
 
-    robot = dart.utils.DartLoader().parseSkeleton(dart.common.Uri(urdf.resolve().as_uri()))
+    robot = dart.utils.DartLoader().parseSkeleton(dart.common.Uri(spec.urdf.resolve().as_uri()))
     if robot is None:
-        raise SystemExit(f"DART could not load {urdf}")
+        raise SystemExit(f"DART could not load {spec.urdf}")
     for i in range(robot.getNumBodyNodes()):
         for node in robot.getBodyNode(i).getShapeNodes():
             if node.getCollisionAspect() is not None:
                 aspect = node.getDynamicsAspect() or node.createDynamicsAspect()
                 aspect.setFrictionCoeff(FRICTION)
-    dofs = np.array([robot.getJoint(name).getIndexInSkeleton(0) for name in JOINT_NAMES], dtype=np.intp)
-    for name in JOINT_NAMES:
+    dofs = np.array([robot.getJoint(name).getIndexInSkeleton(0) for name in spec.joints], dtype=np.intp)
+    for name in spec.joints:
         robot.getJoint(name).setLimitEnforcement(True)
     world.addSkeleton(robot)
-    return world, robot, robot.getBodyNode("base"), dofs
+    return world, robot, robot.getBodyNode(spec.base_link), dofs
 
 
-def place_crouched(robot: Any, dofs: NDArray[np.intp], foot_radius: float = 0.02) -> None:
+def place_crouched(robot: Any, dofs: NDArray[np.intp], spec: Robot) -> None:
     """Level trunk, crouched joints, lowest foot 2 mm above the ground."""
     q = np.zeros(robot.getNumDofs())
     q[5] = 1.0
-    q[dofs] = CROUCHED
+    q[dofs] = spec.crouch
     robot.setPositions(q)
-    lowest = min(robot.getBodyNode(f"{leg}_foot").getWorldTransform().translation()[2] for leg in LEGS)
-    q[5] -= lowest - foot_radius - 0.002
+    lowest = min(robot.getBodyNode(foot).getWorldTransform().translation()[2] for foot in spec.feet)
+    q[5] -= lowest - spec.foot_radius - 0.002
     robot.setPositions(q)
     robot.setVelocities(np.zeros(robot.getNumDofs()))
 
@@ -132,13 +169,15 @@ def run(args: argparse.Namespace) -> int:
     torque_vrs = [vr[f"joint.tau[{i}]"] for i in range(1, 13)]
     stance_vrs = [vr[f"stance[{k}]"] for k in range(1, 5)]
 
-    world, robot, base, dofs = build_world(args.urdf)
-    place_crouched(robot, dofs)
-    effort = np.array([robot.getJoint(name).getForceUpperLimit(0) for name in JOINT_NAMES])
+    unzipped = Path(extract(str(args.fmu)))
+    spec = robot_of_fmu(unzipped)
+    world, robot, base, dofs = build_world(spec)
+    place_crouched(robot, dofs, spec)
+    effort = np.array([float(v.max) for v in md.modelVariables if v.name.startswith("joint.tau[")])
 
     slave = FMU2Slave(
         guid=md.guid,
-        unzipDirectory=extract(str(args.fmu)),
+        unzipDirectory=str(unzipped),
         modelIdentifier=md.coSimulation.modelIdentifier,
         instanceName="controller",
     )
@@ -229,7 +268,6 @@ def plot(log: NDArray[np.float64], fsm_codes: dict[str, int], stand: float, path
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fmu", type=Path, default=REPO / "target" / "fmu" / "QuadController.fmu")
-    parser.add_argument("--urdf", type=Path, default=REPO / "robot" / "quadruped.urdf")
     parser.add_argument("--stand", type=float, default=1.5, help="seconds of mode request Stand (stand-up takes 1 s)")
     parser.add_argument("--walk", type=float, default=3.0, help="seconds of mode request Locomotion")
     parser.add_argument("--vx", type=float, default=0.2, help="forward reference velocity while walking [m/s]")
