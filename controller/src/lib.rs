@@ -50,6 +50,7 @@ pub mod mpc;
 mod mpc_schedule;
 pub mod robot_config;
 mod statics;
+mod steep_ground;
 pub mod tuning;
 mod validation;
 

@@ -12,6 +12,7 @@ use crate::estimate::Estimate;
 use crate::footholds::{FootholdPlanner, MotionTarget, StanceGround};
 use crate::math::{rot_z, wrap_angle};
 use crate::mpc::{ConvexMpc, MpcInput, MpcParams, MpcStatus, MPC_STATES};
+use crate::steep_ground::SteepGround;
 
 /// Farthest the start of the MPC's xy reference may lead the measured base, m: a larger error
 /// would saturate the QP's forces.
@@ -31,6 +32,9 @@ pub struct MpcScheduler {
     mass: f64,
     /// CoM offset from the base origin, base frame, m.
     com_offset_body: Vector3<f64>,
+    /// Configured friction coefficient, and the margin kept above tan(slope) on steep ground.
+    mu: f64,
+    mu_slope_margin: f64,
     ticks_since_mpc: usize,
     forces: [[f64; 3]; NUM_LEGS],
     /// Contacts of the last solve (a change triggers a new solve).
@@ -110,6 +114,8 @@ impl MpcScheduler {
         Ok(MpcScheduler {
             mpc,
             every_ticks: config.mpc_every_ticks,
+            mu: config.mu,
+            mu_slope_margin: config.mu_slope_margin,
             horizon: n,
             dt: config.mpc_dt,
             mass,
@@ -181,7 +187,9 @@ impl MpcScheduler {
         self.solved_contacts = contacts;
         let n = self.horizon;
         let dt = self.dt;
-        let height = footholds.body_height(reference);
+        let normal = footholds.friction_normal(reference, estimate, contacts);
+        let steep = SteepGround::new(&normal, self.mu, self.mu_slope_margin);
+        let height = footholds.body_height(reference) * steep.height_scale;
         let com_now = estimate.position + estimate.rotation * self.com_offset_body;
         let yaw_now = target.yaw + wrap_angle(estimate.rpy.z - target.yaw);
         let x0 = {
@@ -273,7 +281,9 @@ impl MpcScheduler {
                 };
             }
         }
-        let normal = footholds.friction_normal(reference, estimate, contacts);
+        if let Err(reason) = self.mpc.set_friction(steep.mu) {
+            tracing::warn!(%reason, "steep-ground friction refused; the last one is kept");
+        }
         let input = MpcInput {
             x0,
             reference: &self.reference,

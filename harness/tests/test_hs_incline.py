@@ -22,6 +22,7 @@ from pfnav_harness.incline import (
     WALK_DISTANCE,
     incline_scenario,
     incline_terrain,
+    lying_pose,
     run_incline,
     stance_slips,
     straight_plan,
@@ -33,8 +34,14 @@ from pfnav_harness.world import QuadrupedWorld
 # Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
 ROBOT = RobotDescription.load(paths.default_robot_config_path())
 
-# Steepest slope the current controller stands up and walks on in all three directions.
+# Steepest slope the current controller stands up and walks on in all three directions (with the
+# stance slip below 3 cm).
 PASSING_ANGLE = 20.0
+# The directions it also walks at 30° (down falls while stopping at the end: docs/slopes.md), where
+# stance feet slip up to 6 cm.
+STEEP_ANGLE = 30.0
+STEEP_DIRECTIONS = ("up", "across")
+STEEP_MAX_SLIP = 0.08
 # Required walk along the direction (of the 3 m reference).
 MIN_WALKED = 2.5
 
@@ -130,6 +137,21 @@ def test_the_aligned_pose_leaves_the_support_polygon_on_a_steep_cross_slope(tmp_
     assert margins[30.0] < 0.0
 
 
+def test_set_down_lying_the_robot_keeps_its_centre_of_mass_over_its_feet_at_30_across(tmp_path: Path) -> None:
+    """The benchmark's start pose: the crouch bent further, inside the joint limits, low enough
+    that the centre of mass stays inside the feet's polygon where the crouch leaves it."""
+    scenario = incline_scenario(30.0, "across")
+    world = QuadrupedWorld(scenario.terrain, ROBOT, tmp_path)
+    pose = lying_pose(world)
+    crouch = ROBOT.crouch
+    np.testing.assert_allclose(pose[0::3], crouch[0::3])
+    assert np.all(np.abs(pose[1::3]) > np.abs(crouch[1::3])) and np.all(np.abs(pose[2::3]) > np.abs(crouch[2::3]))
+    joints = [world.robot.getJoint(name) for name in ROBOT.joint_names]
+    assert all(j.getPositionLowerLimit(0) < q < j.getPositionUpperLimit(0) for j, q in zip(joints, pose, strict=True))
+    world.place(*scenario.start, scenario.start_yaw, joint_positions=pose)
+    assert support_margin(world) > 0.02
+
+
 @pytest.fixture(scope="module")
 def fmu() -> Path:
     try:
@@ -149,3 +171,17 @@ def test_the_robot_stands_up_and_walks_the_slope(direction: str, fmu: Path, tmp_
     # The feet hold: a stance foot that slides by centimetres is a robot about to slip away.
     assert outcome.max_stance_slip < 0.03, summary
     assert not outcome.non_foot_contacts, f"{summary}; links on the ground: {outcome.non_foot_contacts}"
+
+
+@pytest.mark.parametrize("direction", STEEP_DIRECTIONS)
+def test_the_robot_walks_30_degrees_up_and_across(direction: str, fmu: Path, tmp_path: Path) -> None:
+    """On steep ground the MPC keeps `mpc.muSlopeMargin` of friction above tan(slope) and lowers the
+    body; with the margin at 0 (the configured μ 0.6 alone) it falls up and tips across
+    (docs/slopes.md)."""
+    run = run_incline(STEEP_ANGLE, direction, fmu, ROBOT, tmp_path, friction=0.8)
+    outcome = run.outcome
+    summary = f"{STEEP_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
+    assert outcome.stood_up, summary
+    assert not outcome.fell, summary
+    assert outcome.walked >= MIN_WALKED, summary
+    assert outcome.max_stance_slip < STEEP_MAX_SLIP, summary

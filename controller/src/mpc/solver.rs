@@ -126,6 +126,16 @@ impl ConvexMpc {
                 .all(|pair| wrap_angle(pair[1][2] - pair[0][2]).abs() <= MAX_YAW_STEP)
     }
 
+    /// Sets the friction coefficient of the following solves' pyramids (finite and > 0; else
+    /// refused and unchanged).
+    pub fn set_friction(&mut self, mu: f64) -> Result<(), String> {
+        if !(mu.is_finite() && mu > 0.0) {
+            return Err(format!("friction coefficient {mu} must be finite and > 0"));
+        }
+        self.params.mu = mu;
+        Ok(())
+    }
+
     /// Solve one MPC problem. Never panics; invalid input or solver failure is reported in the
     /// status (forces are then zero and the caller falls back).
     pub fn solve(&mut self, input: &MpcInput<'_>) -> MpcSolution {

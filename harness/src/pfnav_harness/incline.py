@@ -18,6 +18,11 @@ world that records foot positions and non-foot contacts):
   the sphere is not counted);
 - attitude error: body pitch and roll minus those of a body levelled with the plane;
 - torque: peak |commanded torque| / effort limit, per joint (> 1: the physics clamps it).
+
+The robot is set down lying on the plane (`lying_pose`: the robot config's crouch bent further),
+body parallel to it, as one would put a robot down on a steep slope: in the crouch a robot
+stands almost at full height, and on a 30° plane its centre of mass then lies outside its feet
+across the slope before the controller has done anything (docs/slopes.md, 3b).
 """
 
 from __future__ import annotations
@@ -390,6 +395,23 @@ class InclineRun:
     plan: Plan
 
 
+# How much further than its crouch the robot's hips and knees are bent when it is set down.
+LYING_BEND = 1.5
+# Distance kept from the joint limits when bending, rad.
+LYING_LIMIT_MARGIN = 0.05
+
+
+def lying_pose(world: QuadrupedWorld) -> NDArray[np.float64]:
+    """The robot config's crouch with hip and knee angles × `LYING_BEND`, inside the joint limits."""
+    pose = np.array(world.description.crouch, dtype=np.float64)
+    pose[1::3] *= LYING_BEND
+    pose[2::3] *= LYING_BEND
+    joints = [world.robot.getJoint(name) for name in world.description.joint_names]
+    lower = np.array([j.getPositionLowerLimit(0) for j in joints]) + LYING_LIMIT_MARGIN
+    upper = np.array([j.getPositionUpperLimit(0) for j in joints]) - LYING_LIMIT_MARGIN
+    return np.clip(pose, np.minimum(lower, upper), np.maximum(lower, upper))
+
+
 def run_incline(
     angle_deg: float,
     direction: str,
@@ -424,6 +446,7 @@ def run_incline(
         raise
 
     with sim:
+        sim.world.place(float(plan.x[0]), float(plan.y[0]), float(plan.yaw[0]), joint_positions=lying_pose(sim.world))
         placed_margin = support_margin(sim.world)
         probe = WorldProbe(sim.world, max(1, round(sim.duration() / config.physics_dt)) + 1)
         begin = time.perf_counter()
