@@ -37,11 +37,10 @@ ROBOT = RobotDescription.load(paths.default_robot_config_path())
 # Steepest slope the current controller stands up and walks on in all three directions (with the
 # stance slip below 3 cm).
 PASSING_ANGLE = 20.0
-# The directions it also walks at 30° (down falls while stopping at the end: docs/slopes.md), where
-# stance feet slip up to 6 cm.
+# The steepest slope of the issue's grid, walked in every direction by the steep-ground rule; stance
+# feet slip more there (up to 14 cm while braking at the end of the walk down).
 STEEP_ANGLE = 30.0
-STEEP_DIRECTIONS = ("up", "across")
-STEEP_MAX_SLIP = 0.08
+STEEP_MAX_SLIP = 0.15
 # Required walk along the direction (of the 3 m reference).
 MIN_WALKED = 2.5
 
@@ -173,11 +172,11 @@ def test_the_robot_stands_up_and_walks_the_slope(direction: str, fmu: Path, tmp_
     assert not outcome.non_foot_contacts, f"{summary}; links on the ground: {outcome.non_foot_contacts}"
 
 
-@pytest.mark.parametrize("direction", STEEP_DIRECTIONS)
-def test_the_robot_walks_30_degrees_up_and_across(direction: str, fmu: Path, tmp_path: Path) -> None:
-    """On steep ground the MPC keeps `mpc.muSlopeMargin` of friction above tan(slope) and lowers the
-    body; with the margin at 0 (the configured μ 0.6 alone) it falls up and tips across
-    (docs/slopes.md)."""
+@pytest.mark.parametrize("direction", list(DIRECTIONS))
+def test_the_robot_walks_30_degrees(direction: str, fmu: Path, tmp_path: Path) -> None:
+    """On steep ground the MPC keeps `mpc.muSlopeMargin` of friction above tan(slope), lowers the
+    body and limits the reference's accelerations; with the margin at 0 (the configured μ 0.6
+    alone) it falls up and across and while stopping down (docs/slopes.md)."""
     run = run_incline(STEEP_ANGLE, direction, fmu, ROBOT, tmp_path, friction=0.8)
     outcome = run.outcome
     summary = f"{STEEP_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"

@@ -12,6 +12,7 @@ use crate::estimate::Estimate;
 use crate::estimator::StancePlan;
 use crate::footholds::{FootholdPlanner, MotionTarget};
 use crate::gait::{swing_trajectory, Gait, LegPhase};
+use crate::steep_ground::{ReferenceGovernor, SteepGround};
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Locomotion {
@@ -27,6 +28,11 @@ pub struct Locomotion {
     footholds: [Vector3<f64>; NUM_LEGS],
     /// Foot position at touchdown of each leg's current stance, world frame, m.
     stance_anchor: [Vector3<f64>; NUM_LEGS],
+    /// The reference's accelerations limited on steep ground.
+    governor: ReferenceGovernor,
+    /// Configured friction coefficient and the margin kept above tan(slope) (steep ground).
+    mu: f64,
+    mu_slope_margin: f64,
 }
 
 impl Locomotion {
@@ -39,6 +45,9 @@ impl Locomotion {
             swing_start: [Vector3::zeros(); NUM_LEGS],
             footholds: [Vector3::zeros(); NUM_LEGS],
             stance_anchor: [Vector3::zeros(); NUM_LEGS],
+            governor: ReferenceGovernor::default(),
+            mu: config.mu,
+            mu_slope_margin: config.mu_slope_margin,
         }
     }
 
@@ -48,6 +57,7 @@ impl Locomotion {
         self.stance_anchor = estimate.feet_world;
         self.swing_start = estimate.feet_world;
         self.footholds = estimate.feet_world;
+        self.governor = ReferenceGovernor::starting_at([estimate.velocity.x, estimate.velocity.y]);
     }
 
     pub fn run(&mut self, stages: &mut Stages, tick: &Tick) -> Actuation {
@@ -61,11 +71,21 @@ impl Locomotion {
         let t = self.gait_time;
         let contacts = self.gait.contacts(t);
         self.track_contact_edges(estimate, contacts);
+        let normal = stages
+            .footholds
+            .friction_normal(reference, estimate, contacts);
+        let steep = SteepGround::new(&normal, self.mu, self.mu_slope_margin);
+        let (xy, velocity) = self.governor.step(
+            [reference.x, reference.y],
+            [reference.vx, reference.vy],
+            steep.max_acceleration,
+            dt,
+        );
         let target = MotionTarget {
-            xy: [reference.x, reference.y],
+            xy,
             roll: 0.0,
             yaw: reference.yaw,
-            velocity: [reference.vx, reference.vy],
+            velocity,
             yaw_rate: reference.yaw_rate,
         };
         self.plan_touchdowns(&stages.footholds, estimate, reference, &target);
