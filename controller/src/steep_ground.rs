@@ -108,8 +108,8 @@ impl ReferenceGovernor {
             1.0 / LEAD_TIME_CONSTANT
         };
         let decay = (1.0 - dt * return_rate).max(0.0);
-        for i in 0..2 {
-            self.lead[i] = self.lead[i] * decay + (self.velocity[i] - velocity[i]) * dt;
+        for ((lead, governed), given) in self.lead.iter_mut().zip(self.velocity).zip(velocity) {
+            *lead = *lead * decay + (governed - given) * dt;
         }
         (
             [xy[0] + self.lead[0], xy[1] + self.lead[1]],
