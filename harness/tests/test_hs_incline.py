@@ -159,28 +159,29 @@ def fmu() -> Path:
         pytest.fail(str(err), pytrace=False)
 
 
-@pytest.mark.parametrize("direction", list(DIRECTIONS))
-def test_the_robot_stands_up_and_walks_the_slope(direction: str, fmu: Path, tmp_path: Path) -> None:
-    run = run_incline(PASSING_ANGLE, direction, fmu, ROBOT, tmp_path, friction=0.8)
+def walk_the_slope(angle: float, direction: str, fmu: Path, tmp_path: Path, max_slip: float) -> dict[str, float]:
+    """Runs the incline benchmark's case and checks it passed; returns the links other than the feet that touched the ground (first time, s)."""
+    run = run_incline(angle, direction, fmu, ROBOT, tmp_path, friction=0.8)
     outcome = run.outcome
-    summary = f"{PASSING_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
+    summary = f"{angle:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
     assert outcome.stood_up, summary
     assert not outcome.fell, summary
     assert outcome.walked >= MIN_WALKED, summary
     # The feet hold: a stance foot that slides by centimetres is a robot about to slip away.
-    assert outcome.max_stance_slip < 0.03, summary
-    assert not outcome.non_foot_contacts, f"{summary}; links on the ground: {outcome.non_foot_contacts}"
+    assert outcome.max_stance_slip < max_slip, summary
+    return outcome.non_foot_contacts
+
+
+@pytest.mark.parametrize("direction", list(DIRECTIONS))
+def test_the_robot_stands_up_and_walks_the_slope(direction: str, fmu: Path, tmp_path: Path) -> None:
+    touching = walk_the_slope(PASSING_ANGLE, direction, fmu, tmp_path, max_slip=0.03)
+    assert not touching, f"links on the ground: {touching}"
 
 
 @pytest.mark.parametrize("direction", list(DIRECTIONS))
 def test_the_robot_walks_30_degrees(direction: str, fmu: Path, tmp_path: Path) -> None:
     """On steep ground the MPC keeps `mpc.muSlopeMargin` of friction above tan(slope), lowers the
     body and limits the reference's accelerations; with the margin at 0 (the configured μ 0.6
-    alone) it falls up and across and while stopping down (docs/slopes.md)."""
-    run = run_incline(STEEP_ANGLE, direction, fmu, ROBOT, tmp_path, friction=0.8)
-    outcome = run.outcome
-    summary = f"{STEEP_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
-    assert outcome.stood_up, summary
-    assert not outcome.fell, summary
-    assert outcome.walked >= MIN_WALKED, summary
-    assert outcome.max_stance_slip < STEEP_MAX_SLIP, summary
+    alone) it falls up and across and while stopping down (docs/slopes.md). Lying on a 30° plane
+    down, the thighs touch the ground as it is set down."""
+    walk_the_slope(STEEP_ANGLE, direction, fmu, tmp_path, max_slip=STEEP_MAX_SLIP)
