@@ -189,19 +189,19 @@ pub struct RobotFiles {
 impl RobotFiles {
     /// Reads the config at `config_path`, its URDF and every mesh the URDF names.
     pub fn collect(config_path: &Path, packages: &PackagePath) -> Result<Self, BundleError> {
-        let robot_error = |reason: String| BundleError::Robot(reason);
-        let config_text = String::from_utf8(read(config_path)?)
-            .map_err(|_| robot_error(format!("{}: not UTF-8 text", config_path.display())))?;
+        let config_text = String::from_utf8(read(config_path)?).map_err(|_| {
+            BundleError::Robot(format!("{}: not UTF-8 text", config_path.display()))
+        })?;
         let config = quad_controller::RobotConfig::from_toml_str(
             &config_text,
             &config_path.display().to_string(),
         )
-        .map_err(|e| robot_error(e.to_string()))?;
+        .map_err(|e| BundleError::Robot(e.to_string()))?;
         let urdf_path = config
             .urdf_path(config_path, packages)
-            .map_err(|e| robot_error(e.to_string()))?;
+            .map_err(|e| BundleError::Robot(e.to_string()))?;
         let urdf_text = String::from_utf8(read(&urdf_path)?)
-            .map_err(|_| robot_error(format!("{}: not UTF-8 text", urdf_path.display())))?;
+            .map_err(|_| BundleError::Robot(format!("{}: not UTF-8 text", urdf_path.display())))?;
         // Checked as the user's files first, so that an error names them, not the copies.
         RobotModel::from_named_texts(
             &config_text,
@@ -209,9 +209,9 @@ impl RobotFiles {
             &urdf_text,
             &urdf_path.display().to_string(),
         )
-        .map_err(|e| robot_error(e.to_string()))?;
+        .map_err(|e| BundleError::Robot(e.to_string()))?;
         let robot = urdf_rs::read_from_string(&urdf_text)
-            .map_err(|e| robot_error(format!("{}: {e}", urdf_path.display())))?;
+            .map_err(|e| BundleError::Robot(format!("{}: {e}", urdf_path.display())))?;
         let urdf_dir = urdf_path.parent().unwrap_or_else(|| Path::new("."));
         let mut urdf = urdf_text.clone();
         let mut meshes: Vec<(String, Vec<u8>)> = Vec::new();
@@ -232,7 +232,7 @@ impl RobotFiles {
                 seen.push(filename.clone());
                 let local = filename.strip_prefix("file://").unwrap_or(filename);
                 let source = packages.resolve(local, urdf_dir).map_err(|reason| {
-                    robot_error(format!(
+                    BundleError::Robot(format!(
                         "{}: mesh of link `{}`: {reason}",
                         urdf_path.display(),
                         link.name
@@ -259,10 +259,10 @@ impl RobotFiles {
             }
         }
         let mut table: toml::Table = toml::from_str(&config_text)
-            .map_err(|e| robot_error(format!("{}: {e}", config_path.display())))?;
+            .map_err(|e| BundleError::Robot(format!("{}: {e}", config_path.display())))?;
         table.insert("urdf".to_owned(), toml::Value::String(URDF_FILE.to_owned()));
         let body = toml::to_string(&table)
-            .map_err(|e| robot_error(format!("{}: {e}", config_path.display())))?;
+            .map_err(|e| BundleError::Robot(format!("{}: {e}", config_path.display())))?;
         let config_name = config_path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())

@@ -8,14 +8,15 @@
 //! * [`instance`] — the call-state machine (instantiated → initializationMode → stepComplete ⇄
 //!   stepFailed → terminated) around one `Controller`.
 //! * [`variables`] — the single variable table (with each parameter's `min`/`max`, taken from
-//!   `quad_controller::limits`); [`model_description`] turns it into `modelDescription.xml` and
-//!   `documentation/index.html`.
+//!   `quad_controller::limits`), built for the robot an FMU carries; [`model_description`] turns
+//!   it into `modelDescription.xml` and `documentation/index.html`.
 //! * [`budget`] — the most control ticks one `fmi2DoStep` may run (so every call returns within
 //!   1 s whatever the parameters and step size).
-//! * [`resources`] — `fmuResourceLocation` (file URI) → `resources/quadruped.urdf` and
-//!   `resources/controller.json`.
+//! * [`resources`] — `fmuResourceLocation` (file URI) → the robot in `resources/robot/` (config,
+//!   URDF) and `resources/controller.json`, checked, with their variable table.
 //! * [`saved_state`] — FMU states (`fmi2GetFMUstate` & co.) and their serialized form.
-//! * [`bundle`] — writes `QuadController.fmu` (used by the `bundle-fmu` binary).
+//! * [`bundle`] — writes `QuadController.fmu` for a robot config, its URDF and meshes (used by the
+//!   `bundle-fmu` binary).
 //!
 //! # Timing
 #![doc = include_str!("timing.md")]
