@@ -186,7 +186,6 @@ pub struct VariableTable {
     robot_name: String,
     rows: Vec<Variable>,
     initial_state: RobotState,
-    initial_reference: Reference,
 }
 
 impl VariableTable {
@@ -201,7 +200,6 @@ impl VariableTable {
             robot_name: model.name().to_owned(),
             rows: Vec::new(),
             initial_state: RobotState::default(),
-            initial_reference: Reference::default(),
         };
         // The parameters' ranges do not depend on the start pose: check them first, so that a
         // bad value is named by its FMI variable rather than by the controller's refusal.
@@ -250,7 +248,7 @@ impl VariableTable {
 
     /// The inputs of a fresh instance (also the XML `start` values).
     pub fn initial_inputs(&self) -> (RobotState, Reference) {
-        (self.initial_state, self.initial_reference)
+        (self.initial_state, Reference::default())
     }
 
     /// The outputs before the first doStep: no torque, no contact scheduled, FSM passive, the
