@@ -213,13 +213,20 @@ impl LegControl {
         for leg in Leg::ALL {
             let base = 3 * leg.index();
             let p_body = rt * (feet[leg.index()] - pose.position);
-            let solution = model
-                .try_inverse_kinematics(leg, [p_body.x, p_body.y, p_body.z])
-                .filter(|q| q.iter().all(|v| v.is_finite()));
+            let mut lower = [0.0; 3];
+            let mut upper = [0.0; 3];
+            lower.copy_from_slice(&self.lower_limits[base..base + 3]);
+            upper.copy_from_slice(&self.upper_limits[base..base + 3]);
+            let solution = model.inverse_kinematics_within_limits(
+                leg,
+                [p_body.x, p_body.y, p_body.z],
+                lower,
+                upper,
+            );
             for j in 0..3 {
                 let i = base + j;
                 targets[i] = match solution {
-                    Some(q) => q[j].clamp(self.lower_limits[i], self.upper_limits[i]),
+                    Some(q) => q[j],
                     None => start[i] + (self.stand_joint_positions[i] - start[i]) * s,
                 };
             }

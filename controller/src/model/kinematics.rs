@@ -29,6 +29,12 @@ enum IkFailure {
     NotConverged { residual: f64 },
 }
 
+/// Iterations, damping (rad²·m⁻² scale of JᵀJ) and step tolerance of the joint-limited IK's
+/// least-squares refinement: it starts from the clamped closed-form solution, a few steps settle it.
+const LIMITED_IK_ITERATIONS: usize = 20;
+const LIMITED_IK_DAMPING: f64 = 1e-6;
+const LIMITED_IK_TOLERANCE: f64 = 1e-9;
+
 fn axis_rotation(axis: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
     *Rotation3::from_axis_angle(&nalgebra::Unit::new_unchecked(*axis), angle).matrix()
 }
@@ -151,6 +157,66 @@ impl RobotModel {
     /// more than the IK itself).
     pub(crate) fn try_inverse_kinematics(&self, leg: Leg, p_body: [f64; 3]) -> Option<[f64; 3]> {
         self.solve_ik(leg, p_body).ok()
+    }
+
+    /// Joint angles inside `[lower, upper]` that put the foot as close to `p_body` (base frame)
+    /// as those limits allow: the IK solution where it lies inside them; otherwise the joints
+    /// beyond a limit are held at it and the others are moved (least squares) to bring the foot
+    /// nearest the target. Clamping the IK solution alone would keep the hip aimed for a knee
+    /// bend the knee cannot make and swing the foot off its spot. `None` when the IK has no
+    /// solution at all (target out of reach, not finite).
+    pub(crate) fn inverse_kinematics_within_limits(
+        &self,
+        leg: Leg,
+        p_body: [f64; 3],
+        lower: [f64; 3],
+        upper: [f64; 3],
+    ) -> Option<[f64; 3]> {
+        let mut q = self.try_inverse_kinematics(leg, p_body)?;
+        let inside = |j: usize, v: f64| v >= lower[j] && v <= upper[j];
+        if q.iter().enumerate().all(|(j, &v)| inside(j, v)) {
+            return Some(q);
+        }
+        let mut held = [false; 3];
+        for j in 0..3 {
+            held[j] = !inside(j, q[j]);
+            q[j] = q[j].clamp(lower[j], upper[j]);
+        }
+        let target = Vector3::from(p_body);
+        for _ in 0..LIMITED_IK_ITERATIONS {
+            let kinematics = self.foot_kinematics(leg, q);
+            let error = target - kinematics.position;
+            if error.norm() < LIMITED_IK_TOLERANCE {
+                break;
+            }
+            let mut jacobian = kinematics.jacobian;
+            for (j, &is_held) in held.iter().enumerate() {
+                if is_held {
+                    jacobian.set_column(j, &Vector3::zeros());
+                }
+            }
+            // Damped least squares: the held columns are zero, so their joints do not move.
+            let normal = jacobian.transpose() * jacobian + Matrix3::identity() * LIMITED_IK_DAMPING;
+            let Some(step) = normal
+                .try_inverse()
+                .map(|n| n * jacobian.transpose() * error)
+            else {
+                break;
+            };
+            let mut moved = 0.0_f64;
+            for j in 0..3 {
+                let next = (q[j] + step[j]).clamp(lower[j], upper[j]);
+                if next != q[j] + step[j] {
+                    held[j] = true;
+                }
+                moved = moved.max((next - q[j]).abs());
+                q[j] = next;
+            }
+            if moved < LIMITED_IK_TOLERANCE {
+                break;
+            }
+        }
+        q.iter().all(|v| v.is_finite()).then_some(q)
     }
 
     fn solve_ik(&self, leg: Leg, p_body: [f64; 3]) -> Result<[f64; 3], IkFailure> {

@@ -4,8 +4,11 @@
 //! Model: single rigid body with 13 states
 //! `x = [roll, pitch, yaw, p_x, p_y, p_z, ω_x, ω_y, ω_z, v_x, v_y, v_z, g]`
 //! (CoM position/velocity and angular velocity in the world frame, `g = 9.81` a constant state so
-//! gravity enters linearly). Linearised about the reference yaw ψ_k of each step:
-//! `Θ̇ = R_z(ψ_k)ᵀ ω`, `ṗ = v`, `ω̇ = I_w⁻¹ Σ r_i × f_i` with `I_w = R_z I_b R_zᵀ`,
+//! gravity enters linearly). Linearised about the reference attitude (φ_k, θ_k, ψ_k) of each step:
+//! `Θ̇ = T_k ω` with `T_k = T(θ_k, ψ_k)` the ZYX Euler-rate map (`R_z(ψ_k)ᵀ` at θ = 0, the
+//! paper's map, which assumes a level body), `ṗ = v`, `ω̇ = I_w⁻¹ Σ r_i × f_i` with
+//! `I_w = R_k I_b R_kᵀ` and `R_k` the reference rotation (roll and pitch included: on a slope
+//! the body is pitched with the ground, and the yaw-only model destabilised the stand there),
 //! `v̇ = Σ f_i / m − g e_z`. The discretisation is exact for this model (A³ = 0, zero-order hold).
 //!
 //! Decision variables: the ground reaction forces (acting on the robot) of the legs in stance at
@@ -36,15 +39,16 @@
 //!   `v_k = (a_k − a_{k−1})/dt`, and the p rows and the v variables drop out. The v rows become
 //!   second differences of a, and the p and v costs couple consecutive a_k (a tridiagonal block of
 //!   P per axis).
-//! - The rotational states get the same treatment with the step's own yaw:
-//!   `c_k = Θ_k + dt/2 R_kᵀ ω_k` (R_k = R_z(ψ_k), and R_N := R_{N−1} for the last state). The Θ
-//!   rows `Θ_{k+1} − dt/2 R_kᵀ ω_{k+1} = c_k` give `ω_{k+1} = N_k (c_{k+1} − c_k)` with
-//!   `N_k = (dt/2 (R_k + R_{k+1})ᵀ)⁻¹` (invertible while the reference yaw turns by less than π
+//! - The rotational states get the same treatment with the step's own rate map:
+//!   `c_k = Θ_k + dt/2 T_k ω_k` (T_N := T_{N−1} for the last state). The Θ
+//!   rows `Θ_{k+1} − dt/2 T_k ω_{k+1} = c_k` give `ω_{k+1} = N_k (c_{k+1} − c_k)` with
+//!   `N_k = (dt/2 (T_k + T_{k+1}))⁻¹` (invertible while the reference yaw turns by less than π
 //!   per step; [`ConvexMpc::solve`] accepts at most π/2) and
-//!   `Θ_{k+1} = (I − G_k) c_k + G_k c_{k+1}` with `G_k = dt/2 R_kᵀ N_k` (½ I when the yaw is
+//!   `Θ_{k+1} = (I − G_k) c_k + G_k c_{k+1}` with `G_k = dt/2 T_k N_k` (½ I when the attitude is
 //!   constant). The Θ rows and the Θ and ω variables drop out, the ω rows couple c_{k−1}, c_k
 //!   and c_{k+1}, and the Θ and ω costs become 3×3 blocks of P on (c_k, c_{k+1}). N_k and G_k
-//!   have the pattern of a yaw rotation (x and y mix, z stays apart), which P and A keep.
+//!   have the pattern of T (x and y mix, the z row takes all three, nothing above the z entry),
+//!   which the c columns of A keep; the cost blocks of P are full.
 //!
 //!   Per step that leaves 6 state variables (c, a) and 6 rows (ω, v), against 12 and 12 for
 //!   (Θ, p, ω, v): the KKT matrix of a trot has 300 rows and its LDL factor 1 950 nonzeros (360
@@ -60,7 +64,8 @@
 //!
 //! Reuse: all work buffers are allocated once; Clarabel solvers are cached per contact schedule
 //! over the horizon (which fixes the sparsity of P and A), and later solves with the same
-//! schedule only update the numeric values (`update_P/q/A/b`; P changes with the reference yaw
+//! schedule only update the numeric values (`update_P/q/A/b`; P changes with the reference
+//! attitude).
 //!
 //! Layout: [`model`] holds the per-step matrices of the dynamics rows and the terrain frame,
 //! `qp` assembles the sparse QP, `solver` validates input, caches Clarabel solvers per contact
@@ -84,12 +89,12 @@ use model::StageModel;
 
 /// Number of MPC states.
 pub const MPC_STATES: usize = 13;
-/// State variables and dynamics rows of the QP per step: c = Θ + dt/2 R_zᵀ ω and
+/// State variables and dynamics rows of the QP per step: c = Θ + dt/2 T ω and
 /// a = p + dt/2 v (variables); ω and v rows (see the module documentation).
 const NS: usize = 6;
-/// Components of a rotational 3-vector that a yaw rotation mixes with component j: x and y mix,
-/// z stays apart. N_k, G_k and hence the c blocks of P and A have this pattern.
-const YAW_GROUP: [&[usize]; 3] = [&[0, 1], &[0, 1], &[2]];
+/// Rows of column j that N_k (like the Euler-rate map T_k) can fill: x and y mix, and the z row
+/// takes all three; column z has its z entry only. The c columns of A have this pattern.
+const RATE_ROWS: [&[usize]; 3] = [&[0, 1, 2], &[0, 1, 2], &[2]];
 /// Largest change of the reference yaw between two MPC steps, rad (N_k is singular at π); a
 /// reference turning faster is invalid input.
 pub const MAX_YAW_STEP: f64 = std::f64::consts::FRAC_PI_2;

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::model::terrain_frame;
-use super::{ConvexMpc, MpcInput, COST_SCALE, MPC_STATES, NS, ROWS_PER_FOOT, YAW_GROUP};
+use super::{ConvexMpc, MpcInput, COST_SCALE, MPC_STATES, NS, RATE_ROWS, ROWS_PER_FOOT};
 
 impl ConvexMpc {
     /// The Θ and ω costs as blocks on the c variables (`c_diag`, `c_off`, `c_linear`): per step
@@ -62,7 +62,7 @@ impl ConvexMpc {
         let x0 = &input.x0;
         let a0 = [0, 1, 2].map(|j| x0[3 + j] + half_dt * x0[9 + j]);
         let omega0 = Vector3::new(x0[6], x0[7], x0[8]);
-        let c0 = Vector3::new(x0[0], x0[1], x0[2]) + self.stages.rz_t[0] * omega0 * half_dt;
+        let c0 = Vector3::new(x0[0], x0[1], x0[2]) + self.stages.rate_map[0] * omega0 * half_dt;
         self.rotational_cost(input, &c0);
         self.p_colptr.clear();
         self.p_rowval.clear();
@@ -116,19 +116,21 @@ impl ConvexMpc {
             let coefficients = [omega_of_c[k], -(omega_of_c[k] + next), next];
             for j in 0..3 {
                 for (step, coefficient) in (k..n).zip(&coefficients) {
-                    for &i in YAW_GROUP[j] {
+                    for &i in RATE_ROWS[j] {
                         self.a_rowval.push(NS * step + i);
                         self.a_values.push(coefficient[(i, j)]);
                     }
                 }
                 self.a_colptr.push(self.a_rowval.len());
+                // The Θ and ω cost blocks on c are full 3×3 (the z row of N_k and G_k mixes in
+                // x and y).
                 if k > 0 {
-                    for &i in YAW_GROUP[j] {
+                    for i in 0..3 {
                         self.p_rowval.push(prev_c_col + i);
                         self.p_values.push(self.c_off[k][(i, j)]);
                     }
                 }
-                for &i in YAW_GROUP[j].iter().filter(|&&i| i <= j) {
+                for i in 0..=j {
                     self.p_rowval.push(this_c_col + i);
                     self.p_values.push(self.c_diag[k][(i, j)]);
                 }

@@ -129,10 +129,10 @@ impl Rollout {
             for i in 0..12 {
                 cost += params.q_weights[i] * (x[i] - REFERENCE[k][i]).powi(2);
             }
-            // c_{k+1} uses R_{k+1}, and R_N := R_{N−1} for the last step.
-            let rz_t = mpc.stages.rz_t[(k + 1).min(2)];
+            // c_{k+1} uses T_{k+1}, and T_N := T_{N−1} for the last step.
+            let rate_map = mpc.stages.rate_map[(k + 1).min(2)];
             let c = Vector3::new(x[0], x[1], x[2])
-                + rz_t * Vector3::new(x[6], x[7], x[8]) * (0.5 * params.dt);
+                + rate_map * Vector3::new(x[6], x[7], x[8]) * (0.5 * params.dt);
             z.extend(c.iter());
             z.extend((3..6).map(|i| x[i] + 0.5 * params.dt * x[i + 6]));
         }

@@ -59,7 +59,31 @@ pub fn foot_constraint_rows(normal: [f64; 3], mu: f64) -> [Vector3<f64>; ROWS_PE
     ]
 }
 
-/// The discrete model of every step: A_k about the reference yaw, B_k from the feet.
+fn rot_y(angle: f64) -> Matrix3<f64> {
+    let (s, c) = angle.sin_cos();
+    Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+}
+
+fn rot_x(angle: f64) -> Matrix3<f64> {
+    let (s, c) = angle.sin_cos();
+    Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
+}
+
+/// The map from a world angular velocity to the ZYX Euler-angle rates, as the inverse of the map
+/// `ω = ψ̇ e_z + θ̇ R_z e_y + φ̇ R_z R_y e_x` (its columns: the axes each angle turns about).
+fn euler_rates_of_omega(pitch: f64, yaw: f64) -> Matrix3<f64> {
+    let rz = rot_z(yaw);
+    let omega_of_rates = Matrix3::from_columns(&[
+        rz * rot_y(pitch) * Vector3::x(),
+        rz * Vector3::y(),
+        Vector3::z(),
+    ]);
+    omega_of_rates
+        .try_inverse()
+        .expect("the Euler-rate map is invertible away from pitch ±π/2")
+}
+
+/// The discrete model of every step: A_k about the reference attitude, B_k from the feet.
 pub fn discrete_model(
     params: &MpcParams,
     input: &MpcInput<'_>,
@@ -70,14 +94,15 @@ pub fn discrete_model(
     let inertia_body = inertia_body(params);
     let inv_mass = 1.0 / params.mass;
     for k in 0..params.horizon {
-        let yaw = input.reference[k][2];
-        let rz = rot_z(yaw);
-        let inertia_world = rz * inertia_body * rz.transpose();
+        let [roll, pitch, yaw] = [0, 1, 2].map(|i| input.reference[k][i]);
+        let rotation = rot_z(yaw) * rot_y(pitch) * rot_x(roll);
+        let inertia_world = rotation * inertia_body * rotation.transpose();
         let inertia_world_inv = inertia_world
             .try_inverse()
             .unwrap_or_else(Matrix3::identity);
         let mut a_c = Mat13::zeros();
-        a_c.fixed_view_mut::<3, 3>(0, 6).copy_from(&rz.transpose());
+        a_c.fixed_view_mut::<3, 3>(0, 6)
+            .copy_from(&euler_rates_of_omega(pitch, yaw));
         a_c.fixed_view_mut::<3, 3>(3, 9)
             .copy_from(&Matrix3::identity());
         a_c[(11, 12)] = -1.0;
