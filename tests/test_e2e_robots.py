@@ -2,7 +2,9 @@
 
 A flat 8 m map, the robot placed in its crouch, stand-up (1.5 s), then a straight 1 m trot at the
 planner's nominal speed (`incline.run_incline` at 0°): it stands up, does not fall and walks.
-The robots come from the PyPI package example-robot-data (scripts/requirements-robots.txt).
+The Go1 and the A1 also walk the incline benchmark's 30° cases (3 m up, down and across, set down
+lying; scripts/bench_slopes.py). The robots come from the PyPI package example-robot-data
+(scripts/requirements-robots.txt).
 """
 
 from __future__ import annotations
@@ -14,12 +16,22 @@ import pytest
 from pfnav_harness import paths
 from pfnav_harness.cosim import CoSimConfig
 from pfnav_harness.errors import MissingArtifactError
-from pfnav_harness.incline import run_incline
+from pfnav_harness.incline import DIRECTIONS, WALK_DISTANCE, run_incline
 from pfnav_harness.robot import RobotDescription
 from pfnav_harness.robot_fmu import fmu_for_robot, is_default_robot
 
 PACKAGE_ROOT = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"
 WALK = 1.0
+STEEP_ANGLE = 30.0
+# As for our robot (harness/tests/test_hs_incline.py): feet slip most while braking at the end.
+STEEP_MAX_SLIP = 0.15
+MIN_WALKED = 2.5
+
+
+def third_party_robot(name: str) -> RobotDescription:
+    return RobotDescription.load(
+        paths.repo_root() / "robot" / "third_party" / f"{name}.toml", [PACKAGE_ROOT]
+    )
 
 
 @pytest.fixture(scope="session")
@@ -35,9 +47,7 @@ def fmu_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_third_party_robot_stands_up_and_trots(
     name: str, fmu_file: Path, fmu_cache: Path, tmp_path: Path
 ) -> None:
-    robot = RobotDescription.load(
-        paths.repo_root() / "robot" / "third_party" / f"{name}.toml", [PACKAGE_ROOT]
-    )
+    robot = third_party_robot(name)
     assert not is_default_robot(robot)
     fmu = fmu_for_robot(robot, fmu_cache)
     assert fmu != fmu_file and fmu.parent == fmu_cache
@@ -55,3 +65,28 @@ def test_third_party_robot_stands_up_and_trots(
     assert not outcome.fell, outcome
     assert outcome.walked > 0.7 * WALK, outcome
     assert outcome.non_foot_contacts == {}, outcome
+
+
+@pytest.mark.parametrize("direction", list(DIRECTIONS))
+@pytest.mark.parametrize("name", ["go1", "a1"])
+def test_third_party_robot_walks_30_degrees(
+    name: str, direction: str, fmu_cache: Path, tmp_path: Path
+) -> None:
+    """The A1 passed only once the MPC was linearised about the reference pitch (its stand
+    oscillated in roll from 20° on) and the stand-up IK held the knee at its limit (it lifted its
+    uphill feet 30° across); docs/slopes.md, 4c."""
+    robot = third_party_robot(name)
+    run = run_incline(
+        STEEP_ANGLE,
+        direction,
+        fmu_for_robot(robot, fmu_cache),
+        robot,
+        tmp_path,
+        friction=0.8,
+    )
+    outcome = run.outcome
+    summary = f"{name} {STEEP_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
+    assert outcome.stood_up, summary
+    assert not outcome.fell, summary
+    assert MIN_WALKED <= outcome.walked <= WALK_DISTANCE + 0.5, summary
+    assert outcome.max_stance_slip < STEEP_MAX_SLIP, summary

@@ -29,8 +29,9 @@ enum IkFailure {
     NotConverged { residual: f64 },
 }
 
-/// Iterations, damping (rad²·m⁻² scale of JᵀJ) and step tolerance of the joint-limited IK's
-/// least-squares refinement: it starts from the clamped closed-form solution, a few steps settle it.
+/// Iterations, damping (added to JᵀJ, m²/rad²) and tolerance (m and rad) of the joint-limited
+/// IK's least-squares refinement: it starts from the clamped closed-form solution, and a few
+/// steps settle it.
 const LIMITED_IK_ITERATIONS: usize = 20;
 const LIMITED_IK_DAMPING: f64 = 1e-6;
 const LIMITED_IK_TOLERANCE: f64 = 1e-9;
