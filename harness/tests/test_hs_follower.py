@@ -11,7 +11,7 @@ import pytest
 
 from pfnav_harness.errors import PlannerError
 from pfnav_harness.feedback_field import FeedbackField
-from pfnav_harness.follower import STATUS_FALLBACK, STATUS_GOAL, STATUS_NO_FIELD, STATUS_OK, FieldFollower, FollowerCommand, FollowerLimits
+from pfnav_harness.follower import STATUS_APPROACH, STATUS_FALLBACK, STATUS_GOAL, STATUS_NO_FIELD, STATUS_OK, FieldFollower, FollowerCommand, FollowerLimits
 
 RES = 0.25
 ORIGIN = (-1.0, 2.0)
@@ -328,6 +328,31 @@ def test_slows_down_near_the_goal_and_stops_inside() -> None:
     # Stopped at the stop depth inside the disc, not overshooting through it.
     stop_radius = (1.0 - limits.goal_stop_depth) * goal[2]
     assert stop_radius - 0.02 < math.hypot(x - goal[0], y - goal[1]) <= stop_radius
+
+
+def test_inside_the_goal_disc_it_walks_straight_at_the_centre_whatever_the_field_says() -> None:
+    """The goal set has no direction (cost 0, zero velocity), and samples at its rim blend the
+    approach cells' directions in: here they all point east, past the goal. A robot that believes
+    it is inside the disc, north of the centre and short of the stop depth, walks to the centre
+    and stops; following the blend it would leave the disc eastwards and never come back."""
+    goal = (ORIGIN[0] + 6.0, ORIGIN[1] + 6.0, 0.5)
+    field = uniform_field((48, 48), (1.0, 0.0), 0.5, goal)
+    limits = FollowerLimits()
+    follower = FieldFollower(field, limits)
+    x, y, yaw = goal[0] + 0.1, goal[1] + 0.45, -math.pi / 2
+    dt = 0.002
+    first = follower.command(x, y, yaw, dt)
+    assert first.status == STATUS_APPROACH and not first.reached
+    farthest = 0.0
+    for _ in range(5000):
+        cmd = follower.command(x, y, yaw, dt)
+        x += cmd.vx * dt
+        y += cmd.vy * dt
+        yaw = cmd.yaw
+        farthest = max(farthest, math.hypot(x - goal[0], y - goal[1]))
+    assert cmd.reached and cmd.status == STATUS_GOAL
+    assert math.hypot(x - goal[0], y - goal[1]) <= (1.0 - limits.goal_stop_depth) * goal[2]
+    assert farthest <= goal[2]
 
 
 def test_turns_first_when_facing_away() -> None:

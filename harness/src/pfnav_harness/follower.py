@@ -11,7 +11,8 @@ the goal. The follower shapes u* into a command a legged controller can take:
   acceleration limited tracker; while the heading error is large the translational speed drops so
   that the robot turns first instead of walking sideways;
 * inside `slow_radius` of the goal's edge the speed shrinks in proportion to the distance (down
-  to `min_approach_speed`, so the robot does arrive), inside the goal disc it is zero;
+  to `min_approach_speed`, so the robot does arrive); inside the goal disc, where the field has no
+  direction, the robot walks straight at the centre until it is `goal_stop_depth` deep, then stops;
 * off the field's reachable support (pushed next to an obstacle, off the map) it steers by the
   steepest descent of the cost-to-go around the nearest reachable cell within two cells, and
   commands zero velocity when there is none.
@@ -29,6 +30,8 @@ STATUS_OK = "ok"
 # Off the field's support: steering by the cost-to-go's steepest descent next to the robot.
 STATUS_FALLBACK = "fallback"
 STATUS_GOAL = "goal"
+# Inside the goal disc, short of the stop depth: straight at the goal's centre.
+STATUS_APPROACH = "approach"
 STATUS_NO_FIELD = "no_field"
 
 # A sampled velocity shorter than this (m/s) has no usable direction (opposite cells cancelling).
@@ -168,22 +171,17 @@ class FieldFollower:
             status = STATUS_GOAL
             cost_to_go = 0.0
         else:
-            status = STATUS_OK
-            sample = self._field.sample(x, y)
-            if sample is not None:
-                speed = math.hypot(sample.vx, sample.vy)
-                cost_to_go = sample.cost_to_go
-            if speed > _MIN_FIELD_SPEED:
-                ux = sample.vx / speed
-                uy = sample.vy / speed
+            if centre_distance <= self._goal_radius:
+                # The goal set is absorbing (cost 0, no velocity), and samples near its rim blend
+                # that zero with the approach cells' directions into a short vector that can point
+                # anywhere: a robot there crept on it and turned in place for the rest of its run.
+                status = STATUS_APPROACH
+                ux = (self._goal_x - x) / centre_distance
+                uy = (self._goal_y - y) / centre_distance
+                speed = self._field_max_speed
+                cost_to_go = 0.0
             else:
-                descent = self._steepest_descent(x, y)
-                if descent is None:
-                    status = STATUS_NO_FIELD
-                    speed = 0.0
-                else:
-                    status = STATUS_FALLBACK
-                    ux, uy, speed, cost_to_go = descent
+                status, ux, uy, speed, cost_to_go = self._field_direction(x, y)
             if lim.max_speed is not None and speed > lim.max_speed:
                 speed = lim.max_speed
             if distance_to_goal < lim.slow_radius:
@@ -227,6 +225,19 @@ class FieldFollower:
         self._vx += dvx
         self._vy += dvy
         return FollowerCommand(self._vx, self._vy, math.remainder(self._yaw, math.tau), rate, reached, status, cost_to_go)
+
+    def _field_direction(self, x: float, y: float) -> tuple[str, float, float, float, float]:
+        """(status, direction x, direction y, speed, cost-to-go) of the field at the robot, by the
+        steepest descent next to it where the field has no direction, zero speed where neither has one."""
+        sample = self._field.sample(x, y)
+        if sample is not None:
+            speed = math.hypot(sample.vx, sample.vy)
+            if speed > _MIN_FIELD_SPEED:
+                return STATUS_OK, sample.vx / speed, sample.vy / speed, speed, sample.cost_to_go
+        descent = self._steepest_descent(x, y)
+        if descent is None:
+            return STATUS_NO_FIELD, 0.0, 0.0, 0.0, sample.cost_to_go if sample is not None else math.nan
+        return (STATUS_FALLBACK, *descent)
 
     def _steepest_descent(self, x: float, y: float) -> tuple[float, float, float, float] | None:
         """(direction x, direction y, speed, that cell's cost-to-go) from the nearest reachable cell within the search radius.
