@@ -16,7 +16,7 @@ import pytest
 from pfnav_harness import paths
 from pfnav_harness.cosim import CoSimConfig
 from pfnav_harness.errors import MissingArtifactError
-from pfnav_harness.incline import DIRECTIONS, WALK_DISTANCE, run_incline
+from pfnav_harness.incline import DIRECTIONS, MIN_WALKED, WALK_DISTANCE, run_incline
 from pfnav_harness.robot import RobotDescription
 from pfnav_harness.robot_fmu import fmu_for_robot, is_default_robot
 
@@ -25,7 +25,6 @@ WALK = 1.0
 STEEP_ANGLE = 30.0
 # As for our robot (harness/tests/test_hs_incline.py): feet slip most while braking at the end.
 STEEP_MAX_SLIP = 0.15
-MIN_WALKED = 2.5
 
 
 def third_party_robot(name: str) -> RobotDescription:

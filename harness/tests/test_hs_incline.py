@@ -7,6 +7,7 @@ The closed-loop tests use the steepest angle the current controller passes in ev
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -18,8 +19,10 @@ from pfnav_harness import paths
 from pfnav_harness.errors import MissingArtifactError, ScenarioError
 from pfnav_harness.incline import (
     DIRECTIONS,
+    MIN_WALKED,
     NOMINAL_SPEED,
     WALK_DISTANCE,
+    InclineOutcome,
     incline_scenario,
     incline_terrain,
     lying_pose,
@@ -41,8 +44,6 @@ PASSING_ANGLE = 20.0
 # feet slip more there (up to 14 cm while braking at the end of the walk down).
 STEEP_ANGLE = 30.0
 STEEP_MAX_SLIP = 0.15
-# Required walk along the direction (of the 3 m reference).
-MIN_WALKED = 2.5
 
 
 def test_the_plane_rises_along_x_at_the_angle_with_heights_from_zero() -> None:
@@ -103,6 +104,17 @@ def _foot_track(n: int, slide_per_step: float, roll_per_step: float, radius: flo
     # Rolling towards +x is a rotation about +y.
     rotation[:, 0] = np.stack([np.stack([c, 0 * c, s], -1), np.stack([0 * c, 1 + 0 * c, 0 * c], -1), np.stack([-s, 0 * c, c], -1)], -2)
     return position, rotation
+
+
+def test_a_run_passes_only_standing_without_a_fall_and_walking_far_enough() -> None:
+    outcome = InclineOutcome(
+        30.0, "up", 0.8, "completed", True, 0.26, 0.08, 0.05, MIN_WALKED, False, None, "", False,
+        0.01, 0.01, None, 10.0, 3.0, 0.7, "knee", 0.0, 0.05,
+    )
+    assert outcome.passed
+    assert not dataclasses.replace(outcome, walked=MIN_WALKED - 0.01).passed
+    assert not dataclasses.replace(outcome, fell=True).passed
+    assert not dataclasses.replace(outcome, stood_up=False).passed
 
 
 def test_a_rolling_foot_does_not_slip_and_a_sliding_one_does() -> None:

@@ -61,6 +61,8 @@ MAP_SIZE = 8.0
 # The paper maps' resolution (16 m / 128 cells).
 MAP_RESOLUTION = 0.125
 WALK_DISTANCE = 3.0
+# Distance along the direction a run must walk to pass the benchmark (of `WALK_DISTANCE`), m.
+MIN_WALKED = 2.5
 MAX_ANGLE_DEG = 60.0
 # At the walk start the base must be this fraction of the nominal stand height above the ground.
 STOOD_HEIGHT_FRACTION = 0.75
@@ -238,7 +240,8 @@ class InclineOutcome:
 
     @property
     def passed(self) -> bool:
-        return self.stood_up and not self.fell
+        """The benchmark's criterion: stood up, no fall, at least `MIN_WALKED` along the direction."""
+        return self.stood_up and not self.fell and self.walked >= MIN_WALKED
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
