@@ -506,9 +506,9 @@ controller_config! {
         /// slope under the stance feet). Where tan(slope) + this margin exceeds `mu` (23° with the
         /// defaults) the MPC plans with that coefficient instead, the body height shrinks with
         /// cos(slope) and the motion reference's accelerations are limited to half this margin of
-        /// friction (`steep_ground.rs`): on a 30° plane a pyramid of μ 0.6 leaves 0.02 of friction for braking and
-        /// turning, and the robot runs away downhill or falls (docs/slopes.md). Last in the table,
-        /// so that the parameters before it keep their value references.
+        /// friction (`steep_ground.rs`): on a 30° plane a pyramid of μ 0.6 leaves 0.02 of friction
+        /// for braking and turning, and the robot runs away downhill or falls (docs/slopes.md).
+        /// Last in the table, so that the parameters before it keep their value references.
         mu_slope_margin: f64 = 0.17,
             fmi "mpc.muSlopeMargin", range limits::MU_SLOPE_MARGIN, unit "",
             "Friction kept above tan(slope) on steep ground: where tan(slope) + margin > mpc.mu the MPC plans with that coefficient, lowers the body by cos(slope)/cos(slope where they are equal) and limits the reference's accelerations to half the margin times g cos(slope)";

@@ -213,15 +213,11 @@ impl LegControl {
         for leg in Leg::ALL {
             let base = 3 * leg.index();
             let p_body = rt * (feet[leg.index()] - pose.position);
-            let mut lower = [0.0; 3];
-            let mut upper = [0.0; 3];
-            lower.copy_from_slice(&self.lower_limits[base..base + 3]);
-            upper.copy_from_slice(&self.upper_limits[base..base + 3]);
             let solution = model.inverse_kinematics_within_limits(
                 leg,
                 [p_body.x, p_body.y, p_body.z],
-                lower,
-                upper,
+                std::array::from_fn(|j| self.lower_limits[base + j]),
+                std::array::from_fn(|j| self.upper_limits[base + j]),
             );
             for j in 0..3 {
                 let i = base + j;

@@ -51,8 +51,9 @@
 //!   which the c columns of A keep; the cost blocks of P are full.
 //!
 //!   Per step that leaves 6 state variables (c, a) and 6 rows (ω, v), against 12 and 12 for
-//!   (Θ, p, ω, v): the KKT matrix of a trot has 300 rows and its LDL factor 1 950 nonzeros (360
-//!   and 2 146 with a alone), and a trot solve takes about a fifth less time. Both substitutions
+//!   (Θ, p, ω, v): the KKT matrix of a trot has 300 rows; its LDL factor had 1 950 nonzeros (360
+//!   and 2 146 with a alone) with the yaw-only model, whose c blocks were sparser, and a trot
+//!   solve took about a fifth less time. Both substitutions
 //!   are invertible linear changes of variables, so the optimum is the condensed QP's.
 //! - The forces are QP variables in the terrain frame (t₁, t₂, n), in units of m·g. The friction
 //!   pyramid rows then have two entries and the normal-force bounds one (instead of three each,

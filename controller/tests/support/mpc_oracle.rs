@@ -5,7 +5,7 @@
 //! module `mpc_api` with the MPC's public items, `rot_z` and `NUM_LEGS`.
 #![allow(dead_code)] // each includer uses a different part
 
-use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, SMatrix, Vector3};
 
 use super::mpc_api::{rot_z, terrain_tangents, MpcInput, MpcParams, MPC_STATES, NUM_LEGS};
 
@@ -60,13 +60,11 @@ pub fn foot_constraint_rows(normal: [f64; 3], mu: f64) -> [Vector3<f64>; ROWS_PE
 }
 
 fn rot_y(angle: f64) -> Matrix3<f64> {
-    let (s, c) = angle.sin_cos();
-    Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+    *Rotation3::from_axis_angle(&Vector3::y_axis(), angle).matrix()
 }
 
 fn rot_x(angle: f64) -> Matrix3<f64> {
-    let (s, c) = angle.sin_cos();
-    Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
+    *Rotation3::from_axis_angle(&Vector3::x_axis(), angle).matrix()
 }
 
 /// The map from a world angular velocity to the ZYX Euler-angle rates, as the inverse of the map
