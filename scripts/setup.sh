@@ -1,20 +1,21 @@
 #!/usr/bin/env bash
 # Installs everything the demo and the tests need on a fresh Debian machine (run as root):
-# Debian packages, the Python venv with pinned versions, generated LCM Python types,
-# release builds of the workspace and the bundled FMU (its binary portable to glibc >= 2.17).
+# Debian packages, the Python venv with pinned versions, generated LCM Python types, the
+# release build of the workspace (the one build the demo, the Python tests and the Rust tests
+# share) and the bundled FMU (its binary relinked portable to glibc >= 2.17).
 # Safe to run again: it skips what is done.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 log() { printf '\033[1;34m[setup %4ds]\033[0m %s\n' "$SECONDS" "$*"; }
 
-# libclang-dev: bindgen in the fmi crate (the FMU importer used by the Rust FMU tests).
-# cmake, make: OSQP's C sources (osqp-sys), the MPC benchmark's comparison solver and test cross-check.
 # gcc, patch, ca-certificates: the patched liblcm (scripts/build_liblcm.sh; its source comes from
 # Debian's deb-src index through apt, into a private apt directory under build/).
+# libfontconfig1-dev, libfreetype-dev, fonts-dejavu-core: pf-plan's plots. binutils: the linker
+# and `ar` of the Rust builds. (The MPC benchmark's OSQP comparison,
+# `cargo bench -p quad-controller --features osqp-comparison`, also needs cmake.)
 APT_PACKAGES=(libglib2.0-dev iproute2 util-linux pkg-config gcc ca-certificates patch
-              libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils
-              libclang-dev cmake make)
+              libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils)
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
@@ -32,15 +33,12 @@ if [[ ! -x .venv/bin/python ]]; then
     "$PYTHON" -m venv .venv
 fi
 stamp=.venv/.pfnav-requirements
-# Hash of everything pip installs from; a missing file hashes as empty instead of aborting.
-want="$( { cat scripts/requirements.txt scripts/requirements-robots.txt; cat harness/pyproject.toml 2>/dev/null || true; } | sha256sum | cut -d' ' -f1)"
+# The pins: harness/pyproject.toml (the harness and every tool), the robot data (--no-deps).
+want="$(cat harness/pyproject.toml scripts/requirements-robots.txt | sha256sum | cut -d' ' -f1)"
 if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
     log "installing pinned Python packages"
-    .venv/bin/pip install -q --disable-pip-version-check -r scripts/requirements.txt
+    .venv/bin/pip install -q --disable-pip-version-check -e 'harness[dev,build]'
     .venv/bin/pip install -q --disable-pip-version-check --no-deps -r scripts/requirements-robots.txt
-    if [[ -f harness/pyproject.toml ]]; then
-        .venv/bin/pip install -q --disable-pip-version-check -e harness
-    fi
     echo "$want" > "$stamp"
 fi
 
@@ -81,12 +79,10 @@ if [[ -x lcm_types/gen_python.sh ]] || [[ -f lcm_types/gen_python.sh ]]; then
     echo "$ROOT/build/lcm_python" > "$site/pfnav_lcm_types.pth"
 fi
 
+# One build for the demo, the Python tests and the Rust tests; the FMU's shared library in it is
+# linked by zig for glibc 2.17 (fmu/binary/link-gcc.sh).
 log "cargo build --release --workspace"
 cargo build --release --workspace --quiet
-
-if [[ -f fmu/Cargo.toml ]] && grep -q 'name = "bundle-fmu"' fmu/Cargo.toml; then
-    # The shipped binary: linked by zig against glibc 2.17, stripped (a few minutes the first time).
-    log "bundling the FMU from its portable build (scripts/build_fmu_portable.sh)"
-    bash scripts/build_fmu_portable.sh
-fi
+log "bundling the FMU (scripts/build_fmu_portable.sh)"
+bash scripts/build_fmu_portable.sh
 log "done"

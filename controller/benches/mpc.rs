@@ -1,13 +1,15 @@
 //! MPC solve time at horizon 10 (Clarabel on the sparse QP, incl. model building and assembly),
 //! median and p99, on a trotting and a standing problem; the same problem, as the condensed QP of
-//! the test oracle (`tests/support/mpc_oracle.rs`), is also solved by OSQP for comparison. Then 300 seeded random trot and
+//! the test oracle (`tests/support/mpc_oracle.rs`), is also solved by OSQP for comparison (with
+//! `--features osqp-comparison`: OSQP's C sources build with cmake). Then 300 seeded random trot and
 //! stand problems: interior-point iterations, solve time and the step-0 force error against the
 //! exact optimum of each problem (one benchmark instance says little about the spread).
 use std::time::Instant;
 
 #[path = "../tests/support/mpc_cases.rs"]
 mod mpc_cases;
-#[path = "../tests/support/osqp_qp.rs"]
+#[cfg(feature = "osqp-comparison")]
+#[path = "support/osqp_qp.rs"]
 mod osqp_qp;
 mod mpc_api {
     pub use quad_controller::math::rot_z;
@@ -135,10 +137,17 @@ fn bench_mpc(c: &mut Criterion) {
         c.bench_function(&format!("mpc_clarabel_h10_{label}"), |b| {
             b.iter(|| problem.solve().status)
         });
+        #[cfg(feature = "osqp-comparison")]
         osqp_compare::run(c, label, &qp);
+        #[cfg(not(feature = "osqp-comparison"))]
+        println!(
+            "OSQP comparison of {label} ({} variables): run with --features osqp-comparison",
+            qp.n
+        );
     }
 }
 
+#[cfg(feature = "osqp-comparison")]
 mod osqp_compare {
     use super::mpc_oracle::QpData;
     use criterion::Criterion;

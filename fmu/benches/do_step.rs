@@ -1,23 +1,29 @@
 //! Cost of one control tick driven three ways: a direct `Controller::step`, and `fmi2DoStep` of
-//! one tick through the `fmi` crate importer, with and without writing all 47 Real inputs and
-//! reading the 12 torques around it (what a co-simulation master does every step).
+//! one tick through the FMU's exported C functions (the calls an importer makes), with and
+//! without writing the 47 Real state and reference inputs and reading the 12 torques around it
+//! (what a co-simulation master does every step).
 //!
-//! The FMU is bundled from this build's cdylib into the cargo target's tmp folder.
+//! The instance loads its robot from a resources folder written into the cargo target's tmp folder.
 //! Run: `cargo bench -p quad-controller-fmu --bench do_step -- --warm-up-time 1 --measurement-time 3`
 
+use std::ffi::CString;
 use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use fmi::fmi2::import::Fmi2Import;
-use fmi::fmi2::instance::{CoSimulation, Common, InstanceCS};
 use quad_controller::{
-    Controller, ControllerConfig, Reference, RobotModel, RobotState, NUM_JOINTS,
+    Controller, ControllerConfig, PackagePath, Reference, RobotModel, RobotState, NUM_JOINTS,
 };
-use quad_controller_fmu::bundle::{
-    default_robot_config, shared_library_next_to, write_fmu, BundleInputs,
+use quad_controller_fmu::bundle::{default_robot_config, write_resources};
+use quad_controller_fmu::exports::lifecycle::{
+    fmi2EnterInitializationMode, fmi2ExitInitializationMode, fmi2FreeInstance, fmi2Instantiate,
+    fmi2SetupExperiment,
 };
+use quad_controller_fmu::exports::stepping::fmi2DoStep;
+use quad_controller_fmu::exports::values::{fmi2GetReal, fmi2SetReal};
+use quad_controller_fmu::ffi::{Fmi2Component, Fmi2Status, FMI2_FALSE, FMI2_TRUE};
 use quad_controller_fmu::variables::{Causality, ScalarType, VariableTable};
+use quad_controller_fmu::GUID;
 
 const DT: f64 = 0.001;
 /// Ticks until the robot stands (stand-up takes 1 s), so every variant measures the MPC stance.
@@ -63,6 +69,35 @@ fn real_inputs(
     (vrs, values)
 }
 
+/// An initialised instance of our robot's FMU, created through `fmi2Instantiate`.
+fn instantiate(resources: &Path) -> Fmi2Component {
+    write_resources(&default_robot_config(), &PackagePath::default(), resources)
+        .expect("resources");
+    let uri = CString::new(format!("file://{}", resources.display())).expect("uri");
+    let guid = CString::new(GUID).expect("guid");
+    // SAFETY: valid C strings; NULL callbacks are allowed by the FMU.
+    let c = unsafe {
+        fmi2Instantiate(
+            c"bench".as_ptr(),
+            1,
+            guid.as_ptr(),
+            uri.as_ptr(),
+            std::ptr::null(),
+            FMI2_FALSE,
+            FMI2_FALSE,
+        )
+    };
+    assert!(!c.is_null(), "fmi2Instantiate");
+    let ok = |status: Fmi2Status, what: &str| assert_eq!(status, Fmi2Status::Ok, "{what}");
+    ok(
+        fmi2SetupExperiment(c, FMI2_FALSE, 0.0, 0.0, FMI2_FALSE, 0.0),
+        "setup",
+    );
+    ok(fmi2EnterInitializationMode(c), "enter");
+    ok(fmi2ExitInitializationMode(c), "exit");
+    c
+}
+
 fn bench(c: &mut Criterion) {
     let model = RobotModel::from_config_file(&default_robot_config()).expect("robot config");
     let table = VariableTable::new(&model, &ControllerConfig::for_robot(&model)).expect("table");
@@ -84,23 +119,27 @@ fn bench(c: &mut Criterion) {
         })
     });
 
-    let exe = std::env::current_exe().expect("bench executable");
-    let library = shared_library_next_to(&exe).expect("cdylib next to the bench executable");
-    let fmu = Path::new(env!("CARGO_TARGET_TMPDIR")).join("QuadController-bench.fmu");
-    write_fmu(&BundleInputs::linux64(library), &fmu).expect("bundle");
-    let import: Fmi2Import = fmi::import::from_path(&fmu).expect("import");
-    let mut instance: InstanceCS = import
-        .instantiate_cs("bench", false, false)
-        .expect("instantiate");
-    instance.setup_experiment(None, 0.0, None).expect("setup");
-    instance.enter_initialization_mode().expect("enter");
-    instance.exit_initialization_mode().expect("exit");
+    let resources = Path::new(env!("CARGO_TARGET_TMPDIR")).join("do_step_bench_resources");
+    let instance = instantiate(&resources);
     let (vrs, values) = real_inputs(&table, &state, &reference);
-    instance.set_real(&vrs, &values).expect("set");
+    // SAFETY (every call below): `instance` is live; the slices outlive the calls and their
+    // lengths are passed with them.
+    let set_inputs = |values: &[f64]| {
+        let status = unsafe { fmi2SetReal(instance, vrs.as_ptr(), vrs.len(), values.as_ptr()) };
+        assert_eq!(status, Fmi2Status::Ok, "fmi2SetReal");
+    };
+    set_inputs(&values);
     let mut time = 0.0;
+    let step = |time: &mut f64| {
+        assert_eq!(
+            fmi2DoStep(instance, *time, DT, FMI2_TRUE),
+            Fmi2Status::Ok,
+            "fmi2DoStep"
+        );
+        *time += DT;
+    };
     for _ in 0..WARM_UP_TICKS {
-        instance.do_step(time, DT, true).expect("warm-up");
-        time += DT;
+        step(&mut time);
     }
     let torque_vrs: Vec<u32> = table
         .rows()
@@ -110,25 +149,26 @@ fn bench(c: &mut Criterion) {
         .map(|v| v.value_reference)
         .collect();
     let mut torques = [0.0; NUM_JOINTS];
-    group.bench_function("fmi crate fmi2DoStep", |b| {
+    group.bench_function("C API fmi2DoStep", |b| b.iter(|| step(&mut time)));
+    group.bench_function("C API set 47 inputs + fmi2DoStep + get 12 torques", |b| {
         b.iter(|| {
-            instance.do_step(time, DT, true).expect("step");
-            time += DT;
+            set_inputs(black_box(&values));
+            step(&mut time);
+            let status = unsafe {
+                fmi2GetReal(
+                    instance,
+                    torque_vrs.as_ptr(),
+                    torque_vrs.len(),
+                    torques.as_mut_ptr(),
+                )
+            };
+            assert_eq!(status, Fmi2Status::Ok, "fmi2GetReal");
+            black_box(&torques);
         })
     });
-    group.bench_function(
-        "fmi crate set 47 inputs + fmi2DoStep + get 12 torques",
-        |b| {
-            b.iter(|| {
-                instance.set_real(&vrs, black_box(&values)).expect("set");
-                instance.do_step(time, DT, true).expect("step");
-                time += DT;
-                instance.get_real(&torque_vrs, &mut torques).expect("get");
-                black_box(&torques);
-            })
-        },
-    );
     group.finish();
+    // SAFETY: `instance` came from fmi2Instantiate and is freed once.
+    unsafe { fmi2FreeInstance(instance) };
 }
 
 criterion_group!(benches, bench);

@@ -156,7 +156,7 @@ pub struct BundleInputs {
 
 impl BundleInputs {
     /// Our own robot (`robot/quadruped.toml`) and only a `linux64` binary (cargo's
-    /// `libquad_controller_fmu.so`).
+    /// [`SHARED_LIBRARY_FILE`]).
     pub fn linux64(shared_library: PathBuf) -> Self {
         BundleInputs {
             binaries: BinarySource::Files(vec![(Platform::Linux64, shared_library)]),
@@ -477,10 +477,13 @@ pub fn repo_root() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("."))
 }
 
+/// The file name cargo gives the FMU's shared library on Linux (crate `quad-controller-fmu-binary`).
+pub const SHARED_LIBRARY_FILE: &str = "libquad_controller_fmu_binary.so";
+
 /// Where cargo put the cdylib next to an executable of the same build
 /// (`target/<profile>/` for binaries, `target/<profile>/deps/` for tests and examples).
 pub fn shared_library_next_to(executable: &Path) -> Option<PathBuf> {
-    let name = "libquad_controller_fmu.so";
+    let name = SHARED_LIBRARY_FILE;
     let dir = executable.parent()?;
     [
         dir.join(name),

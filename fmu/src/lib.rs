@@ -2,7 +2,7 @@
 //!
 //! This crate is only the FMI boundary: all control logic lives in `quad-controller`.
 //!
-//! * `exports` — the 34 `fmi2*` C functions; each checks its pointers, runs inside
+//! * [`exports`] — the 34 `fmi2*` C functions; each checks its pointers, runs inside
 //!   `catch_unwind` and turns every failure into `fmi2Error` (or NULL from `fmi2Instantiate`)
 //!   with a reason sent to the importer's logger.
 //! * [`instance`] — the call-state machine (instantiated → initializationMode → stepComplete ⇄
@@ -23,7 +23,7 @@
 
 pub mod budget;
 pub mod bundle;
-mod exports;
+pub mod exports;
 pub mod ffi;
 pub mod instance;
 pub mod logger;

@@ -99,7 +99,7 @@ def test_another_robot_gets_a_bundled_fmu_once(bundler: Path, tmp_path: Path) ->
 def test_bundling_errors_are_clear(bundler: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     robot = RobotDescription.load(other_robot(tmp_path / "robot"))
     monkeypatch.setenv("BUNDLER_FAILS", "1")
-    with pytest.raises(SimulationError, match=r"bundle-fmu failed \(exit 2\) for the robot config .*other.toml: error: robot config: key"):
+    with pytest.raises(SimulationError, match=r"bundle-fmu failed for the robot config .*other.toml \(exit 2\): error: robot config: key"):
         fmu_for_robot(robot, tmp_path / "cache")
     assert list((tmp_path / "cache").iterdir()) == []
     monkeypatch.setenv("PFNAV_BUNDLE_FMU", str(tmp_path / "no-such-bundle-fmu"))

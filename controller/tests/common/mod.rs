@@ -1,5 +1,6 @@
 //! Test support: the robot model and a single-rigid-body simulation with ideal foot forces.
 #![allow(dead_code)]
+#![allow(clippy::needless_range_loop)] // parallel indexing of joints, axes and legs
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use quad_controller::{

@@ -7,8 +7,8 @@
 //!
 //! The shared guard machinery (live-instance set, `with_instance`, pointer checks) lives here;
 //! the exports themselves are grouped by the part of the FMI call sequence they belong to.
-//! The module is private: Rust code reaches the FMU through `instance`, importers through the
-//! C symbols only.
+//! Rust code normally reaches the FMU through `instance`; the functions are public so that Rust
+//! callers (the `do_step` benchmark) can go through exactly the C API an importer uses.
 
 use std::collections::HashSet;
 use std::ffi::CStr;
@@ -20,9 +20,9 @@ use crate::instance::Instance;
 use crate::FmuError;
 
 mod fmu_state;
-mod lifecycle;
-mod stepping;
-mod values;
+pub mod lifecycle;
+pub mod stepping;
+pub mod values;
 
 #[cfg(test)]
 mod tests;

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -23,8 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import paths
-from .errors import MissingArtifactError, PlannerError
+from .errors import PlannerError
 from .scenario import GoalRegion, Terrain, write_map
+from .tools import run_tool
 
 FloatArray = NDArray[np.float64]
 
@@ -73,26 +72,14 @@ class TraversabilityField:
 
     def _run(self, command: str, args: list[str], stdin: str | None = None) -> str:
         binary = self._pf_plan or paths.pf_plan_path()
-        try:
-            proc = subprocess.run(
-                [str(binary), command, "--map", str(self.map_file), *args],
-                input=stdin,
-                capture_output=True,
-                text=True,
-                timeout=self.timeout,
-                check=False,
-                env={**os.environ, "RUST_BACKTRACE": "0", "RUST_LIB_BACKTRACE": "0"},
-            )
-        except OSError as err:
-            raise MissingArtifactError(f"cannot run {binary}: {err}") from err
-        except subprocess.TimeoutExpired as err:
-            raise PlannerError(f"`pf-plan {command}` did not finish within {self.timeout:.0f} s") from err
-        if proc.returncode != 0:
-            # anyhow's report: "Error: context", then "Caused by:" and the causes; one line here.
-            lines = [line.strip() for line in proc.stderr.splitlines() if line.strip() and line.strip() != "Caused by:"]
-            detail = "; ".join(line.removeprefix("Error: ") for line in lines) or f"exit code {proc.returncode}"
-            raise CostModelError(f"pf-plan {command} refused the map, the traversability parameters or the path: {detail}")
-        return proc.stdout
+        return run_tool(
+            binary,
+            [command, "--map", str(self.map_file), *args],
+            what=f"pf-plan {command} refused the map, the traversability parameters or the path",
+            failure=CostModelError,
+            timeout=self.timeout,
+            stdin=stdin,
+        )
 
     @property
     def values(self) -> FloatArray:

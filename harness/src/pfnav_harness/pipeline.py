@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,7 +9,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from .cosim import CoSimConfig, CoSimulation, RunResult, save_log
-from .errors import MissingArtifactError, ScenarioError
+from .errors import ScenarioError
 from .estimation_metrics import EstimationMetrics, compute_estimation_metrics, has_estimate
 from .feedback_field import FeedbackField
 from .metrics import OnlineMetrics, RunMetrics, TraversabilityField, compute_metrics, compute_online_metrics
@@ -20,28 +19,20 @@ from .report import RunRecord
 from .robot import RobotDescription
 from .scenario import Scenario, load_scenario
 from .state_log import write_state_log
+from .tools import run_tool
 
 
 def export_scenario(pf_plan: Path, name: str, out_dir: Path, timeout: float = 120.0, seed: int | None = None) -> Scenario:
     """Runs `pf-plan scenario export NAME --out DIR [--seed SEED]` and loads the result (seed None: the scenario's own)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     seed_args = [] if seed is None else ["--seed", str(seed)]
-    try:
-        proc = subprocess.run(
-            [str(pf_plan), "scenario", "export", name, "--out", str(out_dir), *seed_args],
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-            check=False,
-        )
-    except OSError as err:
-        raise MissingArtifactError(f"cannot run {pf_plan}: {err}") from err
-    except subprocess.TimeoutExpired as err:
-        raise ScenarioError(f"`pf-plan scenario export {name}` did not finish within {timeout:.0f} s") from err
-    if proc.returncode != 0:
-        message = (proc.stderr or proc.stdout).strip().splitlines()
-        detail = message[-1] if message else f"exit code {proc.returncode}"
-        raise ScenarioError(f"scenario '{name}' could not be exported by pf-plan: {detail}")
+    run_tool(
+        pf_plan,
+        ["scenario", "export", name, "--out", str(out_dir), *seed_args],
+        what=f"scenario '{name}' could not be exported by pf-plan",
+        failure=ScenarioError,
+        timeout=timeout,
+    )
     json_path = out_dir / f"{name}.json"
     if not json_path.is_file():
         raise ScenarioError(f"pf-plan exported scenario '{name}' but {json_path} is missing")

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import hashlib
 import os
-import subprocess
 from pathlib import Path
 
 from . import paths
-from .errors import MissingArtifactError, SimulationError
+from .errors import HarnessError, MissingArtifactError, SimulationError
 from .robot import PACKAGE_PATH_ENV, RobotDescription
+from .tools import run_tool
 
 BUNDLE_TIMEOUT = 300.0
 
@@ -50,26 +50,17 @@ def fmu_for_robot(robot: RobotDescription, cache_dir: Path) -> Path:
         raise MissingArtifactError(f"the robot config {robot.config_path} is not ours, so its FMU has to be bundled: {err}") from err
     cache_dir.mkdir(parents=True, exist_ok=True)
     partial = cache_dir / f"{target.stem}.{os.getpid()}.partial.fmu"
-    command = [str(bundler), "--robot", str(robot.config_path), "--binaries-from", str(default_fmu), "--out", str(partial)]
+    args = ["--robot", str(robot.config_path), "--binaries-from", str(default_fmu), "--out", str(partial)]
     # bundle-fmu resolves the config's package:// names through the same roots as the harness.
-    # No backtrace: the error's own text names the item and the file.
-    env = {
-        **os.environ,
-        PACKAGE_PATH_ENV: os.pathsep.join(str(root) for root in robot.package_roots),
-        "RUST_BACKTRACE": "0",
-        "RUST_LIB_BACKTRACE": "0",
-    }
+    package_path = {PACKAGE_PATH_ENV: os.pathsep.join(str(root) for root in robot.package_roots)}
     try:
-        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=BUNDLE_TIMEOUT, check=False)
-    except (OSError, subprocess.TimeoutExpired) as err:
+        what = f"bundle-fmu failed for the robot config {robot.config_path}"
+        run_tool(bundler, args, what=what, failure=SimulationError, timeout=BUNDLE_TIMEOUT, env=package_path)
+    except HarnessError:
         partial.unlink(missing_ok=True)
-        raise SimulationError(f"bundle-fmu could not bundle the FMU for {robot.config_path}: {err}") from err
-    if done.returncode != 0 or not partial.is_file():
-        partial.unlink(missing_ok=True)
-        detail = " / ".join(line.strip() for line in (done.stderr or done.stdout).strip().splitlines() if line.strip())
-        raise SimulationError(
-            f"bundle-fmu failed (exit {done.returncode}) for the robot config {robot.config_path}: {detail}\ncommand: {' '.join(command)}"
-        )
+        raise
+    if not partial.is_file():
+        raise SimulationError(f"bundle-fmu wrote no FMU for the robot config {robot.config_path} (expected {partial})")
     os.replace(partial, target)
     return target
 

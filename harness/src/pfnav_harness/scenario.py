@@ -19,7 +19,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import paths
-from .errors import MissingArtifactError, ScenarioError
+from .errors import ScenarioError
+from .tools import run_tool
 
 FloatArray = NDArray[np.float64]
 
@@ -345,17 +345,16 @@ def write_map(terrain: Terrain, folder: Path, name: str, traversability: dict[st
 
 def planner_scenario_names(pf_plan: Path, timeout: float = 60.0, every: bool = False) -> tuple[str, ...]:
     """The planner's paper scenarios, from `pf-plan scenario list` (`every`: all built-in ones, `--all`)."""
-    command = [str(pf_plan), "scenario", "list", *(["--all"] if every else [])]
-    try:
-        proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout, check=False)
-    except OSError as err:
-        raise MissingArtifactError(f"cannot run {pf_plan}: {err}") from err
-    except subprocess.TimeoutExpired as err:
-        raise ScenarioError(f"`pf-plan scenario list` did not finish within {timeout:.0f} s") from err
-    names = tuple(line.strip() for line in proc.stdout.splitlines() if line.strip())
-    if proc.returncode != 0 or not names:
-        detail = (proc.stderr or "").strip().splitlines()
-        raise ScenarioError(f"`pf-plan scenario list` failed: {detail[-1] if detail else f'exit code {proc.returncode}'}")
+    out = run_tool(
+        pf_plan,
+        ["scenario", "list", *(["--all"] if every else [])],
+        what="`pf-plan scenario list` failed",
+        failure=ScenarioError,
+        timeout=timeout,
+    )
+    names = tuple(line.strip() for line in out.splitlines() if line.strip())
+    if not names:
+        raise ScenarioError("`pf-plan scenario list` listed no scenario")
     return names
 
 

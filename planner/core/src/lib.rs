@@ -20,8 +20,6 @@ pub mod map;
 pub mod metrics;
 pub mod pf;
 pub mod plan;
-pub mod plot;
-pub mod report;
 pub mod scenarios;
 pub mod solve_status;
 pub mod ssp;
