@@ -83,6 +83,7 @@ def test_the_command_is_relative_to_the_repository_and_wrapped_in_netns(tmp_path
     assert regenerate_command(".venv/bin/pfnav-demo", argv, tmp_path) == ".venv/bin/pfnav-demo demo --out out/x --scenario 'c shape'"
     monkeypatch.setenv("PFNAV_IN_NETNS", "1")
     assert regenerate_command(".venv/bin/pfnav-demo", ["demo"], tmp_path) == "bash scripts/netns.sh .venv/bin/pfnav-demo demo"
+    assert regenerate_command(".venv/bin/python scripts/x.py", [], tmp_path) == "bash scripts/netns.sh .venv/bin/python scripts/x.py"
 
 
 def test_pictures_and_the_title_leave_the_report() -> None:

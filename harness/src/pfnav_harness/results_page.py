@@ -97,13 +97,15 @@ def collect_stamp(
 def regenerate_command(program: str, argv: Sequence[str], root: Path | None = None) -> str:
     """The shell command that reruns this measurement, as a reader at the repository root types it.
 
+    `program` is the command's fixed start as shell text, `argv` the arguments it was given.
+
     Paths inside the repository are made relative to it, and a command running in the private
     network namespace (scripts/netns.sh sets PFNAV_IN_NETNS) is shown wrapped in it again.
     """
     root = (root or paths.repo_root()).resolve()
     prefix = f"{root}{os.sep}"
-    words = [program, *(a.replace(prefix, "") for a in argv)]
-    command = shlex.join(words)
+    # `program` is shell text already (".venv/bin/python scripts/x.py"); only the arguments need quoting.
+    command = " ".join([program, shlex.join(a.replace(prefix, "") for a in argv)]).strip()
     if os.environ.get("PFNAV_IN_NETNS") == "1":
         command = f"bash scripts/netns.sh {command}"
     return command
