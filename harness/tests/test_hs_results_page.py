@@ -53,6 +53,7 @@ def test_modified_tracked_files_mark_the_stamp_dirty(tmp_path: Path) -> None:
 def test_without_git_the_commit_is_unknown_and_not_vouched_for(tmp_path: Path) -> None:
     stamp = collect_stamp(tmp_path, git=str(fake_git(tmp_path, None)), cpuinfo=tmp_path / "missing", now=NOW)
     assert (stamp.commit, stamp.dirty, stamp.cpu_model) == ("unknown", True, "unknown CPU")
+    assert "| unknown (no git checkout) |" in stamp.markdown()
     stamp = collect_stamp(tmp_path, git=str(tmp_path / "no-such-git"), cpuinfo=fake_cpuinfo(tmp_path), now=NOW)
     assert (stamp.commit, stamp.dirty) == ("unknown", True)
 
@@ -89,3 +90,23 @@ def test_the_command_is_relative_to_the_repository_and_wrapped_in_netns(tmp_path
 def test_pictures_and_the_title_leave_the_report() -> None:
     report = "# report\n\nintro\n\n![a](a.png)\n\n![b](b.png) ![c](c.png)\n\n| t |\n|---|\n\nsee ![inline](x.png) here\n"
     assert without_pictures(report) == "intro\n\n| t |\n|---|\n\nsee ![inline](x.png) here\n"
+
+
+def test_a_regenerated_results_page_does_not_make_the_tree_dirty(tmp_path: Path) -> None:
+    """With the real git: a page written by an earlier command does not change what the next one measures."""
+    import subprocess
+
+    def git(*args: str) -> None:
+        subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", *args], check=True, capture_output=True)
+
+    (tmp_path / "docs" / "results").mkdir(parents=True)
+    (tmp_path / "docs" / "results" / "a.md").write_text("old\n")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    git("init", "-q")
+    git("add", ".")
+    git("commit", "-qm", "start")
+    (tmp_path / "docs" / "results" / "a.md").write_text("regenerated\n")
+    (tmp_path / "untracked.txt").write_text("output\n")
+    assert not collect_stamp(tmp_path).dirty
+    (tmp_path / "code.py").write_text("x = 2\n")
+    assert collect_stamp(tmp_path).dirty

@@ -39,7 +39,8 @@ class Stamp:
     date: dt.datetime
 
     def markdown(self) -> str:
-        commit = f"`{self.commit}`" + (" with uncommitted changes" if self.dirty else "")
+        known = f"`{self.commit}`" + (" with uncommitted changes" if self.dirty else "")
+        commit = "unknown (no git checkout)" if self.commit == "unknown" else known
         load = " / ".join(f"{v:.2f}" for v in self.load_average)
         machine = f"{self.cpu_model}, {self.cores} cores, load average {load} (1 / 5 / 15 min) at the start"
         return "\n".join(
