@@ -134,6 +134,8 @@ def test_report_publishes_a_results_page(tmp_path: Path, monkeypatch: pytest.Mon
     store = SweepStore.create(tmp_path / "store", spec)
     store.append(fake_rows(spec.hash, ["goal", "fell", "goal", "goal"]))
     monkeypatch.setenv("PFNAV_ROOT", str(tmp_path))
+    # Inside scripts/netns.sh the page would name the wrapped command.
+    monkeypatch.delenv("PFNAV_IN_NETNS", raising=False)
     assert main(["report", str(tmp_path / "store"), "--results-page", "sweep-flat"]) == 0
     page = (tmp_path / "docs" / "results" / "sweep-flat.md").read_text()
     assert page.startswith("# Robustness sweep: flat\n")
