@@ -18,6 +18,7 @@ Usage:
     .venv/bin/python scripts/bench_slopes.py                      # 10/20/30° × up/down/across, μ = 0.8
     .venv/bin/python scripts/bench_slopes.py --angles 20 --directions across --set stand.kp[1]=200
     .venv/bin/python scripts/bench_slopes.py --robot robot/third_party/go1.toml   # another robot (PFNAV_PACKAGE_PATH)
+    .venv/bin/python scripts/bench_slopes.py --results-page slopes-quadruped      # also docs/results/slopes-quadruped.md
 
 Another robot than ours runs on an FMU bundled for it by bundle-fmu (cached in OUT/cache).
 """
@@ -40,6 +41,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from pfnav_harness import results_page
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.incline import (
     DIRECTIONS,
@@ -287,9 +289,19 @@ def main() -> int:
         default=None,
         help="robot config (default $PFNAV_ROBOT, else robot/quadruped.toml)",
     )
+    parser.add_argument(
+        "--results-page",
+        default=None,
+        metavar="NAME",
+        help="also publish the table as docs/results/NAME.md, stamped with commit, machine and date",
+    )
     args = parser.parse_args()
     if not (math.isfinite(args.friction) and args.friction > 0.0):
         parser.error(f"--friction must be positive, got {args.friction}")
+    if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
+        parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    # Taken before the runs: the commit that ran and the load it ran under.
+    stamp = results_page.collect_stamp() if args.results_page else None
     parameters = dict(args.parameters)
     try:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -355,6 +367,17 @@ def main() -> int:
     print(
         f"wrote {args.out / 'table.md'}, {args.out / 'results.json'}, {args.out / 'progress.png'}"
     )
+    if args.results_page:
+        page = results_page.write_results_page(
+            args.results_page,
+            f"Inclines: {robot.config_path.stem} on 10°, 20°, 30° planes",
+            text,
+            results_page.regenerate_command(
+                ".venv/bin/python scripts/bench_slopes.py", sys.argv[1:]
+            ),
+            stamp,
+        )
+        print(f"results page: {page}")
     return 0
 
 

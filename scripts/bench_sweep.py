@@ -11,6 +11,7 @@ prefix's (they act from the fork on), so those are not compared.
 
 Usage (planning uses LCM udpm://, so inside the private network namespace):
     bash scripts/netns.sh .venv/bin/python scripts/bench_sweep.py [--spec sweeps/tiny.toml] [--runs 12] [--workers 1,2] [--fork on,off]
+        [--results-page sweep-throughput]
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from pfnav_harness import paths
+from pfnav_harness import paths, results_page
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.planner_client import DEFAULT_LCM_URL
 from pfnav_harness.robot_fmu import robot_and_fmu
@@ -54,7 +55,12 @@ def main() -> int:
     parser.add_argument("--workers", default="1,2", help="cluster sizes to compare (default 1,2)")
     parser.add_argument("--fork", default="on,off", help="fork settings to compare: on, off or both (default on,off)")
     parser.add_argument("--lcm-url", default=DEFAULT_LCM_URL)
+    parser.add_argument("--results-page", default=None, metavar="NAME", help="also publish the table as docs/results/NAME.md")
     args = parser.parse_args()
+    if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
+        parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    # Taken before the runs: the commit that ran and the load it ran under.
+    stamp = results_page.collect_stamp() if args.results_page else None
     try:
         sizes = [int(v) for v in args.workers.split(",")]
         forks = [{"on": True, "off": False}[v.strip()] for v in args.fork.split(",")]
@@ -98,43 +104,50 @@ def main() -> int:
         return err.exit_code
 
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
-    print()
-    print(f"pfnav-sweep throughput, {now}, {platform.node()}: {cpu_model()}, {os.cpu_count()} cores")
-    print(f"spec {args.spec.name} ({spec.scenario}, {spec.duration:g} simulated s per run, stand-up {spec.stand_time:g} s), {spec.runs} runs per cluster")
-    print(f"load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after (other work on the machine slows both columns)")
-    print()
+    # Markdown as printed: the same text goes to the results page.
+    lines: list[str] = [""]
+    lines.append(f"- pfnav-sweep throughput, {now}, {platform.node()}: {cpu_model()}, {os.cpu_count()} cores")
+    lines.append(f"- spec {args.spec.name} ({spec.scenario}, {spec.duration:g} simulated s per run, stand-up {spec.stand_time:g} s), {spec.runs} runs per cluster")
+    lines.append(f"- load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after (other work on the machine slows both columns)")
+    lines.append("")
     # CPU share: how much of a core a worker's run got (1.0 on an idle machine; less when others load it).
     # Sweep wall includes the fork prefixes (a task per group); the per-run wall and CPU columns do not.
-    print(
+    lines.append(
         "| workers | forks | forked runs | cluster start (s) | sweep wall (s) | runs/min | speedup | mean simulated (s) "
         "| mean run wall (s) | mean run CPU (s) | CPU share |"
     )
-    print("| ---: | :---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    lines.append("| ---: | :---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     base = results[0][3].runs_per_minute
     for n, fork, startup, summary, wall, cpu, forked, simulated in results:
         speedup = summary.runs_per_minute / base if base > 0 else float("nan")
-        print(
+        lines.append(
             f"| {n} | {'on' if fork else 'off'} | {forked} | {startup:.1f} | {summary.wall_seconds:.1f} | {summary.runs_per_minute:.1f} | {speedup:.2f}x "
             f"| {simulated:.2f} | {wall:.2f} | {cpu:.2f} | {cpu / wall:.2f} |"
         )
     if len(forks) == 2:
         # Forked runs with a payload or another friction can fall (and stop) at other times than
         # unforked ones: the unforked cost is scaled to the forked runs' simulated time first.
-        print()
+        lines.append("")
         for n in sizes:
             on, off = (next(r for r in results if r[0] == n and r[1] == fork) for fork in (True, False))
             scale = on[7] / off[7]
             wall_on, wall_off = on[3].wall_seconds / on[3].ran, scale * off[3].wall_seconds / off[3].ran
             cpu_on, cpu_off = on[5], scale * off[5]
-            print(
-                f"{n} worker(s), per run of {on[7]:.2f} simulated s: forks save {wall_off - wall_on:.2f} s of sweep wall "
+            lines.append(
+                f"- {n} worker(s), per run of {on[7]:.2f} simulated s: forks save {wall_off - wall_on:.2f} s of sweep wall "
                 f"({100 * (wall_off - wall_on) / wall_off:.0f} %, prefix tasks included) and {cpu_off - cpu_on:.2f} s of the run's CPU "
                 f"({100 * (cpu_off - cpu_on) / cpu_off:.0f} %, prefix tasks aside)"
             )
     errors = sum(r[3].errors for r in results)
     same = all(t == group[0] for group in tables.values() for t in group[1:])
-    print()
-    print(f"rows identical across cluster sizes for each fork setting (wall time aside): {'yes' if same else 'NO'}; runs with errors: {errors}")
+    lines.append("")
+    lines.append(f"rows identical across cluster sizes for each fork setting (wall time aside): {'yes' if same else 'NO'}; runs with errors: {errors}")
+    text = "\n".join(lines)
+    print(text)
+    if args.results_page:
+        title = "Sweep throughput: runs per minute by cluster size, forks on and off"
+        command = results_page.regenerate_command(".venv/bin/python scripts/bench_sweep.py", sys.argv[1:])
+        print(f"results page: {results_page.write_results_page(args.results_page, title, text, command, stamp)}")
     return 0 if same and errors == 0 else 1
 
 

@@ -10,8 +10,9 @@
    times; the co-simulation is deterministic, so the difference is the push's doing).
 
 Each run is one `pfnav-demo run` (its own report and metrics.json under OUT); the tables are printed
-and written to OUT/summary.md. Runs inside the private network namespace (the planner speaks LCM):
-    bash scripts/netns.sh .venv/bin/python scripts/online_campaign.py --out out/online
+and written to OUT/summary.md, and with --results-page NAME to docs/results/NAME.md. Runs inside
+the private network namespace (the planner speaks LCM):
+    bash scripts/netns.sh .venv/bin/python scripts/online_campaign.py --out out/online-campaign --results-page online-campaign
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ from typing import Any
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-DEMO = ROOT / ".venv" / "bin" / "pfnav-demo"
+# The pfnav-demo of the venv this script runs in.
+DEMO = Path(sys.executable).parent / "pfnav-demo"
 PAPER = ("mountain_pass", "pits", "c_shape")
 
 
@@ -107,7 +109,15 @@ def main() -> int:
     parser.add_argument("--push-duration", type=float, default=0.2)
     parser.add_argument("--push-window", default="2,12", help="walk-clock window of the push times, s (default 2,12)")
     parser.add_argument("--bad-map-updates", default="nan,shape,stale", help="broken updates sent in the first online run (empty: none)")
+    parser.add_argument("--results-page", default=None, metavar="NAME", help="also publish the tables as docs/results/NAME.md")
     args = parser.parse_args()
+    sys.path.insert(0, str(ROOT / "harness" / "src"))
+    from pfnav_harness import results_page
+
+    if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
+        parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    # Taken before the runs: the commit that ran and the load it ran under.
+    stamp = results_page.collect_stamp() if args.results_page else None
 
     scenarios = [s for s in args.scenarios.split(",") if s]
     push_scenarios = [s for s in args.push_scenarios.split(",") if s]
@@ -145,6 +155,10 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.md").write_text(text + "\n")
     print(text)
+    if args.results_page:
+        title = "Online navigation and push campaigns"
+        command = results_page.regenerate_command(".venv/bin/python scripts/online_campaign.py", sys.argv[1:])
+        print(f"results page: {results_page.write_results_page(args.results_page, title, text, command, stamp)}")
     return 0
 
 

@@ -18,6 +18,7 @@ Jacksboro, Tennessee; origin and licence in docs/real-terrain.md), so nothing is
 
     .venv/bin/python scripts/real_terrain.py                          # 3 crops × {no limit, 20°}
     .venv/bin/python scripts/real_terrain.py --exaggeration 1.5       # a separately labelled variant
+    .venv/bin/python scripts/real_terrain.py --results-page real-terrain   # also docs/results/real-terrain.md
 """
 
 from __future__ import annotations
@@ -487,6 +488,12 @@ def main(argv: list[str] | None = None) -> int:
         help="also copy each crop's figure here (e.g. docs/img)",
     )
     parser.add_argument("--no-progress", action="store_true")
+    parser.add_argument(
+        "--results-page",
+        default=None,
+        metavar="NAME",
+        help="also publish the table as docs/results/NAME.md, stamped with commit, machine and date",
+    )
     args = parser.parse_args(argv)
     if not (math.isfinite(args.exaggeration) and args.exaggeration > 0.0):
         raise SystemExit(f"--exaggeration must be > 0, got {args.exaggeration}")
@@ -494,7 +501,12 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("--crops >= 1, --cells >= 16 and --cell-size > 0 are needed")
     limits = parse_limits(args.limits)
     sys.path.insert(0, str(REPO / "harness" / "src"))
-    from pfnav_harness import paths
+    from pfnav_harness import paths, results_page
+
+    if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
+        raise SystemExit(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    # Taken before the runs: the commit that ran and the load it ran under.
+    stamp = results_page.collect_stamp() if args.results_page else None
 
     pf_plan = paths.pf_plan_path()
     out: Path = args.out
@@ -672,7 +684,15 @@ def main(argv: list[str] | None = None) -> int:
             default=str,
         )
     )
-    print((out / "table.md").read_text())
+    table = (out / "table.md").read_text()
+    print(table)
+    if args.results_page:
+        title = "Real terrain: P-F plans walked on crops of a real elevation model"
+        command = results_page.regenerate_command(
+            ".venv/bin/python scripts/real_terrain.py", argv if argv is not None else sys.argv[1:]
+        )
+        page = results_page.write_results_page(args.results_page, title, results_page.without_pictures(table), command, stamp)
+        print(f"results page: {page}")
     return 0
 
 

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from .online import OnlineConfig
     from .pushes import PushSchedule
     from .report import RunRecord
+    from .results_page import Stamp
     from .scenario import Scenario
 
 
@@ -148,6 +149,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
 
 
+def _results_page_name(text: str) -> str:
+    from .results_page import PAGE_NAME
+
+    # Checked before the runs: a bad name must not cost a whole demo.
+    if not PAGE_NAME.match(text):
+        raise argparse.ArgumentTypeError(f"a results page name is lower-case letters, digits and '-', got {text!r}")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pfnav-demo",
@@ -165,6 +175,13 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="all scenarios × {P-F, A*}; writes OUT/report.md with PNGs")
     demo.add_argument("--scenario", action="append", default=None, help="only this scenario (repeatable; default: every scenario of `pf-plan scenario list`)")
     demo.add_argument("--methods", default=None, help="comma-separated methods (default pf,astar; online: pf)")
+    demo.add_argument(
+        "--results-page",
+        type=_results_page_name,
+        default=None,
+        metavar="NAME",
+        help="also publish the report's tables as docs/results/NAME.md, stamped with commit, machine and date",
+    )
     _add_common(demo)
     return parser
 
@@ -351,6 +368,9 @@ def _map_request(args: argparse.Namespace) -> tuple[Path | None, tuple[float, fl
 
 def execute(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    results_page = getattr(args, "results_page", None)
+    # The stamp names the commit and the load the measurement started with.
+    stamp = _start_stamp() if results_page else None
     out: Path = args.out
     # The robot and its FMU first: a bad robot config fails before any other work.
     robot, fmu = robot_and_fmu(args.robot, out / "cache")
@@ -503,12 +523,32 @@ def execute(args: argparse.Namespace) -> int:
         )
     )
     print(f"report: {report}", file=sys.stderr)
+    if results_page:
+        argv = getattr(args, "argv", None) or sys.argv[1:]
+        print(f"results page: {_publish(results_page, report, argv, online_config is not None, stamp)}", file=sys.stderr)
     return 0
+
+
+def _start_stamp() -> Stamp:
+    from .results_page import collect_stamp
+
+    return collect_stamp()
+
+
+def _publish(name: str, report: Path, argv: Sequence[str], online: bool, stamp: Stamp | None) -> Path:
+    """docs/results/NAME.md: the report's tables and notes; its pictures stay in the output folder."""
+    from .results_page import regenerate_command, without_pictures, write_results_page
+
+    title = "Online navigation: sensing, replanning, feedback field" if online else "Co-simulation: the scenarios walked end to end"
+    command = regenerate_command(".venv/bin/pfnav-demo", argv)
+    return write_results_page(name, title, without_pictures(report.read_text(encoding="utf-8")), command, stamp)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    # The words the results page names as the command that regenerates it.
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     logging.basicConfig(format="pfnav-demo: %(message)s")
     logging.getLogger("pfnav_harness").setLevel(logging.INFO)
     try:

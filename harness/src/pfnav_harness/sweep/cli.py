@@ -5,6 +5,8 @@
     pfnav-sweep run SPEC.toml --out DIR         plan what is missing, run every run not yet stored, report
     pfnav-sweep report DIR                      write DIR/REPORT.md and plots from the stored rows
 
+`run` and `report` take --results-page NAME to publish the report as docs/results/NAME.md.
+
 Planning talks LCM udpm://, so `plan` and a first `run` go through `bash scripts/netns.sh ...`.
 """
 
@@ -27,6 +29,7 @@ from .spec import FACTORS, SweepSpec, load_spec
 from .store import SweepStore
 
 if TYPE_CHECKING:
+    from ..results_page import Stamp
     from .driver import Planner
     from .runner import Course
 
@@ -71,12 +74,24 @@ def cmd_plan(args: argparse.Namespace) -> int:
     return 0
 
 
+def _publish(name: str, report: Path, argv: Sequence[str], stamp: Stamp | None, note: str = "") -> Path:
+    """docs/results/NAME.md: the sweep report's tables; its plots stay in the store folder."""
+    from ..results_page import regenerate_command, without_pictures, write_results_page
+
+    body = (note + "\n\n" if note else "") + without_pictures(report.read_text(encoding="utf-8"))
+    title = report.read_text(encoding="utf-8").splitlines()[0].removeprefix("# ")
+    return write_results_page(name, title, body, regenerate_command(".venv/bin/pfnav-sweep", argv), stamp)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    from ..results_page import collect_stamp
     from .cluster import dask_client
     from .driver import SweepSummary, run_sweep
     from .report import write_report
     from .runner import Artifacts
 
+    # Taken before the runs: the commit that ran and the load it ran under.
+    stamp = collect_stamp() if args.results_page else None
     spec = load_spec(args.spec)
     if args.no_fork:
         spec = dataclasses.replace(spec, fork=False)
@@ -98,8 +113,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         f"{summary.ran} run(s) done ({summary.errors} error(s)), {summary.skipped} already stored; "
         f"{summary.wall_seconds:.0f} s wall, {summary.runs_per_minute:.1f} runs/min"
     )
-    if not args.no_report:
-        print(f"report: {write_report(store)}")
+    if not args.no_report or args.results_page:
+        report = write_report(store)
+        print(f"report: {report}")
+        if args.results_page:
+            print(f"results page: {_publish(args.results_page, report, args.argv, stamp)}")
     return 0
 
 
@@ -107,7 +125,12 @@ def cmd_report(args: argparse.Namespace) -> int:
     from .report import write_report
 
     store = SweepStore.open_existing(args.store)
-    print(f"report: {write_report(store)}")
+    report = write_report(store)
+    print(f"report: {report}")
+    if args.results_page:
+        # The rows may be older than this commit: `run` stamps the measurement itself.
+        note = "The stamp is when this report was written from the stored rows; `pfnav-sweep run` measured them, possibly on another commit."
+        print(f"results page: {_publish(args.results_page, report, args.argv, None, note)}")
     return 0
 
 
@@ -131,13 +154,35 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--no-progress", action="store_true", help="no progress bar")
             p.add_argument("--no-fork", action="store_true", help="every run stands up by itself (as `fork = false` in the spec)")
             p.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+            _add_results_page(p)
     report = sub.add_parser("report", help="write the report of a store folder")
     report.add_argument("store", type=Path)
+    _add_results_page(report)
     return parser
+
+
+def _results_page_name(text: str) -> str:
+    from ..results_page import PAGE_NAME
+
+    if not PAGE_NAME.match(text):
+        raise argparse.ArgumentTypeError(f"a results page name is lower-case letters, digits and '-', got {text!r}")
+    return text
+
+
+def _add_results_page(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--results-page",
+        type=_results_page_name,
+        default=None,
+        metavar="NAME",
+        help="also publish the report as docs/results/NAME.md, stamped with commit, machine and date",
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # The words the results page names as the command that regenerates it.
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     if getattr(args, "workers", None) is not None and args.workers < 1:
         print(f"pfnav-sweep: error: --workers must be >= 1, got {args.workers}", file=sys.stderr)
         return 2
