@@ -1,5 +1,6 @@
 //! Generates the Rust codec from the wire contract `lcm_types/*.lcm` (and, for this crate's
-//! own tests, from the codegen test schemas) into OUT_DIR.
+//! own tests, from the codegen test schemas), and the channel names and default URL of
+//! `lcm_types/channels.toml`, into OUT_DIR.
 
 use std::path::{Path, PathBuf};
 
@@ -62,4 +63,55 @@ fn main() {
             panic!("lcm-types code generation failed: {message}");
         }
     }
+    let channels = manifest_dir.join("channels.toml");
+    println!("cargo:rerun-if-changed={}", channels.display());
+    if let Err(message) = generate_channels(&channels, &out_dir.join("channels.rs")) {
+        panic!("lcm-types: {}: {message}", channels.display());
+    }
+}
+
+/// `channels.toml` as Rust constants: `DEFAULT_URL`, `DEFAULT_PREFIX` and a module per table
+/// with one `&str` constant per channel, its message type and meaning as the doc comment.
+fn generate_channels(path: &Path, out: &Path) -> Result<(), String> {
+    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+    let table: toml::Table = text.parse().map_err(|e: toml::de::Error| e.to_string())?;
+    let string = |key: &str| -> Result<String, String> {
+        table
+            .get(key)
+            .and_then(toml::Value::as_str)
+            .map(str::to_owned)
+            .ok_or_else(|| format!("`{key}` must be a string"))
+    };
+    let mut code = format!(
+        "/// The bus used when neither a flag nor `$LCM_DEFAULT_URL` names one.\n\
+         pub const DEFAULT_URL: &str = {:?};\n\
+         /// Prefix of every planner channel (`pf-planner-service --channel-prefix` changes it).\n\
+         pub const DEFAULT_PREFIX: &str = {:?};\n",
+        string("default_url")?,
+        string("default_prefix")?
+    );
+    for (group, entries) in &table {
+        let Some(entries) = entries.as_table() else {
+            continue;
+        };
+        code.push_str(&format!(
+            "/// `[{group}]` of channels.toml.\npub mod {group} {{\n"
+        ));
+        for (name, entry) in entries {
+            let fields: Option<Vec<&str>> = entry
+                .as_array()
+                .map(|items| items.iter().filter_map(toml::Value::as_str).collect());
+            let [channel, message, meaning] = fields.as_deref().unwrap_or_default() else {
+                return Err(format!(
+                    "[{group}] {name} must be [channel, message type, meaning]"
+                ));
+            };
+            code.push_str(&format!(
+                "    /// `{message}`, {meaning}.\n    pub const {}: &str = {channel:?};\n",
+                name.to_uppercase()
+            ));
+        }
+        code.push_str("}\n");
+    }
+    std::fs::write(out, code).map_err(|e| format!("cannot write {}: {e}", out.display()))
 }

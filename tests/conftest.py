@@ -28,6 +28,7 @@ from pfnav_harness import scenario as harness_scenario
 from pfnav_harness.cli import in_private_network_namespace
 from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.fmu_runner import FmuContract, read_contract
+from pfnav_harness.lcm_channels import udpm_url
 from pfnav_harness.pipeline import export_scenario
 from pfnav_harness.planner_client import Plan, PlannerClient
 from pfnav_harness.robot import RobotDescription
@@ -98,7 +99,7 @@ def lcm_url() -> str:
             pytrace=False,
         )
     # A port of its own keeps this session's traffic apart from other tests on the same namespace.
-    return f"udpm://239.255.76.67:{7600 + os.getpid() % 100}?ttl=0&recv_buf_size=4194304"
+    return udpm_url(7600 + os.getpid() % 100)
 
 
 @pytest.fixture(scope="session")

@@ -13,6 +13,7 @@ import subprocess
 import sys
 
 import lcm
+from pfnav_harness.lcm_channels import udpm_url
 
 RECEIVER = r"""
 import sys, lcm
@@ -45,7 +46,7 @@ def test_the_lcm_module_is_the_patched_build() -> None:
 def test_regression_crafted_fragments_do_not_crash_a_python_receiver(lcm_url: str) -> None:
     group, port = _group_and_port(lcm_url)
     port += 150  # a port of its own, away from the planner fixtures
-    url = f"udpm://{group}:{port}?ttl=0"
+    url = udpm_url(port, recv_buf_size=False)
     receiver = subprocess.Popen(
         [sys.executable, "-c", RECEIVER, url],
         stdout=subprocess.PIPE,

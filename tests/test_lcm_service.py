@@ -24,6 +24,8 @@ from typing import Any
 import lcm
 import numpy as np
 import pytest
+from pfnav_harness import lcm_channels
+from pfnav_harness.lcm_channels import PLANNER
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 _GENERATED = REPO_ROOT / "build" / "lcm_python"
@@ -69,7 +71,7 @@ def udpm_url(port: int) -> str:
             "udpm tests must run in a private network namespace: bash scripts/netns.sh .venv/bin/pytest ...",
             pytrace=False,
         )
-    return f"udpm://239.255.76.67:{port}?ttl=0"
+    return lcm_channels.udpm_url(port, recv_buf_size=False)
 
 
 @dataclass
@@ -87,9 +89,9 @@ class Client:
 
     def __post_init__(self) -> None:
         self.lc = lcm.LCM(self.url)
-        self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply)
-        self.lc.subscribe(self.prefix + "SERVICE_STATUS", self._on_status)
-        self.lc.subscribe(self.prefix + "FEEDBACK_FIELD", self._on_field)
+        self.lc.subscribe(self.prefix + PLANNER.plan_reply, self._on_reply)
+        self.lc.subscribe(self.prefix + PLANNER.service_status, self._on_status)
+        self.lc.subscribe(self.prefix + PLANNER.feedback_field, self._on_field)
 
     def _on_reply(self, _channel: str, data: bytes) -> None:
         reply = plan_reply_t.decode(data)
@@ -116,7 +118,7 @@ class Client:
         self.lc.publish(self.prefix + channel, msg.encode())
 
     def request(self, msg: Any, timeout: float = 60.0) -> Any:
-        self.publish("PLAN_REQUEST", msg)
+        self.publish(PLANNER.plan_request, msg)
         assert self.pump(lambda: msg.request_id in self.replies, timeout), (
             f"no reply to {msg.request_id}"
         )
@@ -249,7 +251,7 @@ def test_python_client_gets_the_c_shape_plan(
 ) -> None:
     client, service = session
     terrain, meta = c_shape_map(tmp_path)
-    client.publish("MAP", terrain)
+    client.publish(PLANNER.map, terrain)
     assert client.pump(lambda: client.statuses[-1].maps_received >= 1, 10.0), (
         "map not received"
     )
@@ -310,7 +312,7 @@ def test_a_walking_robot_gets_fields_and_stale_maps_are_refused(
     refused as stale, with the reason given to a request that names it."""
     client, _ = session
     n = 16
-    client.publish("MAP", partial_map(n, seq=3, known_columns=6, prior=0.8))
+    client.publish(PLANNER.map, partial_map(n, seq=3, known_columns=6, prior=0.8))
     assert client.pump(lambda: client.statuses[-1].maps_received >= 1, 10.0)
     first = client.request(
         request(1, plan_request_t.METHOD_PF, (0.4, 0.4), (3.5, 3.5), map_seq=3)
@@ -332,8 +334,8 @@ def test_a_walking_robot_gets_fields_and_stale_maps_are_refused(
     # Unknown columns cost the prior 0.8 per metre; the known flat ground costs 1 (h/h_max).
     assert cost[14, 15] == pytest.approx(0.8 * 0.25, rel=1e-6)
 
-    client.publish("MAP", partial_map(n, seq=4, known_columns=12, prior=0.8))
-    client.publish("MAP", partial_map(n, seq=2, known_columns=16, prior=0.8))
+    client.publish(PLANNER.map, partial_map(n, seq=4, known_columns=12, prior=0.8))
+    client.publish(PLANNER.map, partial_map(n, seq=2, known_columns=16, prior=0.8))
     second = client.request(
         request(2, plan_request_t.METHOD_PF, (0.4, 0.4), (3.5, 3.5), map_seq=4)
     )
@@ -405,7 +407,7 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
     try:
         assert client.pump(lambda: bool(client.statuses), 20.0)
         walls = [(6, iy) for iy in range(10)]
-        client.publish("MAP", flat_map(16, seq=4, walls=walls))
+        client.publish(PLANNER.map, flat_map(16, seq=4, walls=walls))
         assert client.pump(lambda: client.statuses[-1].maps_received >= 1, 5.0)
         msgs = [
             request(
@@ -427,7 +429,7 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
         for msg in msgs:
             client.request(msg, timeout=60.0)
         assert _wait_for(
-            lambda: _logged_channels(log_file).count(prefix + "PLAN_REPLY") >= len(msgs),
+            lambda: _logged_channels(log_file).count(prefix + PLANNER.plan_reply) >= len(msgs),
             10.0,
         ), "lcm-logger did not record every reply"
     finally:
@@ -439,7 +441,7 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
 
     recorded: dict[int, Any] = {}
     for event in lcm.EventLog(str(log_file), "r"):
-        if event.channel == prefix + "PLAN_REPLY":
+        if event.channel == prefix + PLANNER.plan_reply:
             reply = plan_reply_t.decode(event.data)
             recorded[reply.request_id] = reply
     assert sorted(recorded) == [1, 2, 3, 4, 5], "the logger recorded the replies"

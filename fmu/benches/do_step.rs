@@ -23,7 +23,6 @@ use quad_controller_fmu::exports::stepping::fmi2DoStep;
 use quad_controller_fmu::exports::values::{fmi2GetReal, fmi2SetReal};
 use quad_controller_fmu::ffi::{Fmi2Component, Fmi2Status, FMI2_FALSE, FMI2_TRUE};
 use quad_controller_fmu::variables::{Causality, ScalarType, VariableTable};
-use quad_controller_fmu::GUID;
 
 const DT: f64 = 0.001;
 /// Ticks until the robot stands (stand-up takes 1 s), so every variant measures the MPC stance.
@@ -70,11 +69,11 @@ fn real_inputs(
 }
 
 /// An initialised instance of our robot's FMU, created through `fmi2Instantiate`.
-fn instantiate(resources: &Path) -> Fmi2Component {
+fn instantiate(resources: &Path, guid: &str) -> Fmi2Component {
     write_resources(&default_robot_config(), &PackagePath::default(), resources)
         .expect("resources");
     let uri = CString::new(format!("file://{}", resources.display())).expect("uri");
-    let guid = CString::new(GUID).expect("guid");
+    let guid = CString::new(guid).expect("guid");
     // SAFETY: valid C strings; NULL callbacks are allowed by the FMU.
     let c = unsafe {
         fmi2Instantiate(
@@ -120,7 +119,7 @@ fn bench(c: &mut Criterion) {
     });
 
     let resources = Path::new(env!("CARGO_TARGET_TMPDIR")).join("do_step_bench_resources");
-    let instance = instantiate(&resources);
+    let instance = instantiate(&resources, &table.guid());
     let (vrs, values) = real_inputs(&table, &state, &reference);
     // SAFETY (every call below): `instance` is live; the slices outlive the calls and their
     // lengths are passed with them.

@@ -138,6 +138,11 @@ impl Instance {
         self.resources.robot_crc
     }
 
+    /// The FMU's GUID (saved states carry it).
+    pub fn guid(&self) -> &str {
+        &self.resources.guid
+    }
+
     /// `fmi2GetFMUstate`: everything the instance carries between calls. Allowed in every
     /// phase.
     pub fn save_state(&self) -> InstanceState {

@@ -39,10 +39,6 @@ use crate::variables::ScalarType;
 /// `modelIdentifier`: the binary is `binaries/linux64/QuadController.so`.
 pub const MODEL_IDENTIFIER: &str = "QuadController";
 
-/// The GUID written to `modelDescription.xml` and checked by `fmi2Instantiate`. Change it
-/// whenever the variable table changes incompatibly.
-pub const GUID: &str = "{320c93d8-147c-4514-a9e7-440d4235dda0}";
-
 /// `DefaultExperiment` stop time, s.
 pub const DEFAULT_STOP_TIME: f64 = 10.0;
 

@@ -5,7 +5,7 @@ use std::fmt::Write;
 
 use crate::logger::LOG_CATEGORIES;
 use crate::variables::{enum_types, Causality, Variable, VariableTable};
-use crate::{DEFAULT_STEP_SIZE, DEFAULT_STOP_TIME, GUID, MODEL_IDENTIFIER};
+use crate::{DEFAULT_STEP_SIZE, DEFAULT_STOP_TIME, MODEL_IDENTIFIER};
 
 /// Escapes text for XML attribute values and element content.
 pub fn xml_escape(text: &str) -> String {
@@ -117,9 +117,10 @@ pub fn model_description_xml(table: &VariableTable) -> String {
     out.push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     let _ = writeln!(
         out,
-        "<fmiModelDescription fmiVersion=\"2.0\" modelName=\"{MODEL_IDENTIFIER}\" guid=\"{GUID}\" \
+        "<fmiModelDescription fmiVersion=\"2.0\" modelName=\"{MODEL_IDENTIFIER}\" guid=\"{}\" \
          description=\"{}\" author=\"pfnav\" version=\"{}\" generationTool=\"quad-controller-fmu bundle-fmu\" \
          generationDateAndTime=\"{}\" variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">",
+        table.guid(),
         xml_escape(&format!(
             "Quadruped controller stack (gait FSM, convex MPC on ground reaction forces, leg torque control) \
              as an FMI 2.0 Co-Simulation slave. Frames: world x east, y north, z up; base quaternion (w,x,y,z) \
@@ -282,7 +283,7 @@ mod tests {
         assert_eq!(xml.matches("<Unknown ").count(), 2 * outputs);
         assert_eq!(xml.matches("dependencies=\"\"/>").count(), 2 * outputs);
         assert!(xml.contains("generationDateAndTime=\""));
-        assert!(xml.contains(&format!("guid=\"{GUID}\"")));
+        assert!(xml.contains(&format!("guid=\"{}\"", our_table().guid())));
         assert!(xml.contains("canHandleVariableCommunicationStepSize=\"true\""));
         assert!(!xml.contains("<Derivatives/>"));
         assert!(xml.contains("name=\"joint.q[1]\" valueReference=\"13\""));

@@ -233,6 +233,8 @@ pub struct Resources {
     /// CRC-32 of the robot config and URDF texts (saved FMU states name the robot they were
     /// taken with).
     pub robot_crc: u32,
+    /// The FMU's GUID, derived from the table ([`VariableTable::guid`]).
+    pub guid: String,
 }
 
 /// CRC-32 that identifies a robot description: its config text, a NUL, its URDF text.
@@ -274,6 +276,7 @@ pub fn load(dir: &Path) -> Result<Resources, FmuError> {
     Ok(Resources {
         model,
         config,
+        guid: table.guid(),
         table: Arc::new(table),
         robot_crc: robot_crc(&config_toml, &urdf),
     })

@@ -10,30 +10,31 @@
 //! | bytes | content |
 //! |---|---|
 //! | 8 | magic `PFNAVFMU` |
-//! | 4 | format version ([`FORMAT_VERSION`]) |
+//! | 4 | layout id of the state types ([`STATE_LAYOUT`]) |
 //! | 38 | the FMU's GUID (ASCII, `{…}`) |
 //! | 4 | CRC-32 of the robot description (URDF) the state was taken with |
 //! | 8 | payload length n |
 //! | 4 | CRC-32 of the payload |
 //! | n | payload: the [`InstanceState`] in CBOR (RFC 8949) |
 //!
-//! A blob is checked in that order before anything is decoded: a blob of another program, of
-//! another version of this FMU, of another robot, truncated or corrupted is refused with the
-//! reason, and nothing in the instance changes.
+//! A blob is checked in that order before anything is decoded: a blob of another program, of a
+//! build of this FMU with other state types, of another interface (GUID) or robot, truncated or
+//! corrupted is refused with the reason, and nothing in the instance changes.
 
 use quad_controller::{Command, ControllerConfig, ControllerState};
 use serde::{Deserialize, Serialize};
 
 use crate::instance::Phase;
 use crate::variables::Inputs;
-use crate::{FmuError, GUID};
+use crate::FmuError;
 
 /// First bytes of every serialized state.
 pub const MAGIC: &[u8; 8] = b"PFNAVFMU";
-/// Version of the serialized layout and of [`InstanceState`]; bump it when either changes.
-pub const FORMAT_VERSION: u32 = 1;
+include!(concat!(env!("OUT_DIR"), "/state_layout.rs"));
+/// Length of a GUID in the header: `{` + 36 characters of the UUID + `}`.
+pub const GUID_LEN: usize = 38;
 /// Length of the header before the payload.
-pub const HEADER_LEN: usize = MAGIC.len() + 4 + GUID.len() + 4 + 8 + 4;
+pub const HEADER_LEN: usize = MAGIC.len() + 4 + GUID_LEN + 4 + 8 + 4;
 /// Largest payload accepted (a state is about 20 kB; anything near this is not ours).
 pub const MAX_PAYLOAD: u64 = 16 << 20;
 
@@ -63,15 +64,21 @@ pub struct InstanceState {
 }
 
 impl InstanceState {
-    /// The serialized form for an FMU whose robot description has CRC-32 `robot_crc`.
-    pub fn encode(&self, robot_crc: u32) -> Result<Vec<u8>, FmuError> {
+    /// The serialized form for the FMU with GUID `guid` whose robot description has CRC-32
+    /// `robot_crc`.
+    pub fn encode(&self, guid: &str, robot_crc: u32) -> Result<Vec<u8>, FmuError> {
+        if guid.len() != GUID_LEN {
+            return Err(FmuError::SavedState(format!(
+                "GUID {guid:?} is not {GUID_LEN} bytes long"
+            )));
+        }
         let mut payload = Vec::new();
         ciborium::into_writer(self, &mut payload)
             .map_err(|e| FmuError::SavedState(format!("cannot encode the state: {e}")))?;
         let mut blob = Vec::with_capacity(HEADER_LEN + payload.len());
         blob.extend_from_slice(MAGIC);
-        blob.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        blob.extend_from_slice(GUID.as_bytes());
+        blob.extend_from_slice(&STATE_LAYOUT.to_le_bytes());
+        blob.extend_from_slice(guid.as_bytes());
         blob.extend_from_slice(&robot_crc.to_le_bytes());
         blob.extend_from_slice(&(payload.len() as u64).to_le_bytes());
         blob.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
@@ -79,9 +86,9 @@ impl InstanceState {
         Ok(blob)
     }
 
-    /// Reads a serialized state, checking it was made by this FMU for the robot whose
-    /// description has CRC-32 `robot_crc`.
-    pub fn decode(blob: &[u8], robot_crc: u32) -> Result<InstanceState, FmuError> {
+    /// Reads a serialized state, checking it was made by a build with these state types, for the
+    /// FMU with GUID `guid` and the robot whose description has CRC-32 `robot_crc`.
+    pub fn decode(blob: &[u8], guid: &str, robot_crc: u32) -> Result<InstanceState, FmuError> {
         let refuse = |reason: String| Err(FmuError::SavedState(reason));
         if blob.len() < HEADER_LEN {
             return refuse(format!(
@@ -93,20 +100,20 @@ impl InstanceState {
         if magic != MAGIC {
             return refuse("not a serialized state of this FMU (wrong magic bytes)".to_owned());
         }
-        let (version, rest) = split::<4>(rest)?;
-        let version = u32::from_le_bytes(*version);
-        if version != FORMAT_VERSION {
+        let (layout, rest) = split::<4>(rest)?;
+        let layout = u32::from_le_bytes(*layout);
+        if layout != STATE_LAYOUT {
             return refuse(format!(
-                "serialized with format version {version}, this FMU reads version {FORMAT_VERSION}"
+                "serialized by a build with other state types (layout {layout:#010x}, this FMU's is {STATE_LAYOUT:#010x})"
             ));
         }
-        let (guid, rest) = rest.split_at_checked(GUID.len()).ok_or_else(|| {
+        let (theirs, rest) = rest.split_at_checked(GUID_LEN).ok_or_else(|| {
             FmuError::SavedState("serialized state ends inside its header".to_owned())
         })?;
-        if guid != GUID.as_bytes() {
+        if theirs != guid.as_bytes() {
             return refuse(format!(
-                "serialized by an FMU with GUID {}, this one is {GUID}",
-                String::from_utf8_lossy(guid)
+                "serialized by an FMU with GUID {}, this one is {guid}",
+                String::from_utf8_lossy(theirs)
             ));
         }
         let (robot, rest) = split::<4>(rest)?;

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import pytest
 
 from pfnav_harness import fmu_runner, paths
 from pfnav_harness.errors import MissingArtifactError
-from pfnav_harness.scenario import Scenario, load_scenario
+from pfnav_harness.scenario import GoalRegion, Scenario, Terrain, load_scenario, write_map
 
 
 def write_scenario(
@@ -26,27 +25,9 @@ def write_scenario(
     goal_radius: float = 0.3,
 ) -> Path:
     """Writes NAME.heights.npy (+ obstacles) and the NAME.json sidecar like `pf-plan scenario export`."""
-    folder.mkdir(parents=True, exist_ok=True)
-    np.save(folder / f"{name}.heights.npy", heights.astype(np.float64))
-    if obstacles is not None:
-        np.save(folder / f"{name}.obstacles.npy", obstacles.astype(np.uint8))
-    meta = {
-        "name": name,
-        "seed": 7,
-        "origin": list(origin),
-        "resolution": resolution,
-        "width": int(heights.shape[1]),
-        "height": int(heights.shape[0]),
-        "heights": f"{name}.heights.npy",
-        "obstacles": f"{name}.obstacles.npy" if obstacles is not None else None,
-        "start": list(start),
-        "start_yaw": 0.0,
-        "goal": {"center": list(goal), "radius": goal_radius},
-        "traversability": {"height_weight": 1.0, "p_floor": 0.05},
-    }
-    path = folder / f"{name}.json"
-    path.write_text(json.dumps(meta))
-    return path
+    terrain = Terrain(origin, resolution, heights, None if obstacles is None else obstacles.astype(bool))
+    traversability = {"height_weight": 1.0, "p_floor": 0.05}
+    return write_map(terrain, folder, name, traversability, start=start, goal=GoalRegion(goal, goal_radius), seed=7)
 
 
 @pytest.fixture

@@ -14,21 +14,18 @@ from pfnav_harness import paths
 
 FAKE_PF_PLAN = textwrap.dedent(
     """\
-    import json, sys
+    import sys
     from pathlib import Path
     import numpy as np
+    from pfnav_harness.scenario import GoalRegion, Terrain, write_map
     args = sys.argv[1:]
     name, out = args[2], Path(args[args.index("--out") + 1])
     if name != "ramp":
         print(f"error: unknown scenario '{name}' (known: ramp)", file=sys.stderr)
         sys.exit(2)
-    out.mkdir(parents=True, exist_ok=True)
-    np.save(out / "ramp.heights.npy", np.zeros((10, 20)))
-    meta = {"name": "ramp", "seed": 1, "origin": [0, 0], "resolution": 0.1, "width": 20, "height": 10,
-            "heights": "ramp.heights.npy", "obstacles": None, "start": [0.5, 0.5], "start_yaw": 0.0,
-            "goal": {"center": [1.5, 0.5], "radius": 0.2},
-            "traversability": {"height_weight": 1.0, "slope_weight": 0.0, "p_floor": 0.05}}
-    (out / "ramp.json").write_text(json.dumps(meta))
+    traversability = {"height_weight": 1.0, "slope_weight": 0.0, "p_floor": 0.05}
+    write_map(Terrain((0.0, 0.0), 0.1, np.zeros((10, 20))), out, "ramp", traversability,
+              start=(0.5, 0.5), goal=GoalRegion((1.5, 0.5), 0.2), seed=1)
     """
 )
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -14,36 +13,19 @@ import pytest
 from pfnav_harness.cli import build_parser
 from pfnav_harness.errors import HarnessError, ScenarioError
 from pfnav_harness.map_input import load_map_scenario, parse_point
+from pfnav_harness.scenario import GoalRegion, Terrain, write_map
 
 # 20 × 10 cells of 0.1 m: x 0..2 m, y 0..1 m; cells (ix 10..11, iy 4..5) are an obstacle.
 WIDTH, HEIGHT, RESOLUTION = 20, 10, 0.1
 
 
 def write_sidecar(folder: Path, name: str = "hill", start: tuple[float, float] = (0.25, 0.25), goal: tuple[float, float] = (1.75, 0.75)) -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
     xs = (np.arange(WIDTH) + 0.5) * RESOLUTION
     heights = np.tile(0.2 * xs, (HEIGHT, 1))
     obstacles = np.zeros((HEIGHT, WIDTH), dtype=bool)
     obstacles[4:6, 10:12] = True
-    np.save(folder / f"{name}.heights.npy", heights)
-    np.save(folder / f"{name}.obstacles.npy", obstacles)
-    meta = {
-        "name": name,
-        "seed": None,
-        "origin": [0.0, 0.0],
-        "resolution": RESOLUTION,
-        "width": WIDTH,
-        "height": HEIGHT,
-        "heights": f"{name}.heights.npy",
-        "obstacles": f"{name}.obstacles.npy",
-        "start": list(start),
-        "start_yaw": 0.3,
-        "goal": {"center": list(goal), "radius": 0.2},
-        "traversability": {"height_weight": 1.0},
-    }
-    path = folder / f"{name}.json"
-    path.write_text(json.dumps(meta))
-    return path
+    terrain = Terrain((0.0, 0.0), RESOLUTION, heights, obstacles)
+    return write_map(terrain, folder, name, {"height_weight": 1.0}, start=start, start_yaw=0.3, goal=GoalRegion(goal, 0.2))
 
 
 def test_map_cli_flags_parse() -> None:

@@ -109,7 +109,7 @@ def test_updates_go_out_at_the_period_and_answers_are_used_after_the_budget() ->
     assert first.ok
     # The first map already carries what the sensor saw at the start: a partial map with a mask.
     _, _, known, prior_p = client.maps[0]
-    assert known is not None and 0 < known.sum() < known.size and prior_p == 0.5
+    assert known is not None and 0 < known.sum() < known.size and prior_p == 0.0  # the planner's default
     used = _walk(navigator, 3.0)
     publish_times = [r.t_publish for r in navigator.replans[1:]]
     # The start plan covers t = 0; updates follow every period.

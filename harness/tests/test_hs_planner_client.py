@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from pfnav_harness.errors import PlannerError
+from pfnav_harness.lcm_channels import PLANNER
 from pfnav_harness.planner_client import PlannerClient, _import_types, plan_from_reply, terrain_map_message
 from pfnav_harness.scenario import Scenario, Terrain
 
@@ -63,8 +64,8 @@ class FakeService:
         self.error = error
         self.requests: list[Any] = []
         self.maps: list[Any] = []
-        client.lc.subscribe(client.prefix + "PLAN_REQUEST", self._on_request)
-        client.lc.subscribe(client.prefix + "MAP", self._on_map)
+        client.lc.subscribe(client.prefix + PLANNER.plan_request, self._on_request)
+        client.lc.subscribe(client.prefix + PLANNER.map, self._on_map)
 
     def _on_map(self, _channel: str, data: bytes) -> None:
         self.maps.append(pfnav.terrain_map_t.decode(data))
@@ -75,7 +76,7 @@ class FakeService:
         if len(self.requests) <= self.drop_first:
             return
         reply = make_reply(request, status=self.status, error=self.error)
-        self.client.lc.publish(self.client.prefix + "PLAN_REPLY", reply.encode())
+        self.client.lc.publish(self.client.prefix + PLANNER.plan_reply, reply.encode())
 
 
 def test_request_is_answered_and_converted(ramp_scenario: Scenario) -> None:

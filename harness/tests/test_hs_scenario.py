@@ -79,7 +79,9 @@ def test_bad_files_give_scenario_errors(tmp_path: Path, scenario_writer: Callabl
     path.write_text(json.dumps(meta))
     with pytest.raises(ScenarioError, match="shape"):
         load_scenario(path)
-    path = write_scenario(tmp_path, "nan", np.full((4, 5), np.nan))
+    # A file another program wrote with NaN heights (the harness's writer refuses to write one).
+    path = write_scenario(tmp_path, "nan", np.zeros((4, 5)))
+    np.save(tmp_path / "nan.heights.npy", np.full((4, 5), np.nan))
     with pytest.raises(ScenarioError, match="NaN"):
         load_scenario(path)
     path = write_scenario(tmp_path, "goal", np.zeros((4, 5)), goal_radius=0.0)

@@ -67,7 +67,7 @@ def test_far_off_map_observation_is_harmless() -> None:
 
 @pytest.mark.parametrize(
     "config",
-    [SensorConfig(range_m=0.0), SensorConfig(range_m=float("nan")), SensorConfig(unknown_traversability=0.0), SensorConfig(unknown_traversability=1.5)],
+    [SensorConfig(range_m=0.0), SensorConfig(range_m=float("nan")), SensorConfig(unknown_traversability=-0.1), SensorConfig(unknown_traversability=1.5)],
 )
 def test_bad_sensor_settings_are_refused(config: SensorConfig) -> None:
     with pytest.raises(SimulationError):

@@ -23,3 +23,8 @@ pub mod codec;
 pub use codec::{DecodeError, DecodeLimits, EncodeError, Message};
 
 include!(concat!(env!("OUT_DIR"), "/pfnav_types.rs"));
+
+/// The bus contract of `lcm_types/channels.toml`: the default URL and every channel name.
+pub mod channels {
+    include!(concat!(env!("OUT_DIR"), "/channels.rs"));
+}

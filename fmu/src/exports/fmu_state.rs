@@ -146,7 +146,7 @@ pub extern "C" fn fmi2SerializedFMUstateSize(
         if size.is_null() {
             return Err(FmuError::InvalidArgument("size is NULL".to_owned()));
         }
-        let blob = owned_state(c, state)?.encode(instance.robot_crc())?;
+        let blob = owned_state(c, state)?.encode(instance.guid(), instance.robot_crc())?;
         // SAFETY: non-NULL pointer to a size_t, per the FMI signature.
         unsafe { *size = blob.len() };
         Ok(Fmi2Status::Ok)
@@ -163,7 +163,7 @@ pub extern "C" fn fmi2SerializeFMUstate(
     size: usize,
 ) -> Fmi2Status {
     with_instance(c, "fmi2SerializeFMUstate", |instance| {
-        let blob = owned_state(c, state)?.encode(instance.robot_crc())?;
+        let blob = owned_state(c, state)?.encode(instance.guid(), instance.robot_crc())?;
         if size < blob.len() {
             return Err(FmuError::InvalidArgument(format!(
                 "buffer of {size} bytes, the serialized state needs {}",
@@ -192,7 +192,7 @@ pub extern "C" fn fmi2DeSerializeFMUstate(
     with_instance(c, "fmi2DeSerializeFMUstate", |instance| {
         // SAFETY: the caller provides `size` readable bytes; NULL is refused for size > 0.
         let blob = unsafe { slice_from(serialized_state.cast::<u8>(), size, "serializedState")? };
-        let saved = InstanceState::decode(blob, instance.robot_crc())?;
+        let saved = InstanceState::decode(blob, instance.guid(), instance.robot_crc())?;
         // SAFETY: FMI passes a pointer to an fmi2FMUstate variable; NULL is checked.
         unsafe { store_state(c, state, saved)? };
         Ok(Fmi2Status::Ok)

@@ -13,7 +13,7 @@ use crate::ffi::{
 };
 use crate::instance::Instance;
 use crate::logger::Logger;
-use crate::{resources, FmuError, GUID};
+use crate::{resources, FmuError};
 
 /// `fmi2GetTypesPlatform`.
 #[no_mangle]
@@ -120,15 +120,17 @@ unsafe fn instantiate(
         )));
     }
     let guid = c_str_lossy(fmu_guid).unwrap_or_default();
-    if guid != GUID {
-        return Err(FmuError::Instantiate(format!(
-            "GUID {guid:?} does not match this FMU's {GUID:?} (modelDescription.xml from a different build?)"
-        )));
-    }
     let location = c_str_lossy(fmu_resource_location)
         .ok_or_else(|| FmuError::Instantiate("fmuResourceLocation is NULL".to_owned()))?;
     let dir = resources::resource_dir_from_uri(&location)?;
     let loaded = resources::load(&dir)?;
+    // The GUID is the interface of the variable table the resources give this binary.
+    if guid != loaded.guid {
+        return Err(FmuError::Instantiate(format!(
+            "GUID {guid:?} does not match this FMU's {:?} (modelDescription.xml from a different build?)",
+            loaded.guid
+        )));
+    }
     let instance = Instance::new(loaded, logger.clone());
     logger.log(
         Fmi2Status::Ok,

@@ -1,7 +1,14 @@
 use super::lifecycle::{fmi2EnterInitializationMode, fmi2FreeInstance, fmi2Instantiate};
 use super::stepping::fmi2DoStep;
 use crate::ffi::{Fmi2Status, FMI2_TRUE};
-use crate::GUID;
+
+/// Our robot's GUID, as `bundle-fmu` writes it into modelDescription.xml.
+fn our_guid() -> std::ffi::CString {
+    let table =
+        crate::variables::VariableTable::for_robot_config(&crate::bundle::default_robot_config())
+            .unwrap();
+    std::ffi::CString::new(table.guid()).unwrap()
+}
 
 #[test]
 fn null_and_foreign_components_are_rejected() {
@@ -22,19 +29,49 @@ fn null_and_foreign_components_are_rejected() {
 #[test]
 fn wrong_guid_type_or_name_give_null() {
     let resources = c"file:///nonexistent";
-    let guid = std::ffi::CString::new(GUID).unwrap();
+    let guid = our_guid();
+    // Good resources: the GUID alone is wrong (another interface's, or garbage).
+    let dir = tempfile::tempdir().unwrap();
+    crate::bundle::write_resources(
+        &crate::bundle::default_robot_config(),
+        &quad_controller::PackagePath::default(),
+        dir.path(),
+    )
+    .unwrap();
+    let good_resources =
+        std::ffi::CString::new(format!("file://{}", dir.path().display())).unwrap();
+    let mut other_interface = guid.clone().into_bytes();
+    other_interface[1] = if other_interface[1] == b'0' {
+        b'1'
+    } else {
+        b'0'
+    };
+    let other_interface = std::ffi::CString::new(other_interface).unwrap();
     // SAFETY: valid C strings, NULL callbacks are allowed.
     unsafe {
-        let bad_guid = fmi2Instantiate(
+        for bad in [c"{x}", other_interface.as_c_str()] {
+            let bad_guid = fmi2Instantiate(
+                c"a".as_ptr(),
+                1,
+                bad.as_ptr(),
+                good_resources.as_ptr(),
+                std::ptr::null(),
+                0,
+                0,
+            );
+            assert!(bad_guid.is_null(), "{bad:?}");
+        }
+        let right = fmi2Instantiate(
             c"a".as_ptr(),
             1,
-            c"{x}".as_ptr(),
-            resources.as_ptr(),
+            guid.as_ptr(),
+            good_resources.as_ptr(),
             std::ptr::null(),
             0,
             0,
         );
-        assert!(bad_guid.is_null());
+        assert!(!right.is_null(), "the GUID the table derives is accepted");
+        fmi2FreeInstance(right);
         let model_exchange = fmi2Instantiate(
             c"a".as_ptr(),
             0,
@@ -78,7 +115,7 @@ fn instantiate(dir: &std::path::Path, name: &std::ffi::CStr) -> crate::ffi::Fmi2
     )
     .unwrap();
     let uri = std::ffi::CString::new(format!("file://{}", dir.display())).unwrap();
-    let guid = std::ffi::CString::new(GUID).unwrap();
+    let guid = our_guid();
     // SAFETY: valid C strings, NULL callbacks are allowed.
     let c = unsafe {
         fmi2Instantiate(

@@ -107,8 +107,8 @@ fn check_round_trip(kalman: bool) {
         "set state: outputs differ from the first run"
     );
 
-    let blob = saved.encode(i.robot_crc()).unwrap();
-    let decoded = InstanceState::decode(&blob, i.robot_crc()).unwrap();
+    let blob = saved.encode(i.guid(), i.robot_crc()).unwrap();
+    let decoded = InstanceState::decode(&blob, i.guid(), i.robot_crc()).unwrap();
     let mut second = instance();
     second.restore_state(&decoded).unwrap();
     assert_eq!(second.phase(), Phase::StepComplete);
@@ -164,7 +164,7 @@ fn bad_serialized_states_are_refused_and_change_nothing() {
     let mut i = started(false);
     run(&mut i, 50);
     let crc = i.robot_crc();
-    let blob = i.save_state().encode(crc).unwrap();
+    let blob = i.save_state().encode(i.guid(), crc).unwrap();
     let before = output_bits(&i);
     let time = i.time();
 
@@ -175,21 +175,22 @@ fn bad_serialized_states_are_refused_and_change_nothing() {
         ("padded", [blob.as_slice(), &[0]].concat(), "truncated or padded"),
         ("not ours", b"%PDF-1.7 and then some more bytes to pass the header length check of the state................................".to_vec(), "magic"),
     ];
-    let mut version = blob.clone();
-    version[MAGIC.len()] ^= 0x01;
-    cases.push(("other version", version, "format version"));
+    let mut layout = blob.clone();
+    layout[MAGIC.len()] ^= 0x01;
+    cases.push(("other state types", layout, "other state types"));
     let mut guid = blob.clone();
-    guid[MAGIC.len() + 5] = b'0';
+    let digit = MAGIC.len() + 4 + 1;
+    guid[digit] = if guid[digit] == b'0' { b'1' } else { b'0' };
     cases.push(("other FMU", guid, "GUID"));
     let mut corrupted = blob.clone();
     let last = corrupted.len() - 1;
     corrupted[last] ^= 0x40;
     cases.push(("corrupted", corrupted, "checksum"));
     for (what, bytes, expected) in &cases {
-        let err = InstanceState::decode(bytes, crc).expect_err(what);
+        let err = InstanceState::decode(bytes, i.guid(), crc).expect_err(what);
         assert!(err.to_string().contains(expected), "{what}: {err}");
     }
-    let err = InstanceState::decode(&blob, crc ^ 1).expect_err("other robot");
+    let err = InstanceState::decode(&blob, i.guid(), crc ^ 1).expect_err("other robot");
     assert!(err.to_string().contains("robot description"), "{err}");
 
     // A well-formed state that is not consistent: a controller state with a phase that has none.

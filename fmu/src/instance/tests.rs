@@ -8,6 +8,7 @@ pub(super) fn instance() -> Instance {
         config: ControllerConfig::default(),
         table: std::sync::Arc::new(our_table().clone()),
         robot_crc: 0x5eed,
+        guid: our_table().guid(),
     };
     Instance::new(
         resources,

@@ -226,6 +226,39 @@ impl VariableTable {
         VariableTable::new(&model, &ControllerConfig::for_robot(&model))
     }
 
+    /// The FMU's GUID (`modelDescription.xml`, checked by `fmi2Instantiate`, carried by saved
+    /// states): a name-based UUID (RFC 9562 version 5) of the interface this table describes, i.e.
+    /// the model identifier, every variable's name, value reference, type, causality, variability,
+    /// declared type and unit, and every enumeration's items and codes. Any change an importer
+    /// would notice changes it; the robot's numbers (start values, ranges) do not.
+    pub fn guid(&self) -> String {
+        use std::fmt::Write as _;
+        let mut interface = format!("{}\n", crate::MODEL_IDENTIFIER);
+        for v in &self.rows {
+            // Writing to a String cannot fail.
+            let _ = writeln!(
+                interface,
+                "{}|{}|{}|{}|{}|{}|{}",
+                v.name,
+                v.value_reference,
+                v.scalar_type().xml_name(),
+                v.causality.xml_name(),
+                v.variability.xml_name(),
+                v.declared_type.unwrap_or(""),
+                v.unit.map_or("", Unit::name),
+            );
+        }
+        for t in enum_types() {
+            let _ = write!(interface, "{}:", t.name);
+            for item in &t.items {
+                let _ = write!(interface, " {}={}", item.name, item.value);
+            }
+            interface.push('\n');
+        }
+        let id = uuid::Uuid::new_v5(&uuid::Uuid::NAMESPACE_OID, interface.as_bytes());
+        format!("{{{id}}}")
+    }
+
     /// The robot's name (the URDF's `<robot name>`).
     pub fn robot_name(&self) -> &str {
         &self.robot_name

@@ -308,3 +308,48 @@ fn joint_measurements_outside_their_range_are_accepted() {
     assert!(check_value(knee, Value::Real(f64::NAN)).is_err());
     assert!(by_name("cmd.mode").unwrap().range_is_enforced());
 }
+
+#[test]
+fn the_guid_is_the_interface_of_the_table() {
+    let ours = our_table();
+    let guid = ours.guid();
+    assert_eq!(guid.len(), crate::saved_state::GUID_LEN);
+    assert!(guid.starts_with('{') && guid.ends_with('}'), "{guid}");
+    assert_eq!(guid, ours.clone().guid(), "deterministic");
+    // Another robot's numbers (start values, ranges, the robot's name) keep the interface.
+    let mut other_robot = ours.clone();
+    other_robot.robot_name = "another robot".to_owned();
+    for v in &mut other_robot.rows {
+        v.min = v.min.map(|m| m - 1.0);
+        v.start = match v.start {
+            Value::Real(x) => Value::Real(x + 0.25),
+            other => other,
+        };
+    }
+    assert_eq!(other_robot.guid(), guid);
+    // What an importer relies on changes it.
+    type Change = (&'static str, fn(&mut Variable));
+    let changes: [Change; 4] = [
+        ("name", |v| v.name.push('x')),
+        ("value reference", |v| v.value_reference += 1000),
+        ("causality", |v| {
+            v.causality = if v.causality == Causality::Input {
+                Causality::Output
+            } else {
+                Causality::Input
+            }
+        }),
+        ("unit", |v| {
+            v.unit = if v.unit.is_some() {
+                None
+            } else {
+                Some(Unit::Metre)
+            }
+        }),
+    ];
+    for (what, change) in changes {
+        let mut changed = ours.clone();
+        change(&mut changed.rows[3]);
+        assert_ne!(changed.guid(), guid, "{what}");
+    }
+}

@@ -20,6 +20,7 @@ from .fmu_runner import ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
 from .robot_fmu import robot_and_fmu
 from .scenario import paper_scenario_names
+from .sensing import PLANNER_DEFAULT
 
 if TYPE_CHECKING:
     from .body_sensors import BodySensorConfig
@@ -116,7 +117,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--online", action="store_true", help="sense the terrain while walking, publish map updates and replan (P-F: feedback mode)")
     p.add_argument("--sensor-range", type=float, default=3.0, help="online: height sensor range around the base, m (default 3)")
-    p.add_argument("--unknown-traversability", type=float, default=0.5, help="online: traversability p of unseen cells, in (0, 1] (default 0.5)")
+    p.add_argument(
+        "--unknown-traversability",
+        type=float,
+        default=PLANNER_DEFAULT,
+        help="online: traversability p of unseen cells, in (0, 1] (default: the planner service's)",
+    )
     p.add_argument("--update-period", type=float, default=0.5, help="online: simulated seconds between map updates (default 0.5 = 2 Hz)")
     p.add_argument("--replan-budget", type=float, default=0.2, help="online: simulated seconds from a map update to its plan in use (default 0.2)")
     p.add_argument(

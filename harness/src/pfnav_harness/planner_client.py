@@ -25,11 +25,10 @@ from numpy.typing import NDArray
 
 from .errors import HarnessError, PlannerError
 from .feedback_field import FeedbackField
+from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, PLANNER
 from .paths import repo_root
 from .scenario import GoalRegion, Scenario, Terrain
 
-DEFAULT_LCM_URL = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304"
-DEFAULT_CHANNEL_PREFIX = "PFNAV_"
 METHODS = ("pf", "astar", "dijkstra")
 # Footprint radius the harness starts the service with (m). The robot's feet stand 0.13 m beside
 # its centre line and its controller keeps them 5 cm off edges; a path closer than ~0.25 m to the
@@ -244,9 +243,9 @@ class PlannerClient:
         self._map_seq = time.time_ns() // 1_000_000
         self._published_map: Any = None
         self._subs = [
-            self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply),
-            self.lc.subscribe(self.prefix + "SERVICE_STATUS", self._on_status),
-            self.lc.subscribe(self.prefix + "FEEDBACK_FIELD", self._on_field),
+            self.lc.subscribe(self.prefix + PLANNER.plan_reply, self._on_reply),
+            self.lc.subscribe(self.prefix + PLANNER.service_status, self._on_status),
+            self.lc.subscribe(self.prefix + PLANNER.feedback_field, self._on_field),
         ]
         self.process: subprocess.Popen[bytes] | None = None
         self._service_log_path = service_log
@@ -367,7 +366,7 @@ class PlannerClient:
         """Publishes the terrain on `<prefix>MAP` with a new sequence number and returns it."""
         seq = self.reserve_map_seq()
         self._published_map = terrain_map_message(terrain, seq, known=known, unknown_traversability=unknown_traversability)
-        self.lc.publish(self.prefix + "MAP", self._published_map.encode())
+        self.lc.publish(self.prefix + PLANNER.map, self._published_map.encode())
         return seq
 
     def reserve_map_seq(self) -> int:
@@ -377,11 +376,11 @@ class PlannerClient:
 
     def publish_raw_map(self, message: Any) -> None:
         """Publishes a prepared `terrain_map_t` as is (tests of how the service treats bad updates)."""
-        self.lc.publish(self.prefix + "MAP", message.encode())
+        self.lc.publish(self.prefix + PLANNER.map, message.encode())
 
     def _republish_map(self) -> None:
         if self._published_map is not None:
-            self.lc.publish(self.prefix + "MAP", self._published_map.encode())
+            self.lc.publish(self.prefix + PLANNER.map, self._published_map.encode())
 
     def send_request(self, pose: StartPose, goal: GoalRegion, method: str, map_seq: int, options: RequestOptions | None = None) -> int:
         """Publishes one plan request and returns its id without waiting for the answer."""
@@ -408,7 +407,7 @@ class PlannerClient:
         req.options.speed = options.speed
         req.options.sample_period = options.sample_period
         req.options.max_solve_time = options.max_solve_time
-        self.lc.publish(self.prefix + "PLAN_REQUEST", req.encode())
+        self.lc.publish(self.prefix + PLANNER.plan_request, req.encode())
         return request_id
 
     def await_answer(self, request_id: int, timeout: float) -> PlanAnswer | None:

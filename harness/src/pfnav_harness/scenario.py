@@ -310,11 +310,22 @@ def load_scenario(json_path: Path) -> Scenario:
     )
 
 
-def write_map(terrain: Terrain, folder: Path, name: str, traversability: dict[str, Any] | None = None) -> Path:
-    """Writes `terrain` as FOLDER/NAME.json + .npy arrays in the `pf-plan scenario export` format.
+def write_map(
+    terrain: Terrain,
+    folder: Path,
+    name: str,
+    traversability: dict[str, Any] | None = None,
+    *,
+    start: tuple[float, float] | None = None,
+    start_yaw: float = 0.0,
+    goal: GoalRegion | None = None,
+    seed: int | None = None,
+) -> Path:
+    """Writes `terrain` as FOLDER/NAME.json + .npy arrays in the `pf-plan scenario export` format
+    (the harness's one writer of it; the planner's is `pf_planner::io::save_scenario`).
 
-    For `pf-plan path-cost --map` / `pf-plan traversability --map`, which read only the map and the
-    traversability model: start and goal are set to the centre of cell (0, 0).
+    Without `start`/`goal` (`pf-plan path-cost --map`, `pf-plan traversability --map` read only the
+    map and the traversability model) both are the centre of cell (0, 0).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -324,18 +335,20 @@ def write_map(terrain: Terrain, folder: Path, name: str, traversability: dict[st
     if terrain.obstacles is not None:
         obstacles = f"{name}.obstacles.npy"
         np.save(folder / obstacles, np.ascontiguousarray(terrain.obstacles, dtype=bool))
-    corner = [terrain.origin[0] + 0.5 * terrain.resolution, terrain.origin[1] + 0.5 * terrain.resolution]
+    corner = (terrain.origin[0] + 0.5 * terrain.resolution, terrain.origin[1] + 0.5 * terrain.resolution)
+    goal = goal or GoalRegion(corner, 0.0)
     meta = {
         "name": name,
+        "seed": seed,
         "origin": list(terrain.origin),
         "resolution": terrain.resolution,
         "width": nx,
         "height": ny,
         "heights": f"{name}.heights.npy",
         "obstacles": obstacles,
-        "start": corner,
-        "start_yaw": 0.0,
-        "goal": {"center": corner, "radius": 0.0},
+        "start": list(start or corner),
+        "start_yaw": start_yaw,
+        "goal": {"center": list(goal.center), "radius": goal.radius},
         "traversability": dict(traversability or {}),
     }
     path = folder / f"{name}.json"

@@ -19,20 +19,22 @@ from .errors import SimulationError
 from .scenario import Terrain
 
 DEFAULT_SENSOR_RANGE = 3.0
-DEFAULT_UNKNOWN_TRAVERSABILITY = 0.5
+# terrain_map_t.unknown_traversability = 0: the planner service's own default applies.
+PLANNER_DEFAULT = 0.0
 
 
 @dataclass(frozen=True)
 class SensorConfig:
     range_m: float = DEFAULT_SENSOR_RANGE
-    # Traversability p the planner gives cells nobody has seen, in (0, 1].
-    unknown_traversability: float = DEFAULT_UNKNOWN_TRAVERSABILITY
+    # Traversability p the planner gives cells nobody has seen, in (0, 1]; 0: the planner's default.
+    unknown_traversability: float = PLANNER_DEFAULT
 
     def validate(self) -> None:
         if not (math.isfinite(self.range_m) and self.range_m > 0.0):
             raise SimulationError(f"the sensor range must be a positive number of metres, got {self.range_m}")
-        if not (math.isfinite(self.unknown_traversability) and 0.0 < self.unknown_traversability <= 1.0):
-            raise SimulationError(f"the traversability of unknown cells must lie in (0, 1], got {self.unknown_traversability}")
+        p = self.unknown_traversability
+        if not (p == PLANNER_DEFAULT or (math.isfinite(p) and 0.0 < p <= 1.0)):
+            raise SimulationError(f"the traversability of unknown cells must lie in (0, 1] (or be 0: the planner's default), got {p}")
 
 
 class BeliefMap:

@@ -14,8 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import HarnessError
+from .lcm_channels import SIM_ROBOT_STATE
 
-CHANNEL = "PFNAV_SIM_ROBOT_STATE"
+CHANNEL = SIM_ROBOT_STATE
 
 
 def robot_state_type() -> Any:

@@ -54,13 +54,7 @@ use std::time::Duration;
 
 use thiserror::Error;
 
-/// The URL used when neither the caller nor `LCM_DEFAULT_URL` names one: liblcm's default
-/// multicast group with `ttl=0`, so packets never leave the host, and a 4 MiB kernel receive
-/// buffer, so a burst of requests is queued rather than dropped by the kernel (the kernel caps
-/// it at `net.core.rmem_max`).
-pub const DEFAULT_URL: &str = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
-
-/// The environment variable that overrides [`DEFAULT_URL`] in [`Lcm::open_default`].
+/// The environment variable that names the bus when the caller gives no URL ([`url_from_env_or`]).
 pub const DEFAULT_URL_ENV: &str = "LCM_DEFAULT_URL";
 
 /// Largest message size an instance can be configured to hand to a handler, and its default,
@@ -179,11 +173,6 @@ impl Lcm {
                 dropped: AtomicU64::new(0),
             }),
         })
-    }
-
-    /// Opens the bus named by `LCM_DEFAULT_URL`, or [`DEFAULT_URL`] when it is unset or empty.
-    pub fn open_default() -> Result<Self, LcmError> {
-        Self::open(&default_url())
     }
 
     /// The URL this instance was opened with.
@@ -320,11 +309,12 @@ impl Drop for Lcm {
     }
 }
 
-/// The URL [`Lcm::open_default`] uses: `LCM_DEFAULT_URL` if set and non-empty, else [`DEFAULT_URL`].
-pub fn default_url() -> String {
+/// `LCM_DEFAULT_URL` if set and non-empty, else `default` (the stack's is
+/// `lcm_types::channels::DEFAULT_URL`).
+pub fn url_from_env_or(default: &str) -> String {
     match std::env::var(DEFAULT_URL_ENV) {
         Ok(url) if !url.is_empty() => url,
-        _ => DEFAULT_URL.to_owned(),
+        _ => default.to_owned(),
     }
 }
 

@@ -284,7 +284,8 @@ impl FeedbackGrid {
         for (name, dims, data) in entries {
             zip.start_file(format!("{name}.npy"), options)
                 .map_err(|e| io(&e))?;
-            zip.write_all(&npy_f64(dims, data)).map_err(|e| io(&e))?;
+            zip.write_all(&crate::io::npy_f64_bytes(dims, data))
+                .map_err(|e| io(&e))?;
         }
         zip.finish().map_err(|e| io(&e))?;
         Ok(())
@@ -343,36 +344,6 @@ fn tied_direction(actions: &[(f64, [f64; 2])], lattice_directions: usize) -> Opt
     } else {
         best_dir
     })
-}
-
-/// One `.npy` (version 1.0) of little-endian float64 in C order with shape `dims`.
-fn npy_f64(dims: &[usize], data: &[f64]) -> Vec<u8> {
-    let shape = match dims {
-        [] => "()".to_owned(),
-        [n] => format!("({n},)"),
-        _ => format!(
-            "({})",
-            dims.iter()
-                .map(usize::to_string)
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    };
-    let mut dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
-    // Magic (6) + version (2) + header length (2) + dict + '\n', padded to a multiple of 64 so
-    // the data starts aligned (as numpy writes it).
-    let unpadded = 10 + dict.len() + 1;
-    dict.push_str(&" ".repeat((64 - unpadded % 64) % 64));
-    dict.push('\n');
-    let mut bytes = Vec::with_capacity(10 + dict.len() + 8 * data.len());
-    bytes.extend_from_slice(b"\x93NUMPY\x01\x00");
-    // The dict of a 2-D shape is far below 64 KiB: the u16 length cannot overflow.
-    bytes.extend_from_slice(&(dict.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(dict.as_bytes());
-    for v in data {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    bytes
 }
 
 #[cfg(test)]

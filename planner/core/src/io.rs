@@ -393,26 +393,40 @@ pub struct NpyArray {
 
 /// Writes a 2-D float64 array (`<f8`, C order).
 pub fn write_npy_f64(path: &Path, shape: (usize, usize), data: &[f64]) -> Result<(), PlanError> {
-    let mut bytes = npy_header("<f8", shape);
-    bytes.reserve(data.len() * 8);
-    for v in data {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    fs::write(path, bytes).map_err(|e| io_error(path, e))
+    fs::write(path, npy_f64_bytes(&[shape.0, shape.1], data)).map_err(|e| io_error(path, e))
 }
 
 /// Writes a 2-D bool array (`|b1`, C order).
 pub fn write_npy_bool(path: &Path, shape: (usize, usize), data: &[bool]) -> Result<(), PlanError> {
-    let mut bytes = npy_header("|b1", shape);
+    let mut bytes = npy_header("|b1", &[shape.0, shape.1]);
     bytes.extend(data.iter().map(|&b| u8::from(b)));
     fs::write(path, bytes).map_err(|e| io_error(path, e))
 }
 
-fn npy_header(descr: &str, shape: (usize, usize)) -> Vec<u8> {
-    let mut dict = format!(
-        "{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {}), }}",
-        shape.0, shape.1
-    );
+/// A whole `.npy` file (version 1.0) of little-endian float64 in C order with shape `dims` (any
+/// number of dimensions; `[]` is a scalar): the one `.npy` writer of the planner (map arrays here,
+/// the feedback field's `.npz` members in `feedback_grid`).
+pub fn npy_f64_bytes(dims: &[usize], data: &[f64]) -> Vec<u8> {
+    let mut bytes = npy_header("<f8", dims);
+    bytes.reserve(data.len() * 8);
+    for v in data {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    bytes
+}
+
+fn npy_header(descr: &str, dims: &[usize]) -> Vec<u8> {
+    let shape = match dims {
+        [n] => format!("({n},)"),
+        _ => format!(
+            "({})",
+            dims.iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
     // Version 1.0: magic (6) + version (2) + length (2) + dict padded so the data starts 64-aligned.
     let unpadded = 10 + dict.len() + 1;
     dict.push_str(&" ".repeat((64 - unpadded % 64) % 64));
@@ -420,6 +434,7 @@ fn npy_header(descr: &str, shape: (usize, usize)) -> Vec<u8> {
     let mut bytes = Vec::with_capacity(10 + dict.len());
     bytes.extend_from_slice(NPY_MAGIC);
     bytes.extend_from_slice(&[1, 0]);
+    // A shape of a few dimensions is far below 64 KiB: the u16 length cannot overflow.
     bytes.extend_from_slice(&(dict.len() as u16).to_le_bytes());
     bytes.extend_from_slice(dict.as_bytes());
     bytes

@@ -13,17 +13,16 @@ use tracing_subscriber::EnvFilter;
 
 /// The P-F planner as an LCM service.
 ///
-/// Channels: <prefix>MAP (terrain_map_t in), <prefix>PLAN_REQUEST (plan_request_t in),
-/// <prefix>PLAN_REPLY (plan_reply_t out, one per request, request_id echoed),
-/// <prefix>SERVICE_STATUS (service_status_t out, every status period).
+/// Channels: <prefix> followed by the names of `[planner]` in lcm_types/channels.toml (maps and
+/// requests in; replies, feedback fields and status out).
 /// Logs go to stderr; set RUST_LOG (e.g. RUST_LOG=debug) for more.
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Args {
-    /// LCM URL; default: $LCM_DEFAULT_URL, else udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304.
+    /// LCM URL [default: $LCM_DEFAULT_URL, else the stack's default bus, lcm_types/channels.toml].
     #[arg(long)]
     lcm_url: Option<String>,
-    /// Prefix of the four channel names.
+    /// Prefix of the five channel names.
     #[arg(long, default_value = DEFAULT_CHANNEL_PREFIX)]
     channel_prefix: String,
     /// Largest map accepted (width x height), checked on the raw size fields before decoding.
@@ -120,7 +119,9 @@ fn main() -> anyhow::Result<()> {
     config.defaults.max_solve_time = args.max_solve_time;
     config.traversability = cost_model(&args)?;
 
-    let url = args.lcm_url.unwrap_or_else(lcm_transport::default_url);
+    let url = args
+        .lcm_url
+        .unwrap_or_else(|| lcm_transport::url_from_env_or(lcm_types::channels::DEFAULT_URL));
     let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);
 
     let shutdown = Arc::new(AtomicBool::new(false));

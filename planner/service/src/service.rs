@@ -34,10 +34,10 @@ pub struct Channels {
 }
 
 /// Default channel prefix.
-pub const DEFAULT_CHANNEL_PREFIX: &str = "PFNAV_";
+pub const DEFAULT_CHANNEL_PREFIX: &str = lcm_types::channels::DEFAULT_PREFIX;
 
 impl Channels {
-    /// The four channels under `prefix`; every name must fit LCM's 63-byte limit and be a
+    /// The five channels under `prefix`; every name must fit LCM's 63-byte limit and be a
     /// plain name (the subscription side treats names as regular expressions).
     pub fn with_prefix(prefix: &str) -> anyhow::Result<Self> {
         let plain = prefix
@@ -47,12 +47,13 @@ impl Channels {
             plain,
             "channel prefix {prefix:?} may only contain ASCII letters, digits, '_', '-' and '/'"
         );
+        use lcm_types::channels::planner;
         let channels = Self {
-            map: format!("{prefix}MAP"),
-            request: format!("{prefix}PLAN_REQUEST"),
-            reply: format!("{prefix}PLAN_REPLY"),
-            feedback_field: format!("{prefix}FEEDBACK_FIELD"),
-            status: format!("{prefix}SERVICE_STATUS"),
+            map: format!("{prefix}{}", planner::MAP),
+            request: format!("{prefix}{}", planner::PLAN_REQUEST),
+            reply: format!("{prefix}{}", planner::PLAN_REPLY),
+            feedback_field: format!("{prefix}{}", planner::FEEDBACK_FIELD),
+            status: format!("{prefix}{}", planner::SERVICE_STATUS),
         };
         let longest = [
             &channels.map,

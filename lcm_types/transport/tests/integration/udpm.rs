@@ -58,7 +58,13 @@ fn udpm_roundtrip_of_small_and_fragmented_messages() {
     if !run_here_or_in_namespace("udpm_roundtrip_of_small_and_fragmented_messages") {
         return;
     }
-    let url = "udpm://239.255.76.67:17301?ttl=0";
+    // The stack's multicast group (loopback only: ttl=0) on a port of this test's own.
+    let group = lcm_types::channels::DEFAULT_URL
+        .trim_start_matches("udpm://")
+        .split(':')
+        .next()
+        .unwrap();
+    let url = &format!("udpm://{group}:17301?ttl=0");
     let receiver = Lcm::open(url).unwrap();
     let sender = Lcm::open(url).unwrap();
     let received: Arc<Mutex<Vec<Vec<u8>>>> = Arc::default();

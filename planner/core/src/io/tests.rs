@@ -3,7 +3,7 @@ use super::*;
 #[test]
 fn header_is_64_byte_aligned_and_parses_back() {
     let data: Vec<f64> = (0..6).map(|i| i as f64 * 0.5 - 1.0).collect();
-    let mut bytes = npy_header("<f8", (2, 3));
+    let mut bytes = npy_header("<f8", &[2, 3]);
     assert_eq!(bytes.len() % 64, 0);
     for v in &data {
         bytes.extend_from_slice(&v.to_le_bytes());
@@ -31,12 +31,12 @@ fn fortran_order_and_small_dtypes_are_converted() {
 #[test]
 fn malformed_files_are_errors() {
     assert!(parse_npy(b"hello").is_err());
-    let mut bytes = npy_header("<f8", (2, 3));
+    let mut bytes = npy_header("<f8", &[2, 3]);
     bytes.extend_from_slice(&[0u8; 8]);
     assert!(parse_npy(&bytes).unwrap_err().contains("expected 48"));
-    let bytes = npy_header("<c16", (1, 1));
+    let bytes = npy_header("<c16", &[1, 1]);
     assert!(parse_npy(&bytes).unwrap_err().contains("unsupported dtype"));
-    let bytes = npy_header("<f8", (1 << 40, 1 << 40));
+    let bytes = npy_header("<f8", &[1 << 40, 1 << 40]);
     assert!(parse_npy(&bytes).unwrap_err().contains("exceeds"));
 }
 
@@ -47,13 +47,13 @@ fn malformed_files_are_errors() {
 fn regression_an_oversize_npy_is_refused_from_its_header() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("big.npy");
-    let mut bytes = npy_header("<f8", (5000, 5000));
+    let mut bytes = npy_header("<f8", &[5000, 5000]);
     bytes.push(0);
     fs::write(&path, &bytes).expect("write");
     let err = read_npy(&path).unwrap_err().to_string();
     assert!(err.contains("exceeds 16777216 cells"), "{err}");
     // Within the cell limit, the claimed size is checked against the file's length.
-    let mut bytes = npy_header("<f8", (4000, 4000));
+    let mut bytes = npy_header("<f8", &[4000, 4000]);
     bytes.push(0);
     fs::write(&path, &bytes).expect("write");
     let err = read_npy(&path).unwrap_err().to_string();
@@ -63,7 +63,7 @@ fn regression_an_oversize_npy_is_refused_from_its_header() {
         .to_string();
     assert!(err.contains("exceeds 1048576 cells"), "{err}");
     // A consistent small file still reads.
-    let mut bytes = npy_header("<f8", (2, 2));
+    let mut bytes = npy_header("<f8", &[2, 2]);
     for v in [1.0f64, 2.0, 3.0, 4.0] {
         bytes.extend_from_slice(&v.to_le_bytes());
     }

@@ -1,0 +1,51 @@
+"""The LCM bus contract as Python reads it: the default URL and the channel names of
+`lcm_types/channels.toml` (the one declaration; Rust generates `lcm_types::channels` from it)."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from urllib.parse import urlsplit
+
+from .paths import repo_root
+
+CHANNELS_FILE = repo_root() / "lcm_types" / "channels.toml"
+
+
+def _load() -> dict[str, object]:
+    with CHANNELS_FILE.open("rb") as f:
+        return tomllib.load(f)
+
+
+_CONTRACT = _load()
+
+
+def _channel(group: str, name: str) -> str:
+    table = _CONTRACT[group]
+    assert isinstance(table, dict)
+    return str(table[name][0])
+
+
+@dataclass(frozen=True)
+class PlannerChannels:
+    """The planner service's channels (names without the prefix)."""
+
+    map: str = _channel("planner", "map")
+    plan_request: str = _channel("planner", "plan_request")
+    plan_reply: str = _channel("planner", "plan_reply")
+    feedback_field: str = _channel("planner", "feedback_field")
+    service_status: str = _channel("planner", "service_status")
+
+
+DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
+DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
+PLANNER = PlannerChannels()
+SIM_ROBOT_STATE = DEFAULT_CHANNEL_PREFIX + _channel("simulation", "robot_state")
+
+
+def udpm_url(port: int, recv_buf_size: bool = True) -> str:
+    """A udpm:// URL on the default bus's multicast group (loopback only: ttl=0) at another port,
+    e.g. for tests that keep their traffic apart."""
+    group = urlsplit(DEFAULT_LCM_URL).hostname
+    query = "ttl=0" + ("&recv_buf_size=4194304" if recv_buf_size else "")
+    return f"udpm://{group}:{port}?{query}"

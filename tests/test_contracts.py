@@ -1,0 +1,119 @@
+"""Each contract between two parts of the stack is declared once (docs/contracts.md). These tests
+fail when a copy of a declared value reappears in the code: every contract names its declaration
+and the text a copy would have; the scanner itself is checked on planted copies, so no check can
+pass vacuously."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# Code and build files; prose (docs, READMEs, the changelog) may quote values.
+CODE_SUFFIXES = (".rs", ".py", ".sh", ".toml", ".lcm", ".txt", ".cfg", ".ini")
+
+
+@dataclass(frozen=True)
+class Contract:
+    name: str
+    # The files allowed to hold the value: its declaration (and code generated from it at build time).
+    declared_in: tuple[str, ...]
+    # Regular expressions a copy would match.
+    copies: tuple[str, ...]
+    # A line a copy would be (checked to be found).
+    example: str
+    # File suffixes searched (default: every code file).
+    suffixes: tuple[str, ...] = CODE_SUFFIXES
+
+    def found_in(self, path: str, text: str) -> list[str]:
+        """`path:line: text` of every copy in `text` (none in the declaration itself)."""
+        if path in self.declared_in or path == "tests/test_contracts.py" or not path.endswith(self.suffixes):
+            return []
+        hits = []
+        for number, line in enumerate(text.splitlines(), start=1):
+            if any(re.search(pattern, line) for pattern in self.copies):
+                hits.append(f"{path}:{number}: {line.strip()}")
+        return hits
+
+
+CONTRACTS = [
+    Contract(
+        "LCM default URL and channel names",
+        declared_in=("lcm_types/channels.toml",),
+        copies=(
+            r"239\.255\.76\.67",
+            r'"PFNAV_"',
+            r'"(MAP|PLAN_REQUEST|PLAN_REPLY|FEEDBACK_FIELD|SERVICE_STATUS|SIM_ROBOT_STATE)"',
+            r"\{prefix\}(MAP|PLAN_REQUEST|PLAN_REPLY|FEEDBACK_FIELD|SERVICE_STATUS)\b",
+        ),
+        example='self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply)',
+    ),
+    # The planner writes sidecars with `pf_planner::io::save_scenario` (one serde struct); Python
+    # code, tests included, goes through `write_map`.
+    Contract(
+        "map sidecar writer (Python)",
+        declared_in=("harness/src/pfnav_harness/scenario.py",),
+        copies=(r"""["']start_yaw["']\s*:""",),
+        example='meta = {"name": name, "start": [0.5, 0.5], "start_yaw": 0.0}',
+        suffixes=(".py",),
+    ),
+    Contract(
+        "the .npy writer of the planner",
+        declared_in=("planner/core/src/io.rs",),
+        copies=(r"\\x93NUMPY",),
+        example='    bytes.extend_from_slice(b"\\x93NUMPY\\x01\\x00");',
+        suffixes=(".rs",),
+    ),
+    # The harness sends 0 (terrain_map_t: "the planner's default"); only the service knows the value.
+    Contract(
+        "the traversability of unknown cells",
+        declared_in=("planner/service/src/convert.rs",),
+        copies=(r"DEFAULT_UNKNOWN_TRAVERSABILITY\s*(:\s*\w+\s*)?=", r"unknown[_-]traversability[^\n]*default\s*=\s*0?\.\d*[1-9]"),
+        example='p.add_argument("--unknown-traversability", type=float, default=0.5)',
+        suffixes=(".rs", ".py"),
+    ),
+    # Both are derived: the GUID from the variable table's interface (VariableTable::guid), the
+    # saved-state layout id from the state types' source (fmu/build.rs). No hand-kept copy.
+    Contract(
+        "the FMU's GUID and saved-state layout",
+        declared_in=("fmu/src/variables/mod.rs", "fmu/build.rs"),
+        copies=(r"\{[0-9a-fA-F]{8}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{4}-[0-9a-fA-F]{12}\}", r"FORMAT_VERSION\s*:\s*u\d+\s*="),
+        example='pub const GUID: &str = "{320c93d8-147c-4514-a9e7-440d4235dda0}";',
+        suffixes=(".rs", ".py"),
+    ),
+]
+
+
+def tracked_code_files() -> dict[str, str]:
+    listed = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, check=True).stdout.decode()
+    files = {}
+    for name in filter(None, listed.split("\0")):
+        path = REPO / name
+        if name.endswith(CODE_SUFFIXES) and path.is_file() and not name.startswith("third_party/"):
+            files[name] = path.read_text(encoding="utf-8", errors="replace")
+    return files
+
+
+@pytest.fixture(scope="module")
+def code() -> dict[str, str]:
+    return tracked_code_files()
+
+
+@pytest.mark.parametrize("contract", CONTRACTS, ids=lambda c: c.name)
+def test_the_contract_is_declared_once(contract: Contract, code: dict[str, str]) -> None:
+    for declaration in contract.declared_in:
+        assert declaration in code, f"{contract.name}: the declaration {declaration} is not a tracked code file"
+    copies = [hit for path, text in code.items() for hit in contract.found_in(path, text)]
+    assert not copies, f"{contract.name} is declared in {', '.join(contract.declared_in)}; copies:\n" + "\n".join(copies)
+
+
+@pytest.mark.parametrize("contract", CONTRACTS, ids=lambda c: c.name)
+def test_a_planted_copy_is_found(contract: Contract) -> None:
+    """A copy of each contract's value, in another file, is caught; in its declaration it is not."""
+    elsewhere = "harness/src/pfnav_harness/elsewhere" + contract.suffixes[0]
+    assert contract.found_in(elsewhere, "first line\n" + contract.example), contract.example
+    assert not contract.found_in(contract.declared_in[0], contract.example)
