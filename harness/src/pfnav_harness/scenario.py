@@ -141,17 +141,27 @@ class Terrain:
         Returns the world (x, y) of its first vertex and the heights (rows along y), or None when
         the map is smaller than the block. The mesh between these vertices is exactly the terrain.
         """
+        corner = self.local_grid_corner(x, y, size)
+        if corner is None:
+            return None
+        ix0, iy0 = corner
+        res = self.resolution
+        x0 = self.origin[0] + (ix0 + 0.5) * res
+        y0 = self.origin[1] + (iy0 + 0.5) * res
+        return x0, y0, self.heights[iy0 : iy0 + size, ix0 : ix0 + size]
+
+    def local_grid_corner(self, x: float, y: float, size: int) -> tuple[int, int] | None:
+        """The (column, row) of the first vertex of `local_grid(x, y, size)`; None where it gives None.
+
+        The block only changes when this does, so a caller can skip rebuilding an unchanged one.
+        """
         ny, nx = self.shape
         if size < 2 or nx < size or ny < size:
             return None
         res = self.resolution
         ix0 = round((x - self.origin[0]) / res - 0.5) - size // 2
         iy0 = round((y - self.origin[1]) / res - 0.5) - size // 2
-        ix0 = min(max(ix0, 0), nx - size)
-        iy0 = min(max(iy0, 0), ny - size)
-        x0 = self.origin[0] + (ix0 + 0.5) * res
-        y0 = self.origin[1] + (iy0 + 0.5) * res
-        return x0, y0, self.heights[iy0 : iy0 + size, ix0 : ix0 + size]
+        return min(max(ix0, 0), nx - size), min(max(iy0, 0), ny - size)
 
     def plane(self, x: float, y: float, radius: float = 0.3, samples: int = 7) -> TerrainPlane:
         """Least-squares plane of the surface over a square window around (x, y).
