@@ -246,7 +246,7 @@ def _eigen_quaternion(
 
 def quaternion_to_rpy(q: NDArray[np.float64]) -> tuple[float, float, float]:
     """Roll, pitch, yaw (ZYX convention) of a quaternion (w, x, y, z)."""
-    w, x, y, z = (float(v) for v in q)
+    w, x, y, z = q.tolist() if isinstance(q, np.ndarray) else (float(v) for v in q)
     roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
     pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
     yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
@@ -705,5 +705,4 @@ class QuadrupedWorld:
             out[:] = self._restored_contacts
             return
         in_collision = self.world.getLastCollisionResult().inCollision
-        for i, foot in enumerate(self.feet):
-            out[i] = in_collision(foot)
+        out[:] = [in_collision(foot) for foot in self.feet]
