@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import fmu_runner as fr
-from .body_sensors import BodySensorConfig, BodySensors, BodySensorsState
+from .body_sensors import BodyReadings, BodySensorConfig, BodySensors, BodySensorsState
 from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
@@ -693,22 +693,20 @@ class EstimatorInTheLoop:
     def __init__(self, fmu: fr.ControllerFmu, world: QuadrupedWorld, config: CoSimConfig, n_steps: int) -> None:
         self.config = config
         self.world = world
-        self.io = fmu.enable_estimation(config.estimator)
-        self.sensors = BodySensors(config.body_sensors, config.comm_step)
+        self.io = io = fmu.enable_estimation(config.estimator)
+        # The sensors write their IMU and fix readings straight into the FMU's input buffers.
+        readings = BodyReadings(gyro=io.gyro, acc=io.acc, fix_pos=io.fix_pos)
+        self.sensors = BodySensors(config.body_sensors, config.comm_step, readings)
         self.joint_q = fmu.inputs.view(fr.JOINT_Q)
         # est.pos, est.vel, est.rpy | imu.gyro, imu.acc | fix.pos
         self._log = np.zeros((n_steps, 18))
         self._status = np.zeros(n_steps, dtype=np.int32)
         self._fix_valid = np.zeros(n_steps, dtype=bool)
         self._new_fix = False
-        self._offset_scratch = np.zeros(4)
 
     def write_inputs(self, t: float, state: NDArray[np.float64]) -> None:
         readings = self.sensors.sample(t, state)
         io = self.io
-        io.gyro[:] = readings.gyro
-        io.acc[:] = readings.acc
-        io.fix_pos[:] = readings.fix_pos
         io.fix_valid[0] = int(readings.fix_valid)
         self._new_fix = readings.fix_valid
         self.joint_q[:] = readings.joint_q
@@ -723,22 +721,18 @@ class EstimatorInTheLoop:
         that same instant.
         """
         io = self.io
-        new = self._offset_scratch
-        np.subtract(io.est_pos, state[0:3], out=new[0:3])
-        new[3] = math.remainder(float(io.est_rpy[2]) - true_yaw, math.tau)
+        ex, ey, ez = io.est_pos.tolist()
+        x, y, z = state[0:3].tolist()
+        new = (ex - x, ey - y, ez - z, math.remainder(float(io.est_rpy[2]) - true_yaw, math.tau))
         # A lost estimate (the FMU says so in est.status) keeps the last good offset.
-        if math.isfinite(float(new.sum())):
+        if math.isfinite(sum(new)):
             out[:] = new
 
     def log_step(self, k: int) -> None:
         io = self.io
         row = self._log[k]
-        row[0:3] = io.est_pos
-        row[3:6] = io.est_vel
-        row[6:9] = io.est_rpy
-        row[9:12] = io.gyro
-        row[12:15] = io.acc
-        row[15:18] = io.fix_pos
+        row[0:9] = io.estimate_block
+        row[9:18] = io.sensor_block
         self._status[k] = io.est_status[0]
         self._fix_valid[k] = self._new_fix
         self._new_fix = False

@@ -235,20 +235,26 @@ class EstimationIo:
     est_vel: NDArray[np.float64]
     est_rpy: NDArray[np.float64]
     est_status: NDArray[np.int32]
+    # gyro, acc, fix_pos and est_pos, est_vel, est_rpy as the one block each is (for logging).
+    sensor_block: NDArray[np.float64]
+    estimate_block: NDArray[np.float64]
 
     @classmethod
     def detached(cls) -> EstimationIo:
         """Arrays of the right shapes bound to no FMU (for stand-ins of the controller FMU)."""
+        sensors, estimate = np.zeros(9), np.zeros(9)
         return cls(
-            gyro=np.zeros(3),
-            acc=np.zeros(3),
-            fix_pos=np.zeros(3),
+            gyro=sensors[0:3],
+            acc=sensors[3:6],
+            fix_pos=sensors[6:9],
             fix_valid=np.zeros(1, dtype=np.int32),
             contact=np.full(4, -1, dtype=np.int32),
-            est_pos=np.zeros(3),
-            est_vel=np.zeros(3),
-            est_rpy=np.zeros(3),
+            est_pos=estimate[0:3],
+            est_vel=estimate[3:6],
+            est_rpy=estimate[6:9],
             est_status=np.zeros(1, dtype=np.int32),
+            sensor_block=sensors,
+            estimate_block=estimate,
         )
 
 
@@ -452,6 +458,8 @@ class ControllerFmu:
             est_vel=outputs.view(EST_VEL),
             est_rpy=outputs.view(EST_RPY),
             est_status=np.ctypeslib.as_array(status_val),
+            sensor_block=inputs.values,
+            estimate_block=outputs.values,
         )
         return self.estimation
 
