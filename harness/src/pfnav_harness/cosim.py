@@ -430,11 +430,11 @@ class CoSimulation:
     def _advance(self, loop: _Loop, end: int, progress: Progress | None) -> None:
         """Physics steps loop.k … end − 1, or until the run stops (sets loop.stop_reason).
 
-        The hot loop (about a third of a run's wall time at 1 kHz): everything it touches is
-        looked up once per call, nothing is allocated per step, and what only changes at a
-        communication point (or when the robot crosses a map cell) is only redone then. The
-        cyclic garbage collector is off meanwhile: the loop makes no reference cycles, and its
-        passes over the whole heap cost more than the loop's own work.
+        The hot loop (its Python part was about 40 % of a run's wall time at 1 kHz): everything
+        it touches is looked up once per call, nothing is allocated per step, and what only
+        changes at a communication point (or when the robot crosses a map cell) is only redone
+        then. The cyclic garbage collector is off meanwhile: the loop makes no reference cycles,
+        and its passes over the whole heap showed as ~4 % of a run.
         """
         gc_was_enabled = gc.isenabled()
         gc.disable()
