@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Co-simulation speed: wall seconds per simulated second, split into physics (DART world.step),
-FMU (set inputs + fmi2DoStep + get outputs through fmpy/ctypes) and Python overhead (state
-read-out, reference, logging), for several FMU communication steps.
+"""Co-simulation speed: wall seconds per simulated second, split into physics (DART world.step,
+with the setForces call before it), FMU (set inputs + fmi2DoStep + get outputs through ctypes)
+and Python (everything else in the master loop: state read-out, reference, height map, logging;
+"Python %" is its share of the total), for several FMU communication steps.
 
 Usage (inside the private network namespace when the plan comes from the service):
     bash scripts/netns.sh .venv/bin/python scripts/bench_cosim.py [--scenario c_shape] [--seconds 10]
@@ -92,7 +93,7 @@ def main() -> int:
                 f"scenario {args.scenario}, plan {plan.method} ({plan.duration:.1f} s), {args.seconds:.0f} simulated s per row"
             )
             print(
-                f"{'comm step':>10} {'total':>8} {'physics':>8} {'FMU':>8} {'Python':>8} {'x realtime':>10}  result"
+                f"{'comm step':>10} {'total':>8} {'physics':>8} {'FMU':>8} {'Python':>8} {'Python %':>8} {'x realtime':>10}  result"
             )
             for step in (float(s) for s in args.comm_steps.split(",")):
                 config = CoSimConfig(comm_step=step, max_duration=args.seconds)
@@ -103,7 +104,7 @@ def main() -> int:
                 per = result.timing.per_sim_second()
                 print(
                     f"{step * 1000:>8.0f}ms {per['total']:>8.3f} {per['physics']:>8.3f} {per['fmu']:>8.3f} "
-                    f"{per['overhead']:>8.3f} {1.0 / per['total']:>10.1f}  {result.stop_reason}"
+                    f"{per['overhead']:>8.3f} {100.0 * per['overhead'] / per['total']:>8.1f} {1.0 / per['total']:>10.1f}  {result.stop_reason}"
                 )
     except HarnessError as err:
         print(f"bench_cosim: error: {err}", file=sys.stderr)

@@ -321,6 +321,19 @@ impl Instance {
         vrs: &[u32],
         values: &[Value],
     ) -> Result<(), FmuError> {
+        let n = vrs.len().min(values.len());
+        self.set_with(function, &vrs[..n], |k| values[k])
+    }
+
+    /// [`Instance::set`] with the value of `vrs[k]` given by `value_at(k)`: the exports read
+    /// the importer's array through it, so a call allocates nothing (the master sets ~50 inputs
+    /// every millisecond). Each value is checked in a first pass and stored in a second.
+    pub fn set_with(
+        &mut self,
+        function: &'static str,
+        vrs: &[u32],
+        value_at: impl Fn(usize) -> Value,
+    ) -> Result<(), FmuError> {
         self.require(
             function,
             &[
@@ -329,8 +342,9 @@ impl Instance {
                 Phase::StepComplete,
             ],
         )?;
-        let mut checked = Vec::with_capacity(vrs.len());
-        for (&vr, &value) in vrs.iter().zip(values) {
+        let running = self.phase == Phase::StepComplete;
+        for (k, &vr) in vrs.iter().enumerate() {
+            let value = value_at(k);
             let variable = lookup(&self.resources.table, vr, value.scalar_type())?;
             if variable.causality == Causality::Output {
                 return Err(FmuError::NotSettable {
@@ -338,16 +352,21 @@ impl Instance {
                     reason: "it is an output".to_owned(),
                 });
             }
-            if self.phase == Phase::StepComplete && !variable.settable_while_running() {
+            if running && !variable.settable_while_running() {
                 return Err(FmuError::NotSettable {
                     name: variable.name.clone(),
                     reason: "it is a fixed parameter and the simulation has started".to_owned(),
                 });
             }
             check_value(variable, value)?;
-            checked.push((variable, value));
         }
-        for (variable, value) in checked {
+        let table = &self.resources.table;
+        for (k, &vr) in vrs.iter().enumerate() {
+            // Found and checked in the first pass.
+            let Some(variable) = table.get(vr) else {
+                continue;
+            };
+            let value = value_at(k);
             match variable.binding {
                 Binding::Parameter { field, element } => {
                     write_parameter(field, element, &mut self.config, value)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from reference_body_sensors import ReferenceBodySensors
 
 from pfnav_harness import paths
 from pfnav_harness.body_sensors import ADIS16470, AS5047P, BodySensorConfig, BodySensors, quaternion_to_matrix
@@ -199,3 +200,28 @@ def test_dart_acceleration_equals_the_velocity_difference_the_imu_uses(ramp_scen
         np.testing.assert_allclose(np.array(world.base.getLinearAcceleration()), (after - before) / DT, atol=1e-8)
         impacts += int(np.linalg.norm((after - before) / DT - (0.0, 0.0, -9.81)) > 5.0)
     assert impacts > 0, "the check must cover touch-down"
+
+
+def test_the_sample_on_floats_reads_what_the_array_model_read() -> None:
+    """`BodySensors.sample` against the array implementation it replaced (reference_body_sensors):
+    the same readings bit for bit, step after step, with noise, bias walk, saturation, quantised
+    joints, fixes and a NaN in the state."""
+    rng = np.random.default_rng(21)
+    for config in (
+        BodySensorConfig(seed=5, fix_rate=20.0, fix_noise=0.03),
+        BodySensorConfig(seed=6, imu_noise_scale=0.0, quantize_joints=False),
+        BodySensorConfig(seed=7, imu_noise_scale=300.0),
+    ):
+        fast, reference = BodySensors(config, 0.002), ReferenceBodySensors(config, 0.002)
+        for k in range(1500):
+            state = rng.normal(scale=(0.5, 0.5, 0.5, 1, 1, 1, 1, *[2.0] * 6, *[1.0] * 24)[0:37])
+            state[3:7] /= np.linalg.norm(state[3:7])
+            if k % 97 == 0:
+                state[7:13] *= 1e4  # beyond the IMU's range
+            if k == 700:
+                state[8] = np.nan
+            a, b = fast.sample(k * 0.002, state), reference.sample(k * 0.002, state)
+            for name in ("gyro", "acc", "joint_q", "joint_dq", "fix_pos"):
+                assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), (k, name)
+            assert a.fix_valid == b.fix_valid
+            assert fast.bias.tobytes() == reference.bias.tobytes()

@@ -39,7 +39,7 @@ class PdStandIn:
     def initialize(self, start_time: float = 0.0) -> None:
         self.steps.clear()
 
-    def exchange_inputs(self, mode: int) -> None:
+    def exchange_inputs(self, mode: int, height_map: bool = True) -> None:
         self.modes.append(mode)
 
     def do_step(self, time: float, step: float) -> None:

@@ -56,7 +56,7 @@ class StatefulStandIn:
     def initialize(self, start_time: float = 0.0) -> None:
         self.initialized = True
 
-    def exchange_inputs(self, mode: int) -> None:
+    def exchange_inputs(self, mode: int, height_map: bool = True) -> None:
         self._mode = int(mode)
 
     def do_step(self, time: float, step: float) -> None:

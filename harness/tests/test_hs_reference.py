@@ -8,6 +8,7 @@ import pytest
 from pfnav_harness.errors import PlannerError
 from pfnav_harness.planner_client import Plan
 from pfnav_harness.reference import T_DZDX, T_HEIGHT, VX, YAW, ReferenceTrajectory, X, Y, Z
+from pfnav_harness.reference_source import TrajectorySource
 from pfnav_harness.scenario import Scenario
 
 
@@ -98,3 +99,28 @@ def test_a_replanned_trajectory_continues_from_where_it_was_planned(ramp_scenari
     source.sample(planned_at + 2.0, pose, offset, True, after)
     assert after[X] == pytest.approx(0.6 + 0.8 * math.cos(0.3), abs=1e-9)
     assert after[Y] == pytest.approx(1.0 + 0.8 * math.sin(0.3), abs=1e-9)
+
+
+def test_block_sampling_is_step_sampling_bit_for_bit(ramp_scenario: Scenario) -> None:
+    """`sample_block` (the co-simulation samples a trajectory for many steps at once) gives each
+    row exactly as `sample` does: before, inside and after the plan, across the yaw wrap, on plan
+    sample times, before and after the walk starts, and after a replan."""
+    t = np.linspace(0.0, 3.0, 31)
+    plan = make_plan(t, 0.5 + 0.3 * t, 1.0 + 0.1 * np.sin(t), np.unwrap(3.0 + 0.4 * t))
+    ref = ReferenceTrajectory(plan, ramp_scenario.terrain, heading_smoothing=0.5)
+    tau = np.concatenate([np.arange(-500, 3600) * 0.001, t, [-0.0, 0.0, 3.0, 1e9]])
+    block = np.zeros((len(tau), 10))
+    ref.sample_block(tau, block)
+    row = np.zeros(10)
+    for i, value in enumerate(tau.tolist()):
+        ref.sample(value, row)
+        assert block[i].tobytes() == row.tobytes(), (i, value)
+    source = TrajectorySource(plan, ramp_scenario.terrain, 0.3, 0.5)
+    source.replace(make_plan(t, 1.0 + 0.2 * t, 1.0 + 0.0 * t, 0.1 * t), planned_at=0.7)
+    clock = np.arange(0, 4000) * 0.001
+    walking = clock >= 1.5
+    source.sample_block(clock - 1.5, walking, block[: len(clock)])
+    pose, offset = np.zeros(3), np.zeros(4)
+    for i in range(len(clock)):
+        source.sample(float(clock[i]) - 1.5, pose, offset, bool(walking[i]), row)
+        assert block[i].tobytes() == row.tobytes(), i

@@ -119,3 +119,16 @@ def test_local_grid_is_the_block_of_mesh_vertices_around_a_point() -> None:
     x0_edge, y0_edge, _ = terrain.local_grid(1.0, -2.0, 11) or (0.0, 0.0, None)
     assert (x0_edge, y0_edge) == pytest.approx((1.0625, -1.9375))
     assert terrain.local_grid(2.3, -1.0, 31) is None
+
+
+def test_height_at_is_height_bit_for_bit() -> None:
+    """`height_at` (plain floats, the co-simulation's fall check) equals `height` everywhere: inside,
+    on vertices and cell edges, on both triangles of a cell, beyond the border, at −0.0."""
+    rng = np.random.default_rng(8)
+    heights = rng.normal(size=(13, 17))
+    heights[0, 0] = -0.0
+    terrain = Terrain((-1.0, 2.0), 0.25, heights)
+    xs = np.concatenate([rng.uniform(-2.0, 4.0, 4000), -1.0 + (np.arange(17) + 0.5) * 0.25, [-0.875, -0.0, 0.0, 1e9, -1e9]])
+    ys = np.concatenate([rng.uniform(1.0, 6.0, 4000), 2.0 + (np.arange(17) % 13 + 0.5) * 0.25, [2.125, -0.0, 0.0, 1e9, -1e9]])
+    for x, y in zip(xs.tolist(), ys.tolist(), strict=True):
+        assert np.float64(terrain.height_at(x, y)).tobytes() == np.float64(terrain.height(x, y)).tobytes(), (x, y)

@@ -103,3 +103,61 @@ def test_pd_stance_stands_on_a_sloped_mesh(tmp_path: Path) -> None:
     feet = world.foot_positions()
     penetration = terrain.height(feet[:, 0], feet[:, 1]) - (feet[:, 2] - world.foot_radius)
     assert penetration.max() < 0.01
+
+
+def test_the_fast_state_read_out_is_dart_s_bit_for_bit(ramp_scenario: Scenario, tmp_path: Path) -> None:
+    """`state_reader` (base rotation from the free joint's coordinates, Eigen's quaternion in Python,
+    one spatial-velocity call) writes exactly what DART's transform and velocity getters give,
+    over rotations of every size (both branches of the quaternion formula, tiny angles, half
+    turns) and while the robot tumbles and hits the ground."""
+    world = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path)
+    assert world._fast_state
+    world.place(1.5, 1.0, 0.7)
+    fast, reference = np.zeros(37), np.zeros(37)
+    read = world.state_reader(fast)
+    rng = np.random.default_rng(11)
+    n = world.robot.getNumDofs()
+    negative_trace = 0
+    for i in range(3000):
+        q = world.robot.getPositions()
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = (rng.uniform(0.0, math.pi), 10.0 ** rng.uniform(-14, -3), math.pi * (1.0 - 1e-15 * rng.uniform()), 0.0)[i % 4]
+        q[0:3] = angle * axis
+        world.robot.setPositions(q)
+        world.robot.setVelocities(rng.normal(scale=2.0, size=n))
+        read()
+        world.state_vector_reference(reference)
+        assert fast.tobytes() == reference.tobytes(), (i, fast - reference)
+        negative_trace += 1.0 + 2.0 * math.cos(angle) <= 0.0
+    assert negative_trace > 300
+    world.place(1.5, 1.0, 2.9)
+    positions = world.robot.getPositions()
+    positions[5] += 0.3
+    world.robot.setPositions(positions)
+    world.robot.setVelocities(rng.normal(scale=3.0, size=n))
+    touched = 0
+    for _ in range(600):
+        world.apply_torques(rng.normal(scale=3.0, size=12))
+        world.step()
+        touched += world.world.getLastCollisionResult().getNumContacts() > 0
+        read()
+        world.state_vector_reference(reference)
+        assert fast.tobytes() == reference.tobytes()
+        world.state_vector(reference)
+        assert fast.tobytes() == reference.tobytes()
+    assert touched > 100  # it landed
+
+
+def test_torques_are_clamped_as_np_clip_does(ramp_scenario: Scenario, tmp_path: Path) -> None:
+    world = QuadrupedWorld(ramp_scenario.terrain, ROBOT, tmp_path)
+    rng = np.random.default_rng(2)
+    limits = world.effort_limits
+    for scale in (0.1, 1.0, 10.0):
+        torques = rng.normal(scale=scale, size=12) * limits
+        torques[0] = limits[0]
+        torques[1] = -limits[1]
+        torques[2] = -0.0
+        world.apply_torques(torques)
+        expected = np.clip(torques, -limits, limits)
+        assert world._forces[world.joint_dofs].tobytes() == expected.tobytes()

@@ -38,11 +38,8 @@ fn set_values<T: Copy>(
     with_instance(c, function, |instance| {
         // SAFETY: as in `get_values`.
         let vrs = unsafe { slice_from(vr, nvr, "vr") }?;
-        let values: Vec<Value> = unsafe { slice_from(value, nvr, "value") }?
-            .iter()
-            .map(|&v| convert(v))
-            .collect();
-        instance.set(function, vrs, &values)?;
+        let values = unsafe { slice_from(value, nvr, "value") }?;
+        instance.set_with(function, vrs, |k| convert(values[k]))?;
         Ok(Fmi2Status::Ok)
     })
 }

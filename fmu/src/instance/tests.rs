@@ -472,3 +472,31 @@ fn kalman_mode_stands_on_its_estimate_and_survives_nan_imu_samples() {
         .set("fmi2SetReal", &[vr("fix.pos[1]")], &[Value::Real(f64::NAN)])
         .is_err());
 }
+
+#[test]
+fn a_set_with_one_bad_value_stores_none_of_its_values() {
+    let mut i = instance();
+    let names = ["ref.x", "ref.y", "base.vel.y"];
+    let vrs: Vec<u32> = names.iter().map(|n| vr(n)).collect();
+    let real = |i: &Instance, name: &str| {
+        let mut out = 0.0;
+        i.get("fmi2GetReal", ScalarType::Real, &[vr(name)], |_, v| {
+            if let Value::Real(x) = v {
+                out = x;
+            }
+        })
+        .unwrap();
+        out
+    };
+    i.enter_initialization_mode().unwrap();
+    let before: Vec<f64> = names.iter().map(|n| real(&i, n)).collect();
+    let bad = [Value::Real(1.5), Value::Real(2.5), Value::Real(f64::NAN)];
+    assert!(i.set("fmi2SetReal", &vrs, &bad).is_err());
+    assert!(i.set_with("fmi2SetReal", &vrs, |k| bad[k]).is_err());
+    let after: Vec<f64> = names.iter().map(|n| real(&i, n)).collect();
+    assert_eq!(after, before);
+    let good = [Value::Real(1.5), Value::Real(2.5), Value::Real(-0.25)];
+    i.set_with("fmi2SetReal", &vrs, |k| good[k]).unwrap();
+    let stored: Vec<f64> = names.iter().map(|n| real(&i, n)).collect();
+    assert_eq!(stored, vec![1.5, 2.5, -0.25]);
+}

@@ -43,6 +43,7 @@ FloatArray = NDArray[np.float64]
 STANDARD_GRAVITY = 9.80665
 # Gravity of the DART world (world.py) and of the specific-force convention of imu.acc.
 GRAVITY_WORLD = np.array([0.0, 0.0, -9.81])
+_GRAVITY = tuple(GRAVITY_WORLD.tolist())
 _DEG = math.pi / 180.0
 _NOISE_BLOCK = 4096
 
@@ -159,12 +160,14 @@ class BodyReadings:
 def quaternion_to_matrix(q: FloatArray) -> FloatArray:
     """Rotation matrix (body → world) of a unit quaternion (w, x, y, z)."""
     w, x, y, z = np.asarray(q, dtype=np.float64).tolist()
-    return np.array(
-        [
-            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
-        ]
+    return np.array(_rotation_rows(w, x, y, z))
+
+
+def _rotation_rows(w: float, x: float, y: float, z: float) -> tuple[tuple[float, float, float], ...]:
+    return (
+        (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)),
+        (2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)),
+        (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)),
     )
 
 
@@ -189,7 +192,8 @@ class BodySensorsState:
 class BodySensors:
     """Seeded IMU, encoder and fix models, sampled every `sample_period` seconds."""
 
-    def __init__(self, config: BodySensorConfig, sample_period: float) -> None:
+    def __init__(self, config: BodySensorConfig, sample_period: float, readings: BodyReadings | None = None) -> None:
+        """`readings`: the arrays `sample` writes into (the estimator's FMU input buffers); fresh ones by default."""
         config.validate()
         if not (math.isfinite(sample_period) and sample_period > 0.0):
             raise SimulationError(f"the sensor sample period must be positive, got {sample_period}")
@@ -201,18 +205,24 @@ class BodySensors:
         spec, scale = config.imu, config.imu_noise_scale
         root_rate = math.sqrt(1.0 / sample_period)
         # White noise and bias-step standard deviations per axis: gyro xyz, then accelerometer xyz.
-        self._white = scale * np.repeat([spec.gyro_noise_density * root_rate, spec.acc_noise_density * root_rate], 3)
-        self._walk = scale * np.repeat([spec.gyro_bias_walk, spec.acc_bias_walk], 3) * math.sqrt(sample_period)
-        self.bias = scale * np.repeat([spec.gyro_bias_stability, spec.acc_bias_stability], 3) * self._imu_rng.standard_normal(6)
-        self._range = np.repeat([spec.gyro_range, spec.acc_range], 3)
-        self._previous_velocity: FloatArray | None = None
+        # Per axis (gyro xyz, then accelerometer xyz) as plain floats: `sample` works on six values,
+        # where numpy's per-call overhead would cost more than the arithmetic.
+        self._white = (scale * np.repeat([spec.gyro_noise_density * root_rate, spec.acc_noise_density * root_rate], 3)).tolist()
+        self._walk = (scale * np.repeat([spec.gyro_bias_walk, spec.acc_bias_walk], 3) * math.sqrt(sample_period)).tolist()
+        self._bias = (scale * np.repeat([spec.gyro_bias_stability, spec.acc_bias_stability], 3) * self._imu_rng.standard_normal(6)).tolist()
+        self._range = np.repeat([spec.gyro_range, spec.acc_range], 3).tolist()
+        self._previous_velocity: tuple[float, float, float] | None = None
         self._fixes = 0
         # Normal draws for the IMU, 12 per sample (6 white, 6 bias steps), drawn in blocks: one
         # generator call per sample would cost more than the rest of the model.
         self._noise = np.zeros((0, 12))
         self._next_noise = 0
-        self._world_vectors = np.zeros((3, 2))
-        self.readings = BodyReadings()
+        self.readings = readings if readings is not None else BodyReadings()
+
+    @property
+    def bias(self) -> FloatArray:
+        """The IMU bias now (gyro xyz, accelerometer xyz; a copy)."""
+        return np.array(self._bias)
 
     def save_state(self) -> BodySensorsState:
         r = self.readings
@@ -221,8 +231,8 @@ class BodySensors:
             fix_rng=self._fix_rng.bit_generator.state,
             noise=self._noise.copy(),
             next_noise=self._next_noise,
-            bias=self.bias.copy(),
-            previous_velocity=None if self._previous_velocity is None else self._previous_velocity.copy(),
+            bias=self.bias,
+            previous_velocity=None if self._previous_velocity is None else np.array(self._previous_velocity),
             fixes=self._fixes,
             readings=BodyReadings(r.gyro.copy(), r.acc.copy(), r.joint_q.copy(), r.joint_dq.copy(), r.fix_pos.copy(), r.fix_valid),
         )
@@ -233,8 +243,8 @@ class BodySensors:
         self._fix_rng.bit_generator.state = state.fix_rng
         self._noise = state.noise.copy()
         self._next_noise = state.next_noise
-        self.bias[:] = state.bias
-        self._previous_velocity = None if state.previous_velocity is None else state.previous_velocity.copy()
+        self._bias = np.asarray(state.bias, dtype=np.float64).tolist()
+        self._previous_velocity = None if state.previous_velocity is None else tuple(np.asarray(state.previous_velocity, dtype=np.float64).tolist())
         self._fixes = state.fixes
         out, saved = self.readings, state.readings
         out.gyro[:] = saved.gyro
@@ -253,27 +263,40 @@ class BodySensors:
         return row
 
     def sample(self, t: float, state: FloatArray) -> BodyReadings:
-        """The readings at time `t` from the 37-entry trunk and joint state (updates `readings`)."""
+        """The readings at time `t` from the 37-entry trunk and joint state (updates `readings`).
+
+        The IMU model runs on plain floats with the operations (and their order) of the array
+        expressions it replaced, so the readings are the same bit for bit (test_hs_body_sensors);
+        the frame change stays one numpy product with the same operands, as its rounding is BLAS's.
+        """
         out = self.readings
-        velocity = state[7:10]
-        if self._previous_velocity is None:
-            self._previous_velocity = velocity.copy()
-        vectors = self._world_vectors
-        vectors[:, 0] = state[10:13]
-        # Specific force in the world frame: (Δv / Δt) − g.
-        vectors[:, 1] = (velocity - self._previous_velocity) / self.sample_period - GRAVITY_WORLD
-        self._previous_velocity[:] = velocity
-        body = quaternion_to_matrix(state[3:7]).T @ vectors
-        noise = self._imu_noise()
-        measured = np.concatenate((body[:, 0], body[:, 1]))
-        measured += self.bias
-        measured += self._white * noise[:6]
-        # Saturation (np.clip costs several times minimum + maximum on 6 entries).
-        np.minimum(measured, self._range, out=measured)
-        np.maximum(measured, -self._range, out=measured)
-        self.bias += self._walk * noise[6:]
-        out.gyro[:] = measured[:3]
-        out.acc[:] = measured[3:]
+        s = state.tolist()
+        vx, vy, vz = s[7], s[8], s[9]
+        previous = self._previous_velocity if self._previous_velocity is not None else (vx, vy, vz)
+        self._previous_velocity = (vx, vy, vz)
+        dt = self.sample_period
+        gx, gy, gz = _GRAVITY
+        # Angular velocity and specific force ((Δv / Δt) − g) in the world frame, one per column.
+        vectors = np.array(
+            (
+                (s[10], (vx - previous[0]) / dt - gx),
+                (s[11], (vy - previous[1]) / dt - gy),
+                (s[12], (vz - previous[2]) / dt - gz),
+            )
+        )
+        body = (np.array(_rotation_rows(s[3], s[4], s[5], s[6])).T @ vectors).tolist()
+        noise = self._imu_noise().tolist()
+        bias, white, walk, limit = self._bias, self._white, self._walk, self._range
+        measured = [0.0] * 6
+        for i, value in enumerate((body[0][0], body[1][0], body[2][0], body[0][1], body[1][1], body[2][1])):
+            m = value + bias[i]
+            m += white[i] * noise[i]
+            # Saturation; min/max keep a NaN as np.minimum/np.maximum did.
+            m = min(m, limit[i])
+            measured[i] = max(m, -limit[i])
+            bias[i] += walk[i] * noise[6 + i]
+        out.gyro[:] = measured[0:3]
+        out.acc[:] = measured[3:6]
 
         joint_q = state[13:25]
         if self.config.quantize_joints:

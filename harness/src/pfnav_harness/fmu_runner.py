@@ -235,20 +235,26 @@ class EstimationIo:
     est_vel: NDArray[np.float64]
     est_rpy: NDArray[np.float64]
     est_status: NDArray[np.int32]
+    # gyro, acc, fix_pos and est_pos, est_vel, est_rpy as the one block each is (for logging).
+    sensor_block: NDArray[np.float64]
+    estimate_block: NDArray[np.float64]
 
     @classmethod
     def detached(cls) -> EstimationIo:
         """Arrays of the right shapes bound to no FMU (for stand-ins of the controller FMU)."""
+        sensors, estimate = np.zeros(9), np.zeros(9)
         return cls(
-            gyro=np.zeros(3),
-            acc=np.zeros(3),
-            fix_pos=np.zeros(3),
+            gyro=sensors[0:3],
+            acc=sensors[3:6],
+            fix_pos=sensors[6:9],
             fix_valid=np.zeros(1, dtype=np.int32),
             contact=np.full(4, -1, dtype=np.int32),
-            est_pos=np.zeros(3),
-            est_vel=np.zeros(3),
-            est_rpy=np.zeros(3),
+            est_pos=estimate[0:3],
+            est_vel=estimate[3:6],
+            est_rpy=estimate[6:9],
             est_status=np.zeros(1, dtype=np.int32),
+            sensor_block=sensors,
+            estimate_block=estimate,
         )
 
 
@@ -295,8 +301,22 @@ class FmuIoSnapshot:
     estimation: tuple[NDArray[Any], ...] | None
 
 
+_FMI2_WARNING = 1
+
+
 def _fmi_status_ok(status: int) -> bool:
-    return status <= 1  # fmi2OK or fmi2Warning
+    return status <= _FMI2_WARNING  # fmi2OK or fmi2Warning
+
+
+# fmi2Set*/fmi2Get*(component, vr[], nvr, value[]) and fmi2DoStep(component, t, h, noSetPrior),
+# with every pointer passed as an address.
+_VALUES_CALL = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+_DO_STEP_CALL = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int)
+
+
+def _lean(function: Any, prototype: Any) -> Any:
+    """`function` (a ctypes function of the FMU) called through `prototype`."""
+    return prototype(ctypes.cast(function, ctypes.c_void_p).value)
 
 
 class ControllerFmu:
@@ -355,22 +375,39 @@ class ControllerFmu:
             self._cleanup_dir()
             raise SimulationError(f"cannot instantiate the FMU {fmu_path}: {err}") from err
         f = self._fmu._functions
-        self._set_real = f["fmi2SetReal"]
-        self._get_real = f["fmi2GetReal"]
-        self._set_integer = f["fmi2SetInteger"]
-        self._set_boolean = f["fmi2SetBoolean"]
-        self._get_integer = f["fmi2GetInteger"]
-        self._get_boolean = f["fmi2GetBoolean"]
-        self._do_step = f["fmi2DoStep"]
+        # The per-step calls go through prototypes that take plain addresses: fmpy's own
+        # prototypes check and convert every array argument on each call, which costs about as
+        # much as the FMU's work for a small exchange.
+        self._set_real = _lean(f["fmi2SetReal"], _VALUES_CALL)
+        self._get_real = _lean(f["fmi2GetReal"], _VALUES_CALL)
+        self._set_integer = _lean(f["fmi2SetInteger"], _VALUES_CALL)
+        self._set_boolean = _lean(f["fmi2SetBoolean"], _VALUES_CALL)
+        self._get_integer = _lean(f["fmi2GetInteger"], _VALUES_CALL)
+        self._get_boolean = _lean(f["fmi2GetBoolean"], _VALUES_CALL)
+        self._do_step = _lean(f["fmi2DoStep"], _DO_STEP_CALL)
         self._component = self._fmu.component
+        # (value references, values) addresses of each exchanged block.
+        self._in_real = (ctypes.addressof(self._in_vr), ctypes.addressof(self._in_val))
+        self._in_count = len(self._in_vr)
+        # The height map is the tail of the real inputs: without it, only the head is sent.
+        self._in_count_without_map = len(REAL_INPUTS) - len(HEIGHT_MAP_INPUTS)
+        self._mode = (ctypes.addressof(self._mode_vr), ctypes.addressof(self._mode_val))
+        self._out_real = (ctypes.addressof(self._out_vr), ctypes.addressof(self._out_val))
+        self._out_count = len(self._out_vr)
+        self._contact = (ctypes.addressof(self._contact_vr), ctypes.addressof(self._contact_val))
+        self._fsm = (ctypes.addressof(self._fsm_vr), ctypes.addressof(self._fsm_val))
         self._initialized = False
         self._terminated = False
         self._estimation: tuple[Any, ...] | None = None
+        self._estimation_at: tuple[int, ...] = ()
         self.estimation: EstimationIo | None = None
 
     def _check(self, status: int, what: str) -> None:
         if not _fmi_status_ok(status):
             raise SimulationError(f"FMU call {what} failed with status {status}")
+
+    def _failed(self, status: int, what: str) -> SimulationError:
+        return SimulationError(f"FMU call {what} failed with status {status}")
 
     def set_parameters(self, values: dict[str, float]) -> None:
         """Sets parameters by name before initialisation (e.g. gait period)."""
@@ -408,6 +445,7 @@ class ControllerFmu:
         status_vr = (ctypes.c_uint * 1)(*vrs([EST_STATUS]))
         status_val = (ctypes.c_int * 1)()
         self._estimation = (in_vr, in_val, valid_vr, valid_val, contact_vr, contact_val, out_vr, out_val, status_vr, status_val)
+        self._estimation_at = tuple(ctypes.addressof(buffer) for buffer in self._estimation)
         inputs = NamedVector(ESTIMATION_REAL_INPUTS, np.ctypeslib.as_array(in_val))
         outputs = NamedVector(ESTIMATION_REAL_OUTPUTS, np.ctypeslib.as_array(out_val))
         self.estimation = EstimationIo(
@@ -420,6 +458,8 @@ class ControllerFmu:
             est_vel=outputs.view(EST_VEL),
             est_rpy=outputs.view(EST_RPY),
             est_status=np.ctypeslib.as_array(status_val),
+            sensor_block=inputs.values,
+            estimate_block=outputs.values,
         )
         return self.estimation
 
@@ -436,30 +476,48 @@ class ControllerFmu:
             raise SimulationError(f"FMU initialisation failed: {err}") from err
         self._initialized = True
 
-    def exchange_inputs(self, mode: int) -> None:
-        """Writes `inputs` (state, reference, terrain) and the mode request into the FMU."""
-        self._check(self._set_real(self._component, self._in_vr, len(self._in_vr), self._in_val), "fmi2SetReal")
+    def exchange_inputs(self, mode: int, height_map: bool = True) -> None:
+        """Writes `inputs` (state, reference, terrain) and the mode request into the FMU.
+
+        `height_map=False`: the height-map inputs are as at the last exchange, so they are not
+        sent again (inputs keep their values in the FMU until set).
+        """
+        c = self._component
+        vr, values = self._in_real
+        status = self._set_real(c, vr, self._in_count if height_map else self._in_count_without_map, values)
+        if status > _FMI2_WARNING:
+            raise self._failed(status, "fmi2SetReal")
         self._mode_val[0] = mode
-        self._check(self._set_integer(self._component, self._mode_vr, 1, self._mode_val), "fmi2SetInteger")
+        status = self._set_integer(c, self._mode[0], 1, self._mode[1])
+        if status > _FMI2_WARNING:
+            raise self._failed(status, "fmi2SetInteger")
         if self._estimation is not None:
-            in_vr, in_val, valid_vr, valid_val, contact_vr, contact_val = self._estimation[:6]
-            self._check(self._set_real(self._component, in_vr, len(in_vr), in_val), "fmi2SetReal (estimator inputs)")
-            self._check(self._set_boolean(self._component, valid_vr, 1, valid_val), "fmi2SetBoolean (fix.valid)")
-            self._check(self._set_integer(self._component, contact_vr, len(contact_vr), contact_val), "fmi2SetInteger (contact)")
+            in_vr, in_val, valid_vr, valid_val, contact_vr, contact_val = self._estimation_at[:6]
+            self._check(self._set_real(c, in_vr, len(ESTIMATION_REAL_INPUTS), in_val), "fmi2SetReal (estimator inputs)")
+            self._check(self._set_boolean(c, valid_vr, 1, valid_val), "fmi2SetBoolean (fix.valid)")
+            self._check(self._set_integer(c, contact_vr, len(CONTACT_INPUTS), contact_val), "fmi2SetInteger (contact)")
 
     def do_step(self, time: float, step: float) -> None:
-        self._check(self._do_step(self._component, time, step, 1), f"fmi2DoStep(t={time:.4f}, h={step})")
+        status = self._do_step(self._component, time, step, 1)
+        if status > _FMI2_WARNING:
+            raise self._failed(status, f"fmi2DoStep(t={time:.4f}, h={step})")
 
     def read_outputs(self) -> None:
         """Fills `outputs` (torques, forces, solve time), `contacts` and `fsm_state`."""
-        self._check(self._get_real(self._component, self._out_vr, len(self._out_vr), self._out_val), "fmi2GetReal")
-        n_contacts = len(self._contact_vr)
-        self._check(self._get_boolean(self._component, self._contact_vr, n_contacts, self._contact_val), "fmi2GetBoolean")
-        self._check(self._get_integer(self._component, self._fsm_vr, 1, self._fsm_val), "fmi2GetInteger")
+        c = self._component
+        status = self._get_real(c, self._out_real[0], self._out_count, self._out_real[1])
+        if status > _FMI2_WARNING:
+            raise self._failed(status, "fmi2GetReal")
+        status = self._get_boolean(c, self._contact[0], len(self._contact_vr), self._contact[1])
+        if status > _FMI2_WARNING:
+            raise self._failed(status, "fmi2GetBoolean")
+        status = self._get_integer(c, self._fsm[0], 1, self._fsm[1])
+        if status > _FMI2_WARNING:
+            raise self._failed(status, "fmi2GetInteger")
         if self._estimation is not None:
-            out_vr, out_val, status_vr, status_val = self._estimation[6:]
-            self._check(self._get_real(self._component, out_vr, len(out_vr), out_val), "fmi2GetReal (estimate)")
-            self._check(self._get_integer(self._component, status_vr, 1, status_val), "fmi2GetInteger (est.status)")
+            out_vr, out_val, status_vr, status_val = self._estimation_at[6:]
+            self._check(self._get_real(c, out_vr, len(ESTIMATION_REAL_OUTPUTS), out_val), "fmi2GetReal (estimate)")
+            self._check(self._get_integer(c, status_vr, 1, status_val), "fmi2GetInteger (est.status)")
 
     def _require_state_support(self, what: str) -> None:
         if not self.can_save_state:

@@ -65,6 +65,7 @@ class ReferenceTrajectory:
             rows[i, T_DZDX] = plane.dzdx
             rows[i, T_DZDY] = plane.dzdy
         self.rows = rows
+        self._times = np.array(self.times)
         self.duration = self.times[-1] - self.times[0]
         self._t0 = self.times[0]
         # Outside the plan's time span the robot is asked to stand still at the end point.
@@ -87,3 +88,22 @@ class ReferenceTrajectory:
             r0 = self.rows[i]
             out[:] = r0 + a * (self.rows[i + 1] - r0)
         out[YAW] = math.remainder(out[YAW], 2.0 * math.pi)
+
+    def sample_block(self, tau: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+        """`sample(tau[j], out[j])` for every j at once, with the same floating-point operations.
+
+        Element-wise numpy arithmetic rounds exactly as the scalar code does, so each row is
+        `sample`'s bit for bit (test_hs_reference).
+        """
+        times = self._times
+        t = self._t0 + tau
+        i = np.searchsorted(times, t, side="right") - 1
+        np.clip(i, 0, len(times) - 2, out=i)
+        t_i = times[i]
+        a = (t - t_i) / (times[i + 1] - t_i)
+        r0 = self.rows[i]
+        np.add(r0, a[:, None] * (self.rows[i + 1] - r0), out=out)
+        out[t <= times[0]] = self._hold_first
+        out[t >= times[-1]] = self._hold_last
+        tau_pi = 2.0 * math.pi
+        out[:, YAW] = [math.remainder(yaw, tau_pi) for yaw in out[:, YAW].tolist()]

@@ -32,7 +32,7 @@ FOLLOW_MODES = ("trajectory", "feedback")
 
 def yaw_of(quaternion: NDArray[np.float64]) -> float:
     """Heading of a (w, x, y, z) quaternion."""
-    w, x, y, z = (float(v) for v in quaternion)
+    w, x, y, z = quaternion.tolist()
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
@@ -58,6 +58,10 @@ class TrajectorySource:
     def sample(self, tau: float, pose: NDArray[np.float64], offset: NDArray[np.float64], walking: bool, out: NDArray[np.float64]) -> None:
         # Indexed by the walk clock alone: the plan (its positions and their terrain) is the map's.
         self.reference.sample(tau - self._start if walking else 0.0, out)
+
+    def sample_block(self, tau: NDArray[np.float64], walking: NDArray[np.bool_], out: NDArray[np.float64]) -> None:
+        """`sample` at each walk-clock time of `tau` into the rows of `out` (the pose does not matter here)."""
+        self.reference.sample_block(np.where(walking, tau - self._start, 0.0), out)
 
     def replace(self, plan: Plan, planned_at: float) -> None:
         """Continues on `plan`, which starts where the robot was at walk-clock time `planned_at`."""
