@@ -11,6 +11,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     from .pushes import PushSchedule
     from .report import RunRecord
     from .results_page import Stamp
+    from .robot import RobotDescription
     from .scenario import Scenario
 
 
@@ -108,6 +110,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retries", type=int, default=2, help="plan request retries after a timeout (default 2)")
     p.add_argument("--lcm-log", action="store_true", help="also write OUT/logs/SCENARIO_METHOD.lcmlog (robot state, 100 Hz) for lcm-logplayer")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="runs simulated at once, each in a process of its own (default: the number of CPUs); results do not depend on it",
+    )
     p.add_argument(
         "--follow",
         choices=("trajectory", "feedback"),
@@ -271,13 +279,13 @@ def _request_options(args: argparse.Namespace) -> RequestOptions:
     return RequestOptions(speed=args.speed, max_solve_time=args.max_solve_time)
 
 
-def _client(args: argparse.Namespace, out: Path) -> PlannerClient:
+def _client(args: argparse.Namespace, out: Path, prefix: str | None = None, log_name: str = "pf-planner-service.log") -> PlannerClient:
     binary = None if args.connect else paths.planner_service_path()
     client = PlannerClient(
         args.lcm_url,
-        args.channel_prefix,
+        args.channel_prefix if prefix is None else prefix,
         binary,
-        service_log=out / "logs" / "pf-planner-service.log",
+        service_log=out / "logs" / log_name,
         startup_timeout=args.service_timeout,
         footprint_radius=args.footprint_radius,
         max_slope_deg=_max_slope_deg(args),
@@ -372,6 +380,103 @@ def _map_request(args: argparse.Namespace) -> tuple[Path | None, tuple[float, fl
     return Path(args.map), start, goal
 
 
+@dataclass(frozen=True)
+class RunJob:
+    """One run of the demo: a scenario walked with one method's plan (offline: the plan is made)."""
+
+    name: str
+    scenario: Scenario
+    method: str
+    answer: PlanAnswer | None
+    # Position in the report (scenario-major, as the runs are listed).
+    index: int
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """What every run of one demo shares (picklable: runs execute in worker processes)."""
+
+    args: argparse.Namespace
+    out: Path
+    fmu: Path
+    robot: RobotDescription
+    config: CoSimConfig
+    online_config: OnlineConfig | None
+    show_progress: bool
+
+
+def _run_one(context: RunContext, job: RunJob) -> RunRecord:
+    from .metrics import TraversabilityField
+    from .pipeline import run_label, simulate, simulate_online
+
+    args, out, config, online_config = context.args, context.out, context.config, context.online_config
+    field = TraversabilityField(job.scenario.terrain, job.scenario.traversability)
+    label = run_label(job.method, config, online_config is not None)
+    log_file = out / "logs" / f"{job.name}_{label}.npz"
+    if online_config is not None:
+        # A service of its own per run, on channels of its own, so that runs side by side never
+        # answer each other's requests (an already running service has one prefix: runs take turns).
+        prefix = None if args.connect else f"{args.channel_prefix}R{job.index}_"
+        log_name = "pf-planner-service.log" if args.connect else f"pf-planner-service_{job.name}_{label}.log"
+        with _client(args, out, prefix, log_name) as client:
+            outcome = simulate_online(
+                client,
+                job.scenario,
+                context.fmu,
+                context.robot,
+                out / "cache",
+                config,
+                dataclasses.replace(online_config, method=job.method),
+                args.plan_timeout,
+                args.retries,
+                log_file,
+                context.show_progress,
+                field,
+            )
+    else:
+        assert job.answer is not None
+        outcome = simulate(
+            job.scenario,
+            job.answer.plan_or_raise(job.method),
+            context.fmu,
+            context.robot,
+            out / "cache",
+            config,
+            log_file,
+            context.show_progress,
+            field,
+            feedback_field=job.answer.field,
+        )
+    return outcome.record(str(log_file.relative_to(out)))
+
+
+def _run_all(context: RunContext, jobs: Sequence[RunJob], parallel: int) -> dict[int, RunRecord]:
+    """Every job's record by its index; `parallel` runs at once in worker processes (1: here)."""
+    records: dict[int, RunRecord] = {}
+
+    def finished(job: RunJob, rec: RunRecord) -> None:
+        records[job.index] = rec
+        print(_summary_line(rec), file=sys.stderr, flush=True)
+
+    if parallel <= 1:
+        for job in jobs:
+            finished(job, _run_one(context, job))
+        return records
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    from tqdm import tqdm
+
+    # spawn: a worker starts clean, without the parent's LCM or DART state.
+    with ProcessPoolExecutor(max_workers=parallel, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {pool.submit(_run_one, context, job): job for job in jobs}
+        with tqdm(total=len(jobs), unit="run", desc=f"runs ({parallel} at once)", disable=context.args.no_progress) as bar:
+            for future in as_completed(futures):
+                finished(futures[future], future.result())
+                bar.update()
+    return records
+
+
 def execute(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     results_page = getattr(args, "results_page", None)
@@ -397,8 +502,7 @@ def execute(args: argparse.Namespace) -> int:
     # Fail on missing build products before any planning work.
     pf_plan = paths.pf_plan_path()
 
-    from .metrics import TraversabilityField
-    from .pipeline import export_scenario, run_label, simulate, simulate_online
+    from .pipeline import export_scenario
     from .report import write_report
 
     config = _config(args)
@@ -434,49 +538,21 @@ def execute(args: argparse.Namespace) -> int:
     answers = {} if online_config is not None else _plan_all(args, scenarios, methods, out)
     plan_time = time.perf_counter() - started
 
-    runs: dict[str, list[RunRecord]] = {}
-    summary = []
-    for name, scenario in scenarios.items():
-        field = TraversabilityField(scenario.terrain, scenario.traversability)
-        runs[name] = []
-        for method in methods:
-            label = run_label(method, config, online_config is not None)
-            log_file = out / "logs" / f"{name}_{label}.npz"
-            if online_config is not None:
-                with _client(args, out) as client:
-                    outcome = simulate_online(
-                        client,
-                        scenario,
-                        fmu,
-                        robot,
-                        out / "cache",
-                        config,
-                        dataclasses.replace(online_config, method=method),
-                        args.plan_timeout,
-                        args.retries,
-                        log_file,
-                        not args.no_progress,
-                        field,
-                    )
-            else:
-                answer = answers[name][method]
-                outcome = simulate(
-                    scenario,
-                    answer.plan_or_raise(method),
-                    fmu,
-                    robot,
-                    out / "cache",
-                    config,
-                    log_file,
-                    not args.no_progress,
-                    field,
-                    feedback_field=answer.field,
-                )
-            rec = outcome.record(str(log_file.relative_to(out)))
-            runs[name].append(rec)
-            line = _summary_line(rec)
-            summary.append(line)
-            print(line, file=sys.stderr, flush=True)
+    jobs = [
+        RunJob(name, scenario, method, None if online_config is not None else answers[name][method], i * len(methods) + k)
+        for i, (name, scenario) in enumerate(scenarios.items())
+        for k, method in enumerate(methods)
+    ]
+    if args.jobs < 1:
+        raise HarnessError(f"--jobs must be >= 1, got {args.jobs}")
+    # An already running service (--connect) listens on one channel prefix: its online runs share it, one at a time.
+    parallel = min(args.jobs, len(jobs)) if not (args.connect and online_config is not None) else 1
+    context = RunContext(args, out, fmu, robot, config, online_config, show_progress=not args.no_progress and parallel == 1)
+    records = _run_all(context, jobs, parallel)
+    runs: dict[str, list[RunRecord]] = {name: [] for name in scenarios}
+    for job in jobs:
+        rec = records[job.index]
+        runs[job.name].append(rec)
     total = time.perf_counter() - started
     sim_seconds = sum(r.metrics.duration for rs in runs.values() for r in rs)
     sim_wall = sum(r.wall_seconds for rs in runs.values() for r in rs)
