@@ -32,21 +32,50 @@ if [[ ! -x .venv/bin/python ]]; then
     log "creating .venv with $($PYTHON --version)"
     "$PYTHON" -m venv .venv
 fi
-stamp=.venv/.pfnav-requirements
-# The pins: harness/pyproject.toml (the harness and every tool), the robot data (--no-deps).
-want="$(cat harness/pyproject.toml scripts/requirements-robots.txt | sha256sum | cut -d' ' -f1)"
-if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
-    log "installing pinned Python packages"
-    .venv/bin/pip install -q --disable-pip-version-check -e 'harness[dev,build]'
-    .venv/bin/pip install -q --disable-pip-version-check --no-deps -r scripts/requirements-robots.txt
-    echo "$want" > "$stamp"
-fi
-
 # LCM: Debian's and PyPI's liblcm let one UDP packet write out of bounds (docs/liblcm-fix.md).
 # Every receiver here uses the patched build instead: the Rust transport links it, Python imports
 # its module (the PyPI `lcm` package is not installed), lcm-logger/lcm-logplayer are its tools.
+# It needs only the venv's interpreter, so it comes before the packages and the Rust build.
 log "patched liblcm (build/lcm)"
 bash scripts/build_liblcm.sh "$ROOT/.venv/bin/python"
+
+# The Python packages download and unpack while cargo compiles (the two overlap on a fresh
+# machine); only the FMU's link below needs them (zig comes from PyPI).
+stamp=.venv/.pfnav-requirements
+# The pins: harness/pyproject.toml (the harness and every tool), the robot data (--no-deps).
+want="$(cat harness/pyproject.toml scripts/requirements-robots.txt | sha256sum | cut -d' ' -f1)"
+pip_pid=""
+pip_log=build/setup-pip.log
+if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
+    log "installing pinned Python packages (in the background, log: $pip_log)"
+    mkdir -p build
+    (
+        .venv/bin/pip install -q --disable-pip-version-check -e 'harness[dev,build]' &&
+        .venv/bin/pip install -q --disable-pip-version-check --no-deps -r scripts/requirements-robots.txt &&
+        echo "$want" > "$stamp"
+    ) > "$pip_log" 2>&1 &
+    pip_pid=$!
+fi
+wait_for_pip() {
+    [[ -n "$pip_pid" ]] || return 0
+    if ! wait "$pip_pid"; then
+        cat "$pip_log" >&2
+        echo "setup: installing the Python packages failed" >&2
+        exit 1
+    fi
+    pip_pid=""
+}
+trap '[[ -n "$pip_pid" ]] && kill "$pip_pid" 2>/dev/null; true' EXIT
+
+# One build for the demo, the Python tests and the Rust tests. Everything but the FMU's shared
+# library first: that one is linked by zig for glibc 2.17 (fmu/binary/link-gcc.sh), which the
+# Python packages bring. (Excluding it leaves every dependency's features as they are, so the
+# second command only compiles and links that crate.)
+log "cargo build --release --workspace (all but the FMU binary)"
+cargo build --release --workspace --exclude quad-controller-fmu-binary --quiet
+wait_for_pip
+log "Python packages installed"
+
 if .venv/bin/python -m pip show lcm >/dev/null 2>&1; then
     .venv/bin/python -m pip uninstall -y -q lcm
 fi
@@ -79,8 +108,6 @@ if [[ -x lcm_types/gen_python.sh ]] || [[ -f lcm_types/gen_python.sh ]]; then
     echo "$ROOT/build/lcm_python" > "$site/pfnav_lcm_types.pth"
 fi
 
-# One build for the demo, the Python tests and the Rust tests; the FMU's shared library in it is
-# linked by zig for glibc 2.17 (fmu/binary/link-gcc.sh).
 log "cargo build --release --workspace"
 cargo build --release --workspace --quiet
 log "bundling the FMU (scripts/build_fmu_portable.sh)"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every test of the project: formatting and lint gates, the Rust workspace tests and the
 # Python tests. Installs what is missing first (scripts/setup.sh). Tests that use LCM's udpm://
-# run inside a private network namespace (scripts/netns.sh).
+# run inside private network namespaces (scripts/netns.sh), one for the Python tests and one for
+# the Rust tests.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -13,24 +14,46 @@ bash scripts/setup.sh
 
 log "cargo fmt --check"
 cargo fmt --all -- --check
-# --release everywhere: clippy reuses the release build's proc macros and build scripts, and the
-# tests link against the release build of the dependencies that setup.sh already compiled.
-log "cargo clippy -D warnings"
-cargo clippy --release --workspace --all-targets --quiet -- -D warnings
-log "building tests"
-cargo test --release --workspace --no-run --quiet
-
-log "cargo test (private network namespace)"
-bash scripts/netns.sh cargo test --release --workspace --offline --quiet
-
 log "ruff"
 .venv/bin/ruff check harness tests scripts examples
 
-log "pytest (private network namespace)"
-# Exit code 5 means "no tests collected": only acceptable while no Python tests exist yet.
+# The Python tests run on the release build setup.sh made while clippy and the Rust tests compile
+# beside them at a lower priority: pytest is mostly one process, so the second core would
+# otherwise idle. Nothing below rebuilds what the Python tests run (tests/test_build_reuse.py).
+mkdir -p build/test-logs
+pytest_log=build/test-logs/pytest.log
+log "pytest (private network namespace) started beside the Rust checks, log: $pytest_log"
+# setsid: pytest and everything it starts form one process group, stopped together on failure.
+setsid bash scripts/netns.sh .venv/bin/python -m pytest -q tests harness/tests > "$pytest_log" 2>&1 &
+pytest_pid=$!
+stop_pytest() {
+    if [[ -n "${pytest_pid:-}" ]]; then
+        kill -- "-$pytest_pid" 2>/dev/null || true
+        echo "--- pytest output so far ($pytest_log) ---"
+        tail -n 60 "$pytest_log" || true
+    fi
+}
+trap stop_pytest EXIT
+
+# --release everywhere: clippy reuses the release build's proc macros and build scripts, and the
+# tests link against the release build of the dependencies that setup.sh already compiled.
+log "cargo clippy -D warnings"
+nice -n 15 cargo clippy --release --workspace --all-targets --quiet -- -D warnings
+log "building Rust tests"
+nice -n 15 cargo test --release --workspace --no-run --quiet
+log "cargo test (private network namespace)"
+nice -n 15 bash scripts/netns.sh cargo test --release --workspace --offline --quiet
+
+log "waiting for pytest"
 set +e
-bash scripts/netns.sh .venv/bin/python -m pytest -q tests harness/tests
+wait "$pytest_pid"
 rc=$?
 set -e
-if ((rc != 0 && rc != 5)); then exit "$rc"; fi
+pytest_pid=""
+cat "$pytest_log"
+# Exit code 5 means "no tests collected": only acceptable while no Python tests exist yet.
+if ((rc != 0 && rc != 5)); then
+    log "pytest failed (exit $rc)"
+    exit "$rc"
+fi
 log "all tests passed in $((SECONDS - start)) s"
