@@ -96,7 +96,7 @@ def main() -> int:
                 f"{'comm step':>10} {'total':>8} {'physics':>8} {'FMU':>8} {'Python':>8} {'Python %':>8} {'x realtime':>10}  result"
             )
             for step in (float(s) for s in args.comm_steps.split(",")):
-                config = CoSimConfig(comm_step=step, max_duration=args.seconds)
+                config = CoSimConfig(comm_step=step, max_duration=args.seconds, estimator="groundTruth")
                 with CoSimulation(
                     scenario, plan, fmu, robot, work / "cache", config
                 ) as sim:

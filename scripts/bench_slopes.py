@@ -53,6 +53,7 @@ from pfnav_harness.incline import (
     run_incline,
 )
 from pfnav_harness.robot_fmu import robot_and_fmu
+from pfnav_harness.world import DEFAULT_FRICTION
 from tqdm import tqdm
 
 # Links listed in the table: those touching the ground until this long after a fall, the first few.
@@ -253,8 +254,8 @@ def main() -> int:
     parser.add_argument(
         "--friction",
         type=float,
-        default=0.8,
-        help="Coulomb friction coefficient of feet and ground (default 0.8)",
+        default=DEFAULT_FRICTION,
+        help=f"Coulomb friction coefficient of feet and ground (default {DEFAULT_FRICTION})",
     )
     parser.add_argument(
         "--speed",

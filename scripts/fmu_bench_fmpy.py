@@ -20,6 +20,7 @@ from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+from pfnav_harness.fmu_runner import FmuContract
 
 REPO = Path(__file__).resolve().parents[1]
 DT = 0.001
@@ -52,7 +53,7 @@ def main() -> None:
     real_inputs = [v for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
     input_vrs = [v.valueReference for v in real_inputs]
     values = [float(v.start) for v in real_inputs]
-    values[input_vrs.index(refs["base.pos.z"])] = 0.28
+    values[input_vrs.index(refs["base.pos.z"])] = FmuContract(md, args.fmu).stand_height
     for i, q in enumerate(stand):
         values[input_vrs.index(refs[f"joint.q[{i + 1}]"])] = q
     slave.setReal(input_vrs, values)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
-from pfnav_harness.fmu_runner import FSM_TYPE, enumeration
+from pfnav_harness.fmu_runner import FSM_TYPE, FmuContract, enumeration
 
 REPO = Path(__file__).resolve().parents[1]
 DT = 0.001
@@ -58,6 +58,7 @@ def main() -> None:
     stand = json.loads(done.stdout)["stand_joint_positions"]
     slave.setReal([refs[f"joint.q[{i + 1}]"] for i in range(12)], stand)
     input_vrs = [refs["base.pos.z"], refs["base.vel.z"]]
+    stand_height = FmuContract(md, args.fmu).stand_height
     torque_vrs = [refs[f"joint.tau[{i}]"] for i in range(1, 13)]
     report_every = max(args.steps // 10, 1)
     start = time.perf_counter()
@@ -65,7 +66,7 @@ def main() -> None:
     print("step,rss_kib,elapsed_s", flush=True)
     for k in range(args.steps):
         phase = k * DT * 2.0
-        slave.setReal(input_vrs, [0.28 + 0.005 * math.sin(phase), 0.01 * math.cos(phase)])
+        slave.setReal(input_vrs, [stand_height + 0.005 * math.sin(phase), 0.01 * math.cos(phase)])
         slave.doStep(k * DT, DT)
         torques = slave.getReal(torque_vrs)
         if not all(math.isfinite(t) for t in torques):

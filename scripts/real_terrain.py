@@ -619,7 +619,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             metrics = json.loads((run_out / "metrics.json").read_text())["runs"][0]
             with np.load(log_file) as npz:
-                log = {key: npz[key] for key in ("plan_x", "plan_y", "base_pos")}
+                log = {key: npz[key] for key in ("plan_x", "plan_y", "base_pos", "estimator")}
             row.planned = True
             row.path_p50, row.path_p95, row.path_max = path_slopes(slopes, args.cell_size, log["plan_x"], log["plan_y"])
             row.planner_cost = float(metrics["planner_cost"]) if metrics.get("planner_cost") is not None else math.nan
@@ -636,7 +636,7 @@ def main(argv: list[str] | None = None) -> int:
                 "stop_reason": metrics.get("stop_reason"),
                 "walk_start": metrics.get("walk_start"),
                 "duration": metrics.get("duration"),
-                "estimator": (metrics.get("estimation") or {}).get("estimator", "groundTruth"),
+                "estimator": str(log["estimator"]),
             }
             rows.append(row)
             plotted.append((row, log))

@@ -52,7 +52,7 @@ def main() -> int:
                 plan = plan_scenario(scenario, ["pf"], args.lcm_url, service_binary=paths.planner_service_path())["pf"]
                 label = args.scenario if seed is None else f"{args.scenario} seed {seed}"
                 for offset in offsets:
-                    config = CoSimConfig(comm_step=args.comm_step)
+                    config = CoSimConfig(comm_step=args.comm_step, estimator="groundTruth")
                     with CoSimulation(scenario, plan, fmu, robot, work / "cache", config) as sim:
                         sim.world.place(float(plan.x[0]) + offset, float(plan.y[0]) - offset, float(plan.yaw[0]))
                         start = time.perf_counter()

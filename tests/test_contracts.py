@@ -28,10 +28,13 @@ class Contract:
     example: str
     # File suffixes searched (default: every code file).
     suffixes: tuple[str, ...] = CODE_SUFFIXES
+    # Files that must run without the harness and so keep their own copy; a test of its own checks
+    # that copy against the declaration.
+    standalone: tuple[str, ...] = ()
 
     def found_in(self, path: str, text: str) -> list[str]:
         """`path:line: text` of every copy in `text` (none in the declaration itself)."""
-        if path in self.declared_in or path == "tests/test_contracts.py" or not path.endswith(self.suffixes):
+        if path in self.declared_in or path in self.standalone or path == "tests/test_contracts.py" or not path.endswith(self.suffixes):
             return []
         hits = []
         for number, line in enumerate(text.splitlines(), start=1):
@@ -39,6 +42,9 @@ class Contract:
                 hits.append(f"{path}:{number}: {line.strip()}")
         return hits
 
+
+# The FMI user's example: fmpy and dartpy only, no harness.
+STANDALONE_EXAMPLE = "examples/fmu_standalone/walk_dart.py"
 
 CONTRACTS = [
     Contract(
@@ -85,6 +91,68 @@ CONTRACTS = [
         example='pub const GUID: &str = "{320c93d8-147c-4514-a9e7-440d4235dda0}";',
         suffixes=(".rs", ".py"),
     ),
+    # Rust code reads HEIGHT_MAP_SIZE / HEIGHT_MAP_CELLS; the FMU publishes one terrain.map.h[i]
+    # per cell and the harness counts them (`fmu_runner.FmuContract.height_map_size`).
+    Contract(
+        "the controller's height-map size",
+        declared_in=("controller/src/api.rs",),
+        copies=(
+            r"HEIGHT_MAP_(SIZE|CELLS)\s*(:\s*\w+\s*)?=\s*\d",
+            r"terrain\.map\.h\[[^\]]*\][^\n]*\brange\(\s*(\d+\s*,\s*)?\d+\s*\)",
+        ),
+        example='terrain |= {f"terrain.map.h[{i + 1}]": rng.uniform(-0.03, 0.03) for i in range(121)}',
+        suffixes=(".rs", ".py"),
+    ),
+    Contract(
+        "the default ground friction",
+        declared_in=("harness/src/pfnav_harness/world.py",),
+        copies=(r"(?i)friction[^\n]*(?<![\w.])0?\.80*(?![\d])",),
+        example="    friction: float = 0.8",
+        suffixes=(".py",),
+        standalone=(STANDALONE_EXAMPLE,),
+    ),
+    # `metrics.FallThresholds` holds the thresholds and the look interval; the co-simulation
+    # (`fallen`) and the metrics (`judge_fall`) apply them. A fall test with its own numbers
+    # (a tilt or height limit, a `k % 10` look) is a second rule.
+    Contract(
+        "the fall rule",
+        declared_in=("harness/src/pfnav_harness/metrics.py",),
+        copies=(
+            r"(min_base_height|max_roll|max_pitch|every_steps)\s*:\s*\w+\s*=\s*\d",
+            r"\.(max_roll|max_pitch|min_base_height)\s*[-+*]",
+            r"%\s*10\s*==\s*0[^\n]*fall",
+        ),
+        example="        return abs(roll) > self.config.fall.max_roll + 0.3",
+        suffixes=(".py",),
+    ),
+    Contract(
+        "the default estimator mode",
+        declared_in=("harness/src/pfnav_harness/fmu_runner.py",),
+        copies=(
+            r"""estimator\w*\s*(:\s*str\s*)?=\s*["'](groundTruth|kalman)["']\s*$""",
+            r"""estimator\w*\s*:\s*str\s*=\s*["']""",
+            r"""\.get\(\s*["']estimator["']\s*,\s*["']""",
+            r"""default\s*=\s*["'](groundTruth|kalman)["']""",
+        ),
+        example='    estimator: str = "groundTruth"',
+        suffixes=(".py",),
+    ),
+    # Rust: the controller's default body height is `tuning::TUNED_STAND_HEIGHT`; our robot's own
+    # (robot/quadruped.toml) is data, tied to it by controller/src/tuning.rs's tests. Python reads
+    # the FMU's `stand.bodyHeight` start value (`FmuContract.stand_height`).
+    Contract(
+        "the stand height",
+        declared_in=("controller/src/tuning.rs", "robot/quadruped.toml"),
+        copies=(
+            r"TUNED_STAND_HEIGHT\s*:\s*f64\s*=",
+            r"body_height\s*:\s*(f64\s*=\s*)?0\.28\b",
+            r"(stand_joint_positions|standing_state|nominal_foot_position|standing_pose_over_feet)\([^)]*\b0\.28\b",
+            r"""["'](base\.pos\.z|ref\.bodyHeight|stand\.bodyHeight)["'][^\n]*(?<![\w.])0\.28\b""",
+            r"height_above_terrain[^\n]*(?<![\w.])0\.28\b",
+        ),
+        example='    state = {"base.pos.z": 0.28, "ref.vx": 0.3, "ref.bodyHeight": 0.28}',
+        suffixes=(".rs", ".py"),
+    ),
 ]
 
 
@@ -117,3 +185,10 @@ def test_a_planted_copy_is_found(contract: Contract) -> None:
     elsewhere = "harness/src/pfnav_harness/elsewhere" + contract.suffixes[0]
     assert contract.found_in(elsewhere, "first line\n" + contract.example), contract.example
     assert not contract.found_in(contract.declared_in[0], contract.example)
+
+
+def test_the_standalone_example_walks_on_the_default_friction(code: dict[str, str]) -> None:
+    from pfnav_harness.world import DEFAULT_FRICTION
+
+    found = re.findall(r"^FRICTION = (\S+)$", code[STANDALONE_EXAMPLE], flags=re.MULTILINE)
+    assert found and float(found[0]) == DEFAULT_FRICTION, f"{STANDALONE_EXAMPLE}: FRICTION = {found}, the harness's DEFAULT_FRICTION = {DEFAULT_FRICTION}"

@@ -32,7 +32,7 @@ def test_surprise_trench_is_seen_and_walked_around_while_bad_updates_are_refused
     robot: RobotDescription,
     tmp_path: Path,
 ) -> None:
-    config = CoSimConfig(follow="feedback", stand_time=1.5, max_duration=16.0)
+    config = CoSimConfig(follow="feedback", stand_time=1.5, max_duration=16.0, estimator="groundTruth")
     online = OnlineConfig(bad_updates=("nan", "shape", "stale"))
     outcome = simulate_online(
         planner,
@@ -116,6 +116,7 @@ def test_a_pushed_robot_heads_for_the_goal_from_where_it_landed(
         stand_time=1.5,
         max_duration=11.5,
         pushes=PushSchedule([push]),
+        estimator="groundTruth",
     )
     outcome = simulate(
         scenario,

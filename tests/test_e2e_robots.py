@@ -19,6 +19,7 @@ from pfnav_harness.errors import MissingArtifactError
 from pfnav_harness.incline import DIRECTIONS, MIN_WALKED, WALK_DISTANCE, run_incline
 from pfnav_harness.robot import RobotDescription
 from pfnav_harness.robot_fmu import fmu_for_robot, is_default_robot
+from pfnav_harness.world import DEFAULT_FRICTION
 
 PACKAGE_ROOT = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"
 WALK = 1.0
@@ -57,7 +58,7 @@ def test_third_party_robot_stands_up_and_trots(
         robot,
         tmp_path,
         distance=WALK,
-        config=CoSimConfig(settle_time=0.5),
+        config=CoSimConfig(settle_time=0.5, estimator="groundTruth"),
     )
     outcome = run.outcome
     assert outcome.stood_up, outcome
@@ -81,7 +82,7 @@ def test_third_party_robot_walks_30_degrees(
         fmu_for_robot(robot, fmu_cache),
         robot,
         tmp_path,
-        friction=0.8,
+        friction=DEFAULT_FRICTION,
     )
     outcome = run.outcome
     summary = f"{name} {STEEP_ANGLE:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"

@@ -36,7 +36,7 @@ def test_short_pf_run(
 ) -> None:
     scenario = paper_scenarios[name]
     plan = plan_for(name, "pf")
-    config = CoSimConfig(comm_step=comm_step, stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS)
+    config = CoSimConfig(comm_step=comm_step, stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS, estimator="groundTruth")
     outcome = simulate(
         scenario,
         plan,

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pytest
 from fmu_support import logging_callbacks, new_slave
+from pfnav_harness.fmu_runner import STAND_HEIGHT_PARAMETER
 
 REPO = Path(__file__).resolve().parents[1]
 LEGS = ("FR", "FL", "RR", "RL")
@@ -100,7 +101,8 @@ def test_start_values_are_the_nominal_stance(md_xml: ET.Element, urdf_limits: li
         q = float(starts[f"joint.q[{i + 1}]"] or "nan")
         assert limit["lower"] < q < limit["upper"], (i, q, limit)
         assert float(starts[f"joint.dq[{i + 1}]"] or "nan") == 0.0
-    assert float(starts["base.pos.z"] or "nan") == pytest.approx(0.28)
+    # Standing at the controller's nominal height.
+    assert float(starts["base.pos.z"] or "nan") == pytest.approx(float(starts[STAND_HEIGHT_PARAMETER] or "nan"))
     assert [float(starts[f"base.quat.{c}"] or "nan") for c in "wxyz"] == [1.0, 0.0, 0.0, 0.0]
 
 

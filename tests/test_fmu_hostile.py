@@ -384,7 +384,7 @@ def test_tick_cap_of_the_most_expensive_parameters_keeps_calls_under_a_second(
     s.ok("set worst reals", s.slave.setReal, [vr[n] for n in reals], list(reals.values()))
     ints = {"mpc.everyTicks": 1, "mpc.horizon": 40, "gait.kind": int(enumeration(fmu_model_description, "GaitKind").Walk)}
     s.ok("set worst integers", s.slave.setInteger, [vr[n] for n in ints], list(ints.values()))
-    state = {"base.pos.z": 0.28, "ref.vx": 0.3, "ref.bodyHeight": 0.28}
+    state = {"base.pos.z": fmu_contract.stand_height, "ref.vx": 0.3, "ref.bodyHeight": fmu_contract.stand_height}
     state |= {f"joint.q[{i + 1}]": q for i, q in enumerate(STAND_JOINTS)}
     s.ok("set state", s.slave.setReal, [vr[n] for n in state], list(state.values()))
     fsm, modes = fmu_contract.fsm, fmu_contract.mode
@@ -406,7 +406,7 @@ def test_tick_cap_of_the_most_expensive_parameters_keeps_calls_under_a_second(
     # A rough local height map adds the foothold search on it to every tick and horizon step.
     rng = random.Random(7)
     terrain = {"terrain.map.x0": -0.25, "terrain.map.y0": -0.25, "terrain.map.spacing": 0.05}
-    terrain |= {f"terrain.map.h[{i + 1}]": rng.uniform(-0.03, 0.03) for i in range(121)}
+    terrain |= {name: rng.uniform(-0.03, 0.03) for name in fmu_contract.height_map_heights}
     s.ok("set height map", s.slave.setReal, [vr[n] for n in terrain], list(terrain.values()))
     for _ in range(60):
         s.ok(f"doStep({cap} ticks, MPC every tick, horizon 40, height map)", s.slave.doStep, t, h)
@@ -474,8 +474,10 @@ class Fuzzer:
     parameters: list[Any] = field(default_factory=list)
     inputs: list[Any] = field(default_factory=list)
     vr: dict[str, int] = field(default_factory=dict)
+    stand_height: float = math.nan
 
     def __post_init__(self) -> None:
+        self.stand_height = FmuContract(self.fmu_model_description, "the fuzzed FMU").stand_height
         for v in self.fmu_model_description.modelVariables:
             self.vr[v.name] = v.valueReference
             if v.causality == "parameter":
@@ -565,7 +567,7 @@ class Fuzzer:
                 mode = rng.choice([0, 1, 2, 2, 3, -1, 2**31 - 1])
                 self.call(op, f"cmd.mode = {mode}", slave.setInteger, [self.vr["cmd.mode"]], [mode], expect=phase_refuses)
         elif op == "standingState":
-            state = {"base.pos.z": 0.28, "base.quat.w": 1.0, "ref.vx": rng.uniform(-0.5, 0.5), "ref.bodyHeight": 0.28}
+            state = {"base.pos.z": self.stand_height, "base.quat.w": 1.0, "ref.vx": rng.uniform(-0.5, 0.5), "ref.bodyHeight": self.stand_height}
             state |= {f"joint.q[{i + 1}]": q for i, q in enumerate(STAND_JOINTS)}
             state |= {f"joint.dq[{i + 1}]": 0.0 for i in range(12)}
             self.call(op, "standing state", slave.setReal, [self.vr[n] for n in state], list(state.values()), expect=self.settable())

@@ -187,9 +187,14 @@ def stand_pose(direct_reference: Path) -> list[float]:
     return run_direct(direct_reference, [])["stand_joint_positions"]
 
 
-def standing(stand_pose: list[float], x: float = 0.0, yaw: float = 0.0) -> Inputs:
+@pytest.fixture(scope="module")
+def stand_height(fmu_contract: FmuContract) -> float:
+    return fmu_contract.stand_height
+
+
+def standing(stand_pose: list[float], stand_height: float, x: float = 0.0, yaw: float = 0.0) -> Inputs:
     return Inputs(
-        position=[x, 0.0, 0.28],
+        position=[x, 0.0, stand_height],
         quaternion=[math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)],
         joints=list(stand_pose),
         reference={"ref.x": x, "ref.yaw": yaw},
@@ -375,11 +380,12 @@ def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
     value_refs: dict[str, int],
     direct_reference: Path,
     stand_pose: list[float],
+    stand_height: float,
     fsm: type[IntEnum],
     modes: type[IntEnum],
 ) -> None:
     s = running.slave
-    inputs = standing(stand_pose)
+    inputs = standing(stand_pose, stand_height)
     inputs.apply(s, value_refs, modes)
     # 1.2 s in 10 ms communication steps (the stand-up takes 1 s), then 0.3 s in 1.5 ms steps.
     t = 0.0
@@ -413,11 +419,11 @@ def test_standing_torques_hold_the_weight_and_equal_a_direct_call(
     np.testing.assert_allclose(ground_forces_arr, second["forces"], atol=0.02 * weight / 4)
 
 
-def test_simulate_fmu_runs_with_fmpy_master(fmu_file: Path, stand_pose: list[float], fsm: type[IntEnum], modes: type[IntEnum]) -> None:
+def test_simulate_fmu_runs_with_fmpy_master(fmu_file: Path, stand_pose: list[float], stand_height: float, fsm: type[IntEnum], modes: type[IntEnum]) -> None:
     from fmpy import simulate_fmu
 
     start = {f"joint.q[{i + 1}]": q for i, q in enumerate(stand_pose)}
-    start.update({"base.pos.z": 0.28, "cmd.mode": int(modes.Stand)})
+    start.update({"base.pos.z": stand_height, "cmd.mode": int(modes.Stand)})
     result = simulate_fmu(
         str(fmu_file),
         stop_time=1.2,
@@ -554,6 +560,7 @@ def test_two_instances_in_one_process_are_independent(
     value_refs: dict[str, int],
     direct_reference: Path,
     stand_pose: list[float],
+    stand_height: float,
     fsm: type[IntEnum],
     modes: type[IntEnum],
 ) -> None:
@@ -561,8 +568,8 @@ def test_two_instances_in_one_process_are_independent(
     b, instantiate_b = make_slave(fmu_unzipped, fmu_model_description, "b")
     instantiate_a()
     instantiate_b()
-    inputs_a = standing(stand_pose)
-    inputs_b = standing(stand_pose, x=3.0, yaw=0.7)
+    inputs_a = standing(stand_pose, stand_height)
+    inputs_b = standing(stand_pose, stand_height, x=3.0, yaw=0.7)
     inputs_b.joint_velocities = [0.3] * 12
     for logged, inputs in ((a, inputs_a), (b, inputs_b)):
         s = logged.slave

@@ -16,7 +16,7 @@ fn bench_estimator(c: &mut Criterion) {
         .expect("controller")
         .stand_joint_positions();
     let state = RobotState {
-        base_position: [0.0, 0.0, 0.28],
+        base_position: [0.0, 0.0, quad_controller::tuning::TUNED_STAND_HEIGHT],
         joint_positions: stand,
         ..RobotState::default()
     };
@@ -26,7 +26,7 @@ fn bench_estimator(c: &mut Criterion) {
     sensors.imu.gyro = [0.01, -0.02, 0.005];
     let with_fix = SensorReadings {
         fix: PositionFix {
-            position: [0.0, 0.0, 0.28],
+            position: [0.0, 0.0, quad_controller::tuning::TUNED_STAND_HEIGHT],
             valid: true,
         },
         ..sensors

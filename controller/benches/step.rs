@@ -17,12 +17,12 @@ fn bench_step(c: &mut Criterion) {
     };
     let mut ctrl = Controller::new(model, config).expect("controller");
     let state = RobotState {
-        base_position: [0.0, 0.0, 0.28],
+        base_position: [0.0, 0.0, quad_controller::tuning::TUNED_STAND_HEIGHT],
         joint_positions: ctrl.stand_joint_positions(),
         ..RobotState::default()
     };
     let mut reference = Reference {
-        body_height: 0.28,
+        body_height: quad_controller::tuning::TUNED_STAND_HEIGHT,
         ..Reference::default()
     };
     for _ in 0..20 {

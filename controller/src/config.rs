@@ -393,7 +393,7 @@ controller_config! {
             "Maximum normal force on a stance foot";
         /// Nominal standing height of the base above the terrain, m (used when the reference
         /// gives ≤ 0).
-        body_height: f64 = 0.28,
+        body_height: f64 = crate::tuning::TUNED_STAND_HEIGHT,
             fmi "stand.bodyHeight", range limits::BODY_HEIGHT, unit "m",
             "Nominal standing height above the terrain (used when ref.bodyHeight <= 0)";
         /// MPC state weights: roll, pitch, yaw, x, y, z, ωx, ωy, ωz, vx, vy, vz, gravity state.

@@ -242,7 +242,14 @@ mod tests {
         .map(|(x, y)| Vector3::new(x + 2.0, y + 1.0, (x + 2.0) * slope.tan()));
         let com_offset = Vector3::new(0.02, 0.0, 0.05);
         let pitch = 0.1;
-        let pose = standing_pose_over_feet(&feet, &com_offset, FRAC_PI_2, pitch, 1.1, 0.28);
+        let pose = standing_pose_over_feet(
+            &feet,
+            &com_offset,
+            FRAC_PI_2,
+            pitch,
+            1.1,
+            crate::tuning::TUNED_STAND_HEIGHT,
+        );
         let com = pose.position + pose.rotation() * com_offset;
         let centroid = feet_centroid(&feet);
         assert!((com.x - centroid.x).abs() < 1e-12, "{com} vs {centroid}");

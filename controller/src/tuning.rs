@@ -1,8 +1,8 @@
 //! The default tuning carried over to another robot. [`ControllerConfig::default`] is tuned for a
-//! 12 kg robot standing 0.28 m high; a robot of another size gets the same behaviour in
-//! dimensionless terms (Froude scaling: forces with the weight, joint stiffness with weight × leg
-//! length, times with √(length / g)), so that a 2.5 kg Solo-sized robot does not receive joint
-//! gains that saturate its 2.7 N·m motors and a heavier one is not left soft.
+//! robot of [`TUNED_MASS`] standing [`TUNED_STAND_HEIGHT`] high; a robot of another size gets the
+//! same behaviour in dimensionless terms (Froude scaling: forces with the weight, joint stiffness
+//! with weight × leg length, times with √(length / g)), so that a 2.5 kg Solo-sized robot does not
+//! receive joint gains that saturate its 2.7 N·m motors and a heavier one is not left soft.
 
 use crate::{ControllerConfig, RobotModel};
 

@@ -659,8 +659,12 @@ mod tests {
         let original = RobotModel::from_config_file_with(&config_path, &packages).unwrap();
         assert_eq!(model.total_mass(), original.total_mass());
         assert_eq!(
-            model.stand_joint_positions(0.28).unwrap(),
-            original.stand_joint_positions(0.28).unwrap()
+            model
+                .stand_joint_positions(quad_controller::tuning::TUNED_STAND_HEIGHT)
+                .unwrap(),
+            original
+                .stand_joint_positions(quad_controller::tuning::TUNED_STAND_HEIGHT)
+                .unwrap()
         );
         // Unpacked into a resources folder, the FMU's loader reads it.
         robot

@@ -53,7 +53,8 @@ def advance_reference(self: CoSimulation, loop: Any, end: int, progress: Any) ->
     body_height_in = inputs.index("ref.bodyHeight")
     map_origin = inputs.view(fr.HEIGHT_MAP_ORIGIN)
     map_spacing = inputs.index(fr.HEIGHT_MAP_SPACING)
-    map_heights = inputs.view(fr.HEIGHT_MAP_HEIGHTS)
+    map_heights = inputs.view(fmu.contract.height_map_heights)
+    map_size = fmu.contract.height_map_size
     input_values = inputs.values
     terrain = self.scenario.terrain
     use_map = c.height_map
@@ -74,7 +75,6 @@ def advance_reference(self: CoSimulation, loop: Any, end: int, progress: Any) ->
     # The pose the robot's navigation works with: x, y, yaw (truth + offset).
     pose = np.zeros(3)
     stop_reason: str | None = None
-    min_height = c.fall.min_base_height
     progress_every = max(1, n_steps // 200)
     t_begin = perf()
     k = loop.k
@@ -114,7 +114,7 @@ def advance_reference(self: CoSimulation, loop: Any, end: int, progress: Any) ->
             input_values[body_height_in] = c.body_height
             # The elevation map a perception stack would give: the mesh vertices around the base,
             # in the robot's estimated frame (perception measures the ground relative to the body).
-            grid = terrain.local_grid(float(state[0]), float(state[1]), fr.HEIGHT_MAP_SIZE) if use_map else None
+            grid = terrain.local_grid(float(state[0]), float(state[1]), map_size) if use_map else None
             if grid is None:
                 input_values[map_spacing] = 0.0
             else:
@@ -150,7 +150,7 @@ def advance_reference(self: CoSimulation, loop: Any, end: int, progress: Any) ->
             estimator.log_step(k)
 
         # The controller's damping state is its own verdict that the robot is down.
-        if walking and fall_step is None and k % 10 == 0 and (flags[8] == fsm.Damping or self._fallen(state, min_height)):
+        if walking and fall_step is None and k % c.fall.every_steps == 0 and (flags[8] == fsm.Damping or self._fallen(state)):
             fall_step = k
         if fall_step is not None and (k - fall_step) * dt >= c.after_fall:
             stop_reason = f"fell at t={fall_step * dt:.2f} s"

@@ -12,7 +12,7 @@ from pfnav_harness import fmu_runner as fr
 from pfnav_harness import paths
 from pfnav_harness.cosim import CoSimConfig, CoSimulation, save_log
 from pfnav_harness.errors import SimulationError
-from pfnav_harness.metrics import TraversabilityField, compute_metrics
+from pfnav_harness.metrics import TraversabilityField, compute_metrics, judge_fall
 from pfnav_harness.planner_client import Plan
 from pfnav_harness.report import RunRecord, write_report
 from pfnav_harness.robot import RobotDescription
@@ -29,7 +29,7 @@ class PdStandIn:
 
     def __init__(self, contract: fr.FmuContract, kp: float = 120.0, kd: float = 3.0) -> None:
         self.contract = contract
-        self.inputs = fr.NamedVector(fr.REAL_INPUTS)
+        self.inputs = fr.NamedVector(contract.real_inputs)
         self.outputs = fr.NamedVector(fr.REAL_OUTPUTS)
         self.kp, self.kd = kp, kd
         self.steps: list[tuple[float, float]] = []
@@ -87,7 +87,7 @@ def standing_plan(x: float, y: float) -> Plan:
 
 def test_master_steps_logs_and_closes(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
     stand_in = PdStandIn(fmu_contract)
-    config = CoSimConfig(comm_step=0.004, stand_time=0.2, settle_time=0.3)
+    config = CoSimConfig(comm_step=0.004, stand_time=0.2, settle_time=0.3, estimator="groundTruth")
     with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=stand_in) as sim:
         assert sim.duration() == pytest.approx(1.5)
         result = sim.run()
@@ -139,11 +139,14 @@ def test_master_steps_logs_and_closes(ramp_scenario: Scenario, fmu_contract: fr.
 
 def test_a_collapsing_robot_is_stopped_early_as_a_fall(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
     limp = PdStandIn(fmu_contract, kp=0.0, kd=0.0)
-    config = CoSimConfig(stand_time=0.0, settle_time=5.0, after_fall=0.2)
+    config = CoSimConfig(stand_time=0.0, settle_time=5.0, after_fall=0.2, estimator="groundTruth")
     with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=limp) as sim:
         result = sim.run()
     assert result.stop_reason.startswith("fell at")
     assert result.timing.simulated < 2.0
+    # The metrics judge the log by the rule the run stopped on: the same fall time.
+    verdict = judge_fall(result.log, ramp_scenario.terrain, config.fall)
+    assert verdict.fell and result.stop_reason == f"fell at t={verdict.fall_time:.2f} s"
 
 
 def test_bad_configs_are_rejected(ramp_scenario: Scenario, tmp_path: Path) -> None:

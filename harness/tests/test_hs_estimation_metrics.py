@@ -171,7 +171,9 @@ class EstimatingStandIn(PdStandIn):
 def _fake_contract() -> Any:
     fsm = IntEnum("FsmState", {"Passive": 0, "Stand": 1, "Locomotion": 2, "Damping": 3})
     mode = IntEnum("ModeRequest", {"Passive": 0, "Stand": 1, "Locomotion": 2})
-    return SimpleNamespace(fsm=fsm, mode=mode)
+    # A 3×3 height map: the harness takes the size from the contract, whatever the FMU's is.
+    heights = fr.height_map_heights(3)
+    return SimpleNamespace(fsm=fsm, mode=mode, height_map_size=3, height_map_heights=heights, real_inputs=fr.FIXED_REAL_INPUTS + heights)
 
 
 def test_kalman_mode_feeds_sensor_readings_and_logs_the_estimate(ramp_scenario: Scenario, tmp_path: Path) -> None:
@@ -222,7 +224,7 @@ def test_the_contact_sensor_reports_the_feet_dart_finds_on_the_ground(ramp_scena
 
 def test_ground_truth_mode_touches_no_estimator_variables(ramp_scenario: Scenario, tmp_path: Path) -> None:
     stand_in = PdStandIn(_fake_contract())  # has no enable_estimation: must not be asked
-    config = CoSimConfig(stand_time=0.1, settle_time=0.1, max_duration=0.3)
+    config = CoSimConfig(stand_time=0.1, settle_time=0.1, max_duration=0.3, estimator="groundTruth")
     with CoSimulation(ramp_scenario, standing_plan(1.5, 1.0), None, ROBOT, tmp_path, config, controller=stand_in) as sim:
         log = sim.run().log
     assert str(log["estimator"]) == "groundTruth" and not has_estimate(log)

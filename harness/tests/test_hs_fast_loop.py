@@ -64,7 +64,7 @@ def assert_same_log(fast: RunResult, reference: RunResult) -> None:
 
 # Factories: a push schedule remembers its heading-relative forces, so each run gets its own.
 CASES: dict[str, Callable[[], CoSimConfig]] = {
-    "1 ms, ground truth": lambda: CoSimConfig(comm_step=0.001, max_duration=2.6),
+    "1 ms, ground truth": lambda: CoSimConfig(comm_step=0.001, max_duration=2.6, estimator="groundTruth"),
     "2 ms, kalman, contact sensor, pushes": lambda: CoSimConfig(
         comm_step=0.002,
         max_duration=2.6,
@@ -72,7 +72,7 @@ CASES: dict[str, Callable[[], CoSimConfig]] = {
         body_sensors=BodySensorConfig(seed=3, fix_rate=5.0, fix_noise=0.02, contact_sensor=True),
         pushes=PushSchedule((horizontal_push(25.0, 0.0, 0.3, 0.1), horizontal_push(20.0, 90.0, 0.7, 0.05, heading_relative=True))),
     ),
-    "5 ms, ground truth, no height map": lambda: CoSimConfig(comm_step=0.005, max_duration=2.6, height_map=False),
+    "5 ms, ground truth, no height map": lambda: CoSimConfig(comm_step=0.005, max_duration=2.6, height_map=False, estimator="groundTruth"),
 }
 
 
@@ -97,7 +97,7 @@ def test_the_fast_loop_follows_the_feedback_law_as_the_reference_loop(ramp_scena
 
 def test_online_replans_reach_the_fast_loop_as_the_reference_loop(ramp_scenario: Scenario, tmp_path: Path) -> None:
     """Replans swap the plan mid-walk: the block-sampled reference must follow from that step on."""
-    config = CoSimConfig(comm_step=0.002, max_duration=3.0)
+    config = CoSimConfig(comm_step=0.002, max_duration=3.0, estimator="groundTruth")
 
     def navigator() -> tuple[OnlineNavigator, Plan]:
         nav = OnlineNavigator(ScriptedClient(), ramp_scenario, OnlineConfig(update_period=0.3, apply_delay=0.1))

@@ -30,25 +30,37 @@ def test_every_variable_the_harness_uses_is_in_the_bundled_fmu(model_description
     wrong = {name: variables[name].causality for name, causality in fr.USED_VARIABLES.items() if variables[name].causality != causality}
     assert not wrong, wrong
     # Every group the harness addresses is part of the one declaration.
-    for group in (fr.REAL_INPUTS, fr.REAL_OUTPUTS, fr.CONTACT_OUTPUTS, (fr.MODE_INPUT, fr.FSM_OUTPUT)):
+    for group in (fr.FIXED_REAL_INPUTS, fr.REAL_OUTPUTS, fr.CONTACT_OUTPUTS, (fr.MODE_INPUT, fr.FSM_OUTPUT)):
         assert set(group) <= set(fr.USED_VARIABLES)
-    assert {variables[n].type for n in (*fr.REAL_INPUTS, *fr.REAL_OUTPUTS)} == {"Real"}
-    assert {variables[n].type for n in fr.CONTACT_OUTPUTS} == {"Boolean"}
+    real_inputs = fr.FmuContract(model_description, "bundled FMU").real_inputs
+    assert {variables[n].type for n in (*real_inputs, *fr.REAL_OUTPUTS)} == {"Real"}
+    assert {variables[n].causality for n in real_inputs} == {"input"}
 
 
-def test_enumerations_come_from_the_model_description(model_description: Any) -> None:
-    types = {t.name: t for t in model_description.typeDefinitions}
-    for type_name, items in fr.USED_ENUMERATIONS.items():
-        assert types[type_name].type == "Enumeration"
-        declared = {item.name: int(item.value) for item in types[type_name].items}
-        assert set(items) <= set(declared), (type_name, declared)
+def test_the_height_map_size_is_counted_from_the_fmu(model_description: Any) -> None:
     contract = fr.FmuContract(model_description, "bundled FMU")
-    fsm = {item.name: int(item.value) for item in types[fr.FSM_TYPE].items}
-    assert {s.name: int(s) for s in contract.fsm} == fsm
-    assert len(set(fsm.values())) == len(fsm)
-    variables = {v.name: v for v in model_description.modelVariables}
-    for name, type_name in fr.ENUMERATION_VARIABLES.items():
-        assert variables[name].declaredType.name == type_name
+    samples = [v.name for v in model_description.modelVariables if v.name.startswith("terrain.map.h[")]
+    assert contract.height_map_size**2 == len(samples) > 1
+    assert contract.height_map_heights == fr.height_map_heights(contract.height_map_size)
+    assert contract.real_inputs[-len(samples) :] == contract.height_map_heights
+
+
+@pytest.mark.parametrize("kept", [0, 120])
+def test_an_fmu_whose_height_map_is_not_square_is_refused(model_description: Any, kept: int) -> None:
+    md = copy.copy(model_description)
+    samples = [v for v in model_description.modelVariables if v.name.startswith("terrain.map.h[")]
+    dropped = {v.name for v in samples[kept:]}
+    md.modelVariables = [v for v in model_description.modelVariables if v.name not in dropped]
+    with pytest.raises(SimulationError, match=f"{kept} height-map samples .*perfect square"):
+        fr.FmuContract(md, "stripped FMU")
+
+
+def test_a_gap_in_the_height_map_samples_is_named(model_description: Any) -> None:
+    md = copy.copy(model_description)
+    md.modelVariables = [copy.copy(v) for v in model_description.modelVariables]
+    next(v for v in md.modelVariables if v.name == "terrain.map.h[7]").name = "terrain.map.h[9999]"
+    with pytest.raises(SimulationError, match=re.escape("no variable terrain.map.h[7]")):
+        fr.FmuContract(md, "renumbered FMU")
 
 
 @pytest.mark.parametrize("name", ["ref.z", "terrain.dzdy", "fsm.state", "cmd.mode", "joint.dq[12]", "stance[4]"])
@@ -69,8 +81,8 @@ def test_an_fmu_without_an_fsm_state_the_harness_names_is_refused(model_descript
         fr.FmuContract(md, "stripped FMU")
 
 
-def test_named_vectors_address_entries_by_name() -> None:
-    v = fr.NamedVector(fr.REAL_INPUTS)
+def test_named_vectors_address_entries_by_name(model_description: Any) -> None:
+    v = fr.NamedVector(fr.FmuContract(model_description, "bundled FMU").real_inputs)
     v.view(fr.JOINT_Q)[:] = np.arange(12)
     assert v.values[v.index("joint.q[1]")] == 0.0 and v.values[v.index("joint.q[12]")] == 11.0
     assert v.span(fr.BASE_QUAT) == slice(3, 7)

@@ -39,7 +39,7 @@ class StatefulStandIn:
 
     def __init__(self, contract: fr.FmuContract) -> None:
         self.contract = contract
-        self.inputs = fr.NamedVector(fr.REAL_INPUTS)
+        self.inputs = fr.NamedVector(contract.real_inputs)
         self.outputs = fr.NamedVector(fr.REAL_OUTPUTS)
         self.can_save_state = True
         self.estimation: fr.EstimationIo | None = None

@@ -32,7 +32,7 @@ from pfnav_harness.incline import (
     support_margin,
 )
 from pfnav_harness.robot import RobotDescription
-from pfnav_harness.world import QuadrupedWorld
+from pfnav_harness.world import DEFAULT_FRICTION, QuadrupedWorld
 
 # Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
 ROBOT = RobotDescription.load(paths.default_robot_config_path())
@@ -173,7 +173,7 @@ def fmu() -> Path:
 
 def walk_the_slope(angle: float, direction: str, fmu: Path, tmp_path: Path, max_slip: float) -> dict[str, float]:
     """Runs the incline benchmark's case and checks it passed; returns the links other than the feet that touched the ground (first time, s)."""
-    run = run_incline(angle, direction, fmu, ROBOT, tmp_path, friction=0.8)
+    run = run_incline(angle, direction, fmu, ROBOT, tmp_path, friction=DEFAULT_FRICTION)
     outcome = run.outcome
     summary = f"{angle:g}° {direction}: {outcome.stop_reason}; walked {outcome.walked:.2f} m; {outcome.fall_reason}"
     assert outcome.stood_up, summary

@@ -93,9 +93,17 @@ def test_falls_are_detected_by_height_and_tilt(ramp_scenario: Scenario, fmu_cont
 
     tilted = straight_log(ramp_scenario, 0.0)
     n = len(tilted["t"])
-    tilted["base_quat"][n // 2 :] = quat_from_rpy(1.2, 0.0, 0.0)
+    tilted["base_quat"][n // 2 :] = quat_from_rpy(1.4, 0.0, 0.0)
     m = compute_metrics(tilted, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf")
     assert m.fell and m.fall_time == pytest.approx(tilted["t"][n // 2]) and "roll" in m.fall_reason
+    # Judged where the co-simulation looks: a tilt from a step between two looks counts at the next.
+    tilted["base_quat"][:] = quat_from_rpy(0.0, 0.0, 0.0)
+    tilted["base_quat"][n // 2 + 3 :] = quat_from_rpy(0.0, -1.4, 0.0)
+    m = compute_metrics(tilted, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf")
+    assert m.fell and m.fall_time == pytest.approx(tilted["t"][n // 2 + 10]) and "pitch" in m.fall_reason
+    # 1.2 rad: a steep slope's tilt on top of 1 rad, still standing.
+    tilted["base_quat"][:] = quat_from_rpy(1.2, 0.0, 0.0)
+    assert not compute_metrics(tilted, ramp_scenario.terrain, ramp_scenario.goal, field, "ramp", "pf").fell
 
     # Pitched like the 0.2 slope (≈ 11.3° nose up), levelled with the terrain: not a fall.
     levelled = straight_log(ramp_scenario, 0.0)

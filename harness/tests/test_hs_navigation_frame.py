@@ -97,7 +97,7 @@ class OffsetEstimateStandIn(PdStandIn):
         base = self.inputs.view(fr.BASE_POS)
         yaw = yaw_of(self.inputs.view(fr.BASE_QUAT))
         origin = self.inputs.view(fr.HEIGHT_MAP_ORIGIN)
-        first_height = self.inputs.view(fr.HEIGHT_MAP_HEIGHTS)[0]
+        first_height = self.inputs.view(self.contract.height_map_heights)[0]
         self.seen.append((time, base[0], base[1], base[2], yaw, origin[0], origin[1], first_height))
         est = self.estimation
         assert est is not None
@@ -119,7 +119,7 @@ def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_sce
     seen = np.array(controller.seen[1:])
     terrain = ramp_scenario.terrain
     for _, x, y, _, _, origin_x, origin_y, first_height in seen[::37]:
-        grid = terrain.local_grid(x, y, fr.HEIGHT_MAP_SIZE)
+        grid = terrain.local_grid(x, y, fmu_contract.height_map_size)
         assert grid is not None
         # The block of ground around the true base, shifted into the estimated frame.
         assert (origin_x, origin_y) == pytest.approx((grid[0] + OFFSET[0], grid[1] + OFFSET[1]), abs=1e-12)
@@ -128,13 +128,13 @@ def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_sce
 
 def test_without_an_estimator_nothing_is_shifted(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
     plan = standing_plan(1.2, 1.0)
-    config = CoSimConfig(stand_time=0.2, max_duration=0.3, follow="feedback")
+    config = CoSimConfig(stand_time=0.2, max_duration=0.3, follow="feedback", estimator="groundTruth")
     controller = OffsetEstimateStandIn(fmu_contract)
     controller.estimation = fr.EstimationIo.detached()  # written by the stand-in, never read by the harness
     with CoSimulation(ramp_scenario, plan, None, ROBOT, tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
         result = sim.run()
     np.testing.assert_array_equal(result.log["ref"][:, 0], result.log["base_pos"][:, 0])
     for _, x, y, _, _, origin_x, _, _ in controller.seen[::50]:
-        grid = ramp_scenario.terrain.local_grid(x, y, fr.HEIGHT_MAP_SIZE)
+        grid = ramp_scenario.terrain.local_grid(x, y, fmu_contract.height_map_size)
         assert grid is not None
         assert origin_x == grid[0]

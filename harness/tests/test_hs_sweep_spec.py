@@ -9,6 +9,7 @@ from typing import Any
 import pytest
 
 from pfnav_harness import paths
+from pfnav_harness.fmu_runner import DEFAULT_ESTIMATOR
 from pfnav_harness.sweep.driver import run_tasks
 from pfnav_harness.sweep.runner import fork_group, forkable, run_config
 from pfnav_harness.sweep.spec import FACTORS, SpecError, load_spec, parse_spec
@@ -33,7 +34,7 @@ def spec_with(**changes: Any) -> dict[str, Any]:
         (spec_with(factors={"push_direction": {"values": ["up"]}}), "unknown value 'up'"),
         (spec_with(factors={"push_magnitude": {"range": [0, 50], "values": [1]}}), "exactly one of"),
         (spec_with(factors={"terrain_seed": {"values": [1.5]}}), "must be integers"),
-        (spec_with(factors={"sensor_noise_seed": {"values": [1, 2]}}), 'only acts with `estimator = "kalman"`'),
+        (spec_with(estimator="groundTruth", factors={"sensor_noise_seed": {"values": [1, 2]}}), 'only acts with `estimator = "kalman"`'),
         (spec_with(estimator="particle"), "`estimator` must be one of groundTruth, kalman"),
         (spec_with(runs=-3), "`runs` must be an integer >= 1, got -3"),
         (spec_with(runs=0), "`runs` must be an integer >= 1"),
@@ -120,7 +121,7 @@ def test_sensor_noise_seed_reaches_the_run_config_with_the_estimator() -> None:
     assert seed == task.factors["sensor_noise_seed"]
     assert isinstance(seed, int) and 0 <= seed <= 1000
     assert {run_config(t).body_sensors.seed for t in run_tasks(spec, set())[:4]} != {seed}, "each run draws its own seed"
-    assert run_config(run_tasks(parse_spec(BASE), set())[0]).estimator == "groundTruth"
+    assert run_config(run_tasks(parse_spec(BASE), set())[0]).estimator == DEFAULT_ESTIMATOR
 
 
 def test_run_config_carries_push_payload_and_friction() -> None:

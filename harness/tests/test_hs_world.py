@@ -11,7 +11,7 @@ import pytest
 from pfnav_harness import paths
 from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario, Terrain
-from pfnav_harness.world import QuadrupedWorld, quaternion_to_rpy, rotation_to_quaternion
+from pfnav_harness.world import DEFAULT_FRICTION, QuadrupedWorld, quaternion_to_rpy, rotation_to_quaternion
 
 # Our robot (robot/quadruped.toml), whatever $PFNAV_ROBOT says: these tests are calibrated on it.
 ROBOT = RobotDescription.load(paths.default_robot_config_path())
@@ -85,7 +85,7 @@ def test_pd_stance_stands_on_a_sloped_mesh(tmp_path: Path) -> None:
     xs = (np.arange(n) + 0.5) * res
     slope = math.tan(math.radians(10.0))
     terrain = Terrain((0.0, 0.0), res, np.tile(0.2 + slope * xs, (n, 1)))
-    world = QuadrupedWorld(terrain, ROBOT, tmp_path, friction=0.8)
+    world = QuadrupedWorld(terrain, ROBOT, tmp_path, friction=DEFAULT_FRICTION)
     world.place(2.0, 2.0, 0.0)
     kp, kd = 120.0, 3.0
     for _ in range(1500):

@@ -48,7 +48,7 @@ struct Truth {
 
 impl Truth {
     fn standing(model: &RobotModel) -> Truth {
-        let position = Vector3::new(0.0, 0.0, 0.28);
+        let position = Vector3::new(0.0, 0.0, crate::tuning::TUNED_STAND_HEIGHT);
         Truth {
             position,
             velocity: Vector3::zeros(),
@@ -124,7 +124,7 @@ struct TrotWalk {
 
 impl TrotWalk {
     fn new(model: &RobotModel, velocity: Vector3<f64>) -> TrotWalk {
-        let start = Vector3::new(0.0, 0.0, 0.28);
+        let start = Vector3::new(0.0, 0.0, crate::tuning::TUNED_STAND_HEIGHT);
         let nominal = stand_feet_body(model);
         TrotWalk {
             gait: Gait::new(GaitKind::Trot, 0.3),

@@ -39,7 +39,7 @@ fn limited_ik_is_the_ik_inside_the_limits() {
     let model = our_model();
     for leg in Leg::ALL {
         let (lower, upper) = leg_limits(&model, leg);
-        let target = model.nominal_foot_position(leg, 0.28);
+        let target = model.nominal_foot_position(leg, crate::tuning::TUNED_STAND_HEIGHT);
         let free = model.inverse_kinematics(leg, target).expect("reachable");
         let limited = model
             .inverse_kinematics_within_limits(leg, target, lower, upper)

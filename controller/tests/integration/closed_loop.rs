@@ -141,6 +141,9 @@ fn trot_uphill_follows_the_terrain_plane() {
         "pitch {}",
         track.final_pitch
     );
-    assert!((track.final_height_above_terrain - 0.28).abs() < 0.03);
+    assert!(
+        (track.final_height_above_terrain - quad_controller::tuning::TUNED_STAND_HEIGHT).abs()
+            < 0.03
+    );
     assert!(track.max_error < 0.05, "max error {:.4} m", track.max_error);
 }

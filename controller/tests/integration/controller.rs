@@ -24,7 +24,7 @@ fn standing_state(controller: &Controller, height: f64) -> RobotState {
 fn reference(mode: ModeRequest) -> Reference {
     Reference {
         mode,
-        body_height: 0.28,
+        body_height: quad_controller::tuning::TUNED_STAND_HEIGHT,
         ..Reference::default()
     }
 }
@@ -40,7 +40,7 @@ fn standing_mpc_forces(contacts: [bool; 4]) -> ([[f64; 3]; 4], f64, ControllerCo
         ..MpcParams::from_config(&config, model.total_mass(), inertia)
     })
     .expect("valid MPC");
-    let base_z = 0.28;
+    let base_z = quad_controller::tuning::TUNED_STAND_HEIGHT;
     let com_world = [com[0], com[1], base_z + com[2]];
     let state = [
         0.0,
@@ -164,7 +164,7 @@ fn step(ctrl: &mut Controller, state: &RobotState, mode: ModeRequest) -> Command
 #[test]
 fn fsm_walks_through_every_transition() {
     let mut ctrl = controller();
-    let state = standing_state(&ctrl, 0.28);
+    let state = standing_state(&ctrl, quad_controller::tuning::TUNED_STAND_HEIGHT);
     assert_eq!(ctrl.fsm_state(), FsmState::Passive);
     let cmd = step(&mut ctrl, &state, ModeRequest::Passive);
     assert_eq!(cmd.fsm_state, FsmState::Passive);
@@ -218,7 +218,7 @@ fn fsm_walks_through_every_transition() {
 
 fn locomoting_controller() -> (Controller, RobotState) {
     let mut ctrl = controller();
-    let state = standing_state(&ctrl, 0.28);
+    let state = standing_state(&ctrl, quad_controller::tuning::TUNED_STAND_HEIGHT);
     for _ in 0..1002 {
         step(&mut ctrl, &state, ModeRequest::Stand);
     }
@@ -243,7 +243,7 @@ fn falling_over_enters_damping_until_reset_to_passive() {
     }
     assert_eq!(cmd.desired_forces, [[0.0; 3]; 4]);
     // Damping is sticky: neither stand nor locomotion requests leave it.
-    let upright = standing_state(&ctrl, 0.28);
+    let upright = standing_state(&ctrl, quad_controller::tuning::TUNED_STAND_HEIGHT);
     assert_eq!(
         step(&mut ctrl, &upright, ModeRequest::Stand).fsm_state,
         FsmState::Damping
@@ -261,7 +261,7 @@ fn falling_over_enters_damping_until_reset_to_passive() {
 #[test]
 fn joint_beyond_its_limit_enters_damping() {
     let mut ctrl = controller();
-    let mut state = standing_state(&ctrl, 0.28);
+    let mut state = standing_state(&ctrl, quad_controller::tuning::TUNED_STAND_HEIGHT);
     step(&mut ctrl, &state, ModeRequest::Stand);
     assert_eq!(ctrl.fsm_state(), FsmState::StandUp);
     // Knee limit is −0.5 rad; margin 0.15 rad.
@@ -470,7 +470,7 @@ fn config_round_trips_through_json() {
 
 /// Stand-up torques of the first tick with every joint moving at `velocity` rad/s.
 fn stand_up_torques(ctrl: &mut Controller, velocity: f64) -> [f64; 12] {
-    let mut state = standing_state(ctrl, 0.28);
+    let mut state = standing_state(ctrl, quad_controller::tuning::TUNED_STAND_HEIGHT);
     state.joint_velocities = [velocity; 12];
     step(ctrl, &state, ModeRequest::Stand).joint_torques
 }

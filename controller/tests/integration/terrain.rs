@@ -12,7 +12,7 @@ use quad_controller::{
 fn reference(mode: ModeRequest) -> Reference {
     Reference {
         mode,
-        body_height: 0.28,
+        body_height: quad_controller::tuning::TUNED_STAND_HEIGHT,
         ..Reference::default()
     }
 }
@@ -84,7 +84,7 @@ fn rear_right_touchdown(map: Option<&HeightMap>) -> [f64; 3] {
         ctrl.set_height_map(map).expect("valid map");
     }
     let state = RobotState {
-        base_position: [0.0, 0.0, 0.28],
+        base_position: [0.0, 0.0, quad_controller::tuning::TUNED_STAND_HEIGHT],
         joint_positions: ctrl.stand_joint_positions(),
         ..RobotState::default()
     };

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 from . import paths
 from .errors import HarnessError
-from .fmu_runner import ESTIMATOR_MODES
+from .fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
 from .robot_fmu import robot_and_fmu
 from .scenario import paper_scenario_names
@@ -147,9 +147,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--estimator",
         choices=ESTIMATOR_MODES,
-        default="kalman",
+        default=DEFAULT_ESTIMATOR,
         help="what the controller runs on: kalman (its own estimate from a simulated IMU, joint encoders and optional position "
-        "fixes, the way a real robot runs; default) or groundTruth (the simulated body's exact state)",
+        f"fixes, the way a real robot runs) or groundTruth (the simulated body's exact state); default {DEFAULT_ESTIMATOR}",
     )
     p.add_argument("--fix-rate", type=float, default=0.0, help="kalman: absolute position fixes per second (default 0 = none)")
     p.add_argument("--fix-noise", type=float, default=None, help="kalman: standard deviation of each fix coordinate, m (default 0.02)")
@@ -202,7 +202,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _config(args: argparse.Namespace) -> CoSimConfig:
     from .cosim import CoSimConfig
-    from .metrics import FallThresholds
 
     duration = args.duration
     if args.short:
@@ -218,7 +217,6 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
     return CoSimConfig(
         comm_step=args.comm_step,
         max_duration=duration,
-        fall=FallThresholds(),
         follow=follow,
         pushes=_pushes(args),
         estimator=args.estimator,

@@ -40,7 +40,7 @@ from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RAT
 from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
 from .robot import RobotDescription
 from .scenario import Scenario
-from .world import Payload, QuadrupedWorld, WorldSnapshot, quaternion_to_rpy, terrain_digest
+from .world import DEFAULT_FRICTION, Payload, QuadrupedWorld, WorldSnapshot, quaternion_to_rpy, terrain_digest
 
 Progress = Callable[[float], None]
 # FMU reference input ← column of a reference row. ref.z is the height of the local terrain plane
@@ -80,7 +80,7 @@ class CoSimConfig:
     settle_time: float = 3.0
     # Stop early this long after a fall is detected (nothing useful happens afterwards).
     after_fall: float = 1.0
-    friction: float = 0.8
+    friction: float = DEFAULT_FRICTION
     # Desired base height above the terrain; ≤ 0 lets the controller use its own nominal height.
     body_height: float = 0.0
     plane_radius: float = 0.3
@@ -104,7 +104,7 @@ class CoSimConfig:
     payload: Payload | None = None
     # What the controller runs on: "groundTruth" (the DART state) or "kalman" (its own estimate
     # from the body sensors below; needs an FMU with the estimator).
-    estimator: str = "groundTruth"
+    estimator: str = fr.DEFAULT_ESTIMATOR
     body_sensors: BodySensorConfig = field(default_factory=BodySensorConfig)
 
     def validate(self) -> None:
@@ -124,7 +124,7 @@ class CoSimConfig:
 
 # Ground and foot friction of every fork prefix (CoSimConfig's default): a run's own friction
 # acts from the fork on.
-PREFIX_FRICTION = 0.8
+PREFIX_FRICTION = DEFAULT_FRICTION
 # Config fields a prefix does not depend on: applied at the fork point, or acting on the walk clock only.
 APPLIED_AT_FORK = ("pushes", "payload", "friction")
 # Config fields that only decide when a run ends (never before the walk starts).
@@ -464,7 +464,8 @@ class CoSimulation:
         inputs.values[inputs.index("ref.bodyHeight")] = c.body_height
         map_origin = inputs.view(fr.HEIGHT_MAP_ORIGIN)
         map_spacing = inputs.index(fr.HEIGHT_MAP_SPACING)
-        map_heights = inputs.view(fr.HEIGHT_MAP_HEIGHTS)
+        map_heights = inputs.view(fmu.contract.height_map_heights)
+        map_size = fmu.contract.height_map_size
         input_values = inputs.values
         terrain = self.scenario.terrain
         use_map = c.height_map
@@ -513,7 +514,7 @@ class CoSimulation:
         # Without an estimator the belief offset stays zero: only the block corner moves the map.
         offset_moves = estimator is not None
         stop_reason: str | None = None
-        min_height = c.fall.min_base_height
+        fall_every = c.fall.every_steps
         progress_every = max(1, n_steps // 200)
         isfinite = math.isfinite
         t_begin = perf()
@@ -566,11 +567,11 @@ class CoSimulation:
                 # in the robot's estimated frame (perception measures the ground relative to the body).
                 map_changed = False
                 if use_map:
-                    corner = terrain.local_grid_corner(float(state[0]), float(state[1]), fr.HEIGHT_MAP_SIZE)
+                    corner = terrain.local_grid_corner(float(state[0]), float(state[1]), map_size)
                     key = (corner, offset[0:3].tobytes() if offset_moves else b"")
                     if key != map_key:
                         map_key, map_changed = key, True
-                        grid = terrain.local_grid(float(state[0]), float(state[1]), fr.HEIGHT_MAP_SIZE)
+                        grid = terrain.local_grid(float(state[0]), float(state[1]), map_size)
                         if grid is None:
                             input_values[map_spacing] = 0.0
                         else:
@@ -607,7 +608,7 @@ class CoSimulation:
                 estimator.log_step(k)
 
             # The controller's damping state is its own verdict that the robot is down.
-            if walking and fall_step is None and k % 10 == 0 and (flags[8] == damping or self._fallen(state, min_height)):
+            if walking and fall_step is None and k % fall_every == 0 and (flags[8] == damping or self._fallen(state)):
                 fall_step = k
             if fall_step is not None and (k - fall_step) * dt >= c.after_fall:
                 stop_reason = f"fell at t={fall_step * dt:.2f} s"
@@ -674,14 +675,11 @@ class CoSimulation:
             log.update(replan_log(online))
         return RunResult(self.scenario.name, self.plan.method, log, loop.timing, stop_reason)
 
-    def _fallen(self, state: NDArray[np.float64], min_height: float) -> bool:
-        """Cheap per-step fall check (absolute tilt and height); metrics apply the full rule later."""
+    def _fallen(self, state: NDArray[np.float64]) -> bool:
+        """The height and tilt part of the fall rule (`FallThresholds`) at the state just read."""
         ground = self.scenario.terrain.height_at(float(state[0]), float(state[1]))
-        if state[2] - ground < min_height:
-            return True
         roll, pitch, _ = quaternion_to_rpy(state[3:7])
-        # Absolute tilt with margin for the slope the robot stands on (≤ ~15° on walkable routes).
-        return abs(roll) > self.config.fall.max_roll + 0.3 or abs(pitch) > self.config.fall.max_pitch + 0.3
+        return self.config.fall.fallen(float(state[2]) - ground, roll, pitch)
 
 
 class EstimatorInTheLoop:

@@ -103,7 +103,7 @@ def _rms(values: FloatArray) -> float:
 def compute_estimation_metrics(log: dict[str, Any], until: float | None = None) -> EstimationMetrics:
     """The metrics of one run log with an estimate (see `has_estimate`), over the walk up to `until`
     (the fall time of a run that fell; None: to the end)."""
-    missing = [key for key in ESTIMATE_KEYS if key not in log]
+    missing = [key for key in (*ESTIMATE_KEYS, "estimator") if key not in log]
     if missing:
         raise KeyError(f"the run log has no estimate ({', '.join(missing)} missing): was it run in kalman mode?")
     walking = _walking(log, until)
@@ -121,7 +121,7 @@ def compute_estimation_metrics(log: dict[str, Any], until: float | None = None) 
     status = np.asarray(log["est_status"])[walking].astype(np.int64)
     fix_valid = np.asarray(log.get("fix_valid", np.zeros(0, dtype=bool)), dtype=bool)
     return EstimationMetrics(
-        estimator=str(log.get("estimator", "kalman")),
+        estimator=str(log["estimator"]),
         measured_until=float(np.asarray(log["t"])[walking][-1]),
         fix_rate=float(log.get("fix_rate", 0.0)),
         fix_noise=float(log.get("fix_noise", 0.0)),

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import math
+import re
 import shutil
 import tempfile
 from collections.abc import Sequence
@@ -52,13 +54,21 @@ REFERENCE_INPUTS = (
     "terrain.dzdx",
     "terrain.dzdy",
 )
-# Local elevation map around the robot (HEIGHT_MAP_SIZE² mesh vertices); spacing ≤ 0: no map.
-HEIGHT_MAP_SIZE = 11
+# Local elevation map around the robot (size² mesh vertices); spacing ≤ 0: no map. The size is
+# the controller's (HEIGHT_MAP_SIZE in controller/src/api.rs): the FMU publishes one
+# terrain.map.h[i] per sample and `FmuContract` counts them.
 HEIGHT_MAP_ORIGIN = ("terrain.map.x0", "terrain.map.y0")
 HEIGHT_MAP_SPACING = "terrain.map.spacing"
-HEIGHT_MAP_HEIGHTS = tuple(f"terrain.map.h[{i}]" for i in range(1, HEIGHT_MAP_SIZE * HEIGHT_MAP_SIZE + 1))
-HEIGHT_MAP_INPUTS = (*HEIGHT_MAP_ORIGIN, HEIGHT_MAP_SPACING, *HEIGHT_MAP_HEIGHTS)
-REAL_INPUTS = STATE_INPUTS + REFERENCE_INPUTS + HEIGHT_MAP_INPUTS
+HEIGHT_MAP_HEIGHT = re.compile(r"terrain\.map\.h\[\d+\]")
+
+
+def height_map_heights(size: int) -> tuple[str, ...]:
+    """The FMU's height-map sample inputs of a size×size map, row-major (x fastest)."""
+    return tuple(f"terrain.map.h[{i}]" for i in range(1, size * size + 1))
+
+
+# Real inputs before the height map (whose samples the FMU's contract adds: `FmuContract.real_inputs`).
+FIXED_REAL_INPUTS = (*STATE_INPUTS, *REFERENCE_INPUTS, *HEIGHT_MAP_ORIGIN, HEIGHT_MAP_SPACING)
 MODE_INPUT = "cmd.mode"
 
 TORQUE_OUTPUTS = tuple(f"joint.tau[{i}]" for i in range(1, 13))
@@ -69,6 +79,10 @@ REAL_OUTPUTS = (*TORQUE_OUTPUTS, *FORCE_OUTPUTS, SOLVE_TIME_OUTPUT)
 # for its measured-contact inputs).
 CONTACT_OUTPUTS = tuple(f"stance[{k}]" for k in range(1, 5))
 FSM_OUTPUT = "fsm.state"
+
+# The controller's nominal stand height above the terrain: its start value is the robot's stand
+# height (the controller's tuned default, scaled to the FMU's robot), `FmuContract.stand_height`.
+STAND_HEIGHT_PARAMETER = "stand.bodyHeight"
 
 # Enumeration types (modelDescription <TypeDefinitions>) and the items the harness refers to.
 FSM_TYPE = "FsmState"
@@ -81,9 +95,11 @@ USED_ENUMERATIONS: dict[str, tuple[str, ...]] = {
 ENUMERATION_VARIABLES = {MODE_INPUT: MODE_TYPE, FSM_OUTPUT: FSM_TYPE}
 
 # Every FMU variable the harness reads or writes, with the causality it must have.
+# The height-map samples are checked by `FmuContract` once it has counted them.
 USED_VARIABLES: dict[str, str] = (
-    {name: "input" for name in (*REAL_INPUTS, MODE_INPUT)}
+    {name: "input" for name in (*FIXED_REAL_INPUTS, MODE_INPUT)}
     | {name: "output" for name in (*REAL_OUTPUTS, *CONTACT_OUTPUTS, FSM_OUTPUT)}
+    | {STAND_HEIGHT_PARAMETER: "parameter"}
 )
 
 # State estimation (issue 18): body sensor inputs, the estimate, the mode parameter. Needed only
@@ -104,6 +120,9 @@ EST_STATUS = "est.status"
 ESTIMATOR_PARAMETER = "estimator"
 # Estimator modes by item name; the codes are read from the parameter's enumeration type.
 ESTIMATOR_MODES = ("groundTruth", "kalman")
+# What a run's controller works on unless told otherwise (CLI, sweeps, CoSimConfig): its own
+# estimate from the body sensors, as on a real robot.
+DEFAULT_ESTIMATOR = "kalman"
 ESTIMATION_VARIABLES: dict[str, str] = (
     {name: "input" for name in (*ESTIMATION_REAL_INPUTS, FIX_VALID, *CONTACT_INPUTS)}
     | {name: "output" for name in (*ESTIMATION_REAL_OUTPUTS, EST_STATUS)}
@@ -158,6 +177,12 @@ class FmuContract:
         variables = {v.name: v for v in md.modelVariables}
         types = {t.name: t for t in md.typeDefinitions}
         problems = _variable_problems(variables, USED_VARIABLES)
+        self.height_map_size = _height_map_size(variables, problems)
+        self.height_map_heights = height_map_heights(self.height_map_size)
+        problems += _variable_problems(variables, dict.fromkeys(self.height_map_heights, "input"))
+        # The order of the FMU input buffer; the height-map samples are its tail, so an exchange
+        # that keeps the map sends only the head.
+        self.real_inputs = FIXED_REAL_INPUTS + self.height_map_heights
         for type_name, items in USED_ENUMERATIONS.items():
             t = types.get(type_name)
             if t is None or t.type != "Enumeration":
@@ -174,8 +199,9 @@ class FmuContract:
         if problems:
             raise SimulationError(f"{source} lacks what the harness needs: {'; '.join(problems)}")
         self.source = source
-        self.value_references = {name: int(variables[name].valueReference) for name in USED_VARIABLES}
+        self.value_references = {name: int(variables[name].valueReference) for name in (*USED_VARIABLES, *self.height_map_heights)}
         self.parameters = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
+        self.stand_height = float(self.parameters[STAND_HEIGHT_PARAMETER].start)
         self.fsm = enumeration(md, FSM_TYPE)
         self.mode = enumeration(md, MODE_TYPE)
         self.estimation_problems = _variable_problems(variables, ESTIMATION_VARIABLES)
@@ -214,6 +240,16 @@ def _variable_problems(variables: dict[str, Any], expected: dict[str, str]) -> l
         elif v.causality != causality:
             problems.append(f"{name} is {v.causality}, not {causality}")
     return problems
+
+
+def _height_map_size(variables: dict[str, Any], problems: list[str]) -> int:
+    """The side of the FMU's square height map: √(number of terrain.map.h[i]); 0 (and a problem) when not a square."""
+    count = sum(1 for name in variables if HEIGHT_MAP_HEIGHT.fullmatch(name))
+    size = math.isqrt(count)
+    if count == 0 or size * size != count:
+        problems.append(f"{count} height-map samples terrain.map.h[i] (a square map needs a perfect square > 0)")
+        return 0
+    return size
 
 
 def _estimator_codes(parameter: Any) -> dict[str, int]:
@@ -342,11 +378,12 @@ class ControllerFmu:
             parameters={name: str(v.start) for name, v in self.contract.parameters.items()},
         )
         vrs = self.contract.vrs
-        self._in_vr = (ctypes.c_uint * len(REAL_INPUTS))(*vrs(REAL_INPUTS))
-        self._in_val = (ctypes.c_double * len(REAL_INPUTS))()
+        real_inputs = self.contract.real_inputs
+        self._in_vr = (ctypes.c_uint * len(real_inputs))(*vrs(real_inputs))
+        self._in_val = (ctypes.c_double * len(real_inputs))()
         # `inputs.values` *is* the ctypes buffer fmi2SetReal reads: no per-step copy. Likewise
         # for the outputs.
-        self.inputs = NamedVector(REAL_INPUTS, np.ctypeslib.as_array(self._in_val))
+        self.inputs = NamedVector(real_inputs, np.ctypeslib.as_array(self._in_val))
         self._out_vr = (ctypes.c_uint * len(REAL_OUTPUTS))(*vrs(REAL_OUTPUTS))
         self._out_val = (ctypes.c_double * len(REAL_OUTPUTS))()
         self.outputs = NamedVector(REAL_OUTPUTS, np.ctypeslib.as_array(self._out_val))
@@ -390,7 +427,7 @@ class ControllerFmu:
         self._in_real = (ctypes.addressof(self._in_vr), ctypes.addressof(self._in_val))
         self._in_count = len(self._in_vr)
         # The height map is the tail of the real inputs: without it, only the head is sent.
-        self._in_count_without_map = len(REAL_INPUTS) - len(HEIGHT_MAP_INPUTS)
+        self._in_count_without_map = len(FIXED_REAL_INPUTS)
         self._mode = (ctypes.addressof(self._mode_vr), ctypes.addressof(self._mode_val))
         self._out_real = (ctypes.addressof(self._out_vr), ctypes.addressof(self._out_val))
         self._out_count = len(self._out_vr)

@@ -45,7 +45,7 @@ from .metrics import FallThresholds, judge_fall, rms_tracking_error, roll_pitch_
 from .planner_client import Plan
 from .robot import RobotDescription
 from .scenario import GoalRegion, Scenario, Terrain
-from .world import QuadrupedWorld
+from .world import DEFAULT_FRICTION, QuadrupedWorld
 
 FloatArray = NDArray[np.float64]
 
@@ -66,8 +66,6 @@ MIN_WALKED = 2.5
 MAX_ANGLE_DEG = 60.0
 # At the walk start the base must be this fraction of the nominal stand height above the ground.
 STOOD_HEIGHT_FRACTION = 0.75
-# FMU parameter of the nominal stand height (used when ref.bodyHeight ≤ 0, as the harness sends).
-STAND_HEIGHT_PARAMETER = "stand.bodyHeight"
 # A foot that loses contact for longer than this (s) has ended its stance.
 CONTACT_GAP = 0.01
 # The probe reads the DART collision result every this many physics steps (it is the probe's dearest part).
@@ -301,6 +299,7 @@ def evaluate(
     angle_deg: float,
     direction: str,
     placed_margin: float = math.nan,
+    fall: FallThresholds | None = None,
 ) -> InclineOutcome:
     """Turns one run's log and probe records into an `InclineOutcome`."""
     log = result.log
@@ -314,9 +313,9 @@ def evaluate(
     ground = terrain.height(pos[:, 0], pos[:, 1])
     heading = DIRECTIONS[direction]
 
-    # The harness's fall rule, with tilt and damping judged from t = 0: a robot that tips over
-    # while standing up has fallen too.
-    verdict = judge_fall(log, terrain, FallThresholds(), tilt_from=0.0)
+    # The harness's fall rule (the run's, which it stopped on), with tilt and damping judged from
+    # t = 0: a robot that tips over while standing up has fallen too.
+    verdict = judge_fall(log, terrain, fall or FallThresholds(), tilt_from=0.0)
     fell, fall_time, fall_reason = verdict.fell, verdict.fall_time, verdict.reason
     fell_before_walk = bool(fall_time is not None and fall_time < t[k_walk])
     if fell_before_walk:
@@ -421,7 +420,7 @@ def run_incline(
     fmu_path: Path,
     robot: RobotDescription,
     cache_dir: Path,
-    friction: float = 0.8,
+    friction: float = DEFAULT_FRICTION,
     distance: float = WALK_DISTANCE,
     speed: float = NOMINAL_SPEED,
     parameters: dict[str, float] | None = None,
@@ -433,15 +432,13 @@ def run_incline(
         raise SimulationError(f"friction coefficient must be positive, got {friction}")
     scenario = incline_scenario(angle_deg, direction, distance)
     plan = straight_plan(scenario, speed)
-    config = dataclasses.replace(config or CoSimConfig(settle_time=1.0), friction=friction)
+    config = dataclasses.replace(config or CoSimConfig(settle_time=1.0, estimator="groundTruth"), friction=friction)
     controller = fr.ControllerFmu(fmu_path)
     try:
         if parameters:
             controller.set_parameters(parameters)
         contract = controller.contract
-        if STAND_HEIGHT_PARAMETER not in contract.parameters:
-            raise SimulationError(f"{fmu_path}: no parameter {STAND_HEIGHT_PARAMETER} (the nominal stand height)")
-        nominal_height = float((parameters or {}).get(STAND_HEIGHT_PARAMETER, contract.parameters[STAND_HEIGHT_PARAMETER].start))
+        nominal_height = float((parameters or {}).get(fr.STAND_HEIGHT_PARAMETER, contract.stand_height))
         stand_code = int(contract.fsm.Stand)
         sim = CoSimulation(scenario, plan, None, robot, cache_dir, config, controller=controller)
     except BaseException:
@@ -455,6 +452,6 @@ def run_incline(
         begin = time.perf_counter()
         result = sim.run(progress)
         wall = time.perf_counter() - begin
-        outcome = evaluate(scenario, result, probe, sim.world, nominal_height, stand_code, friction, angle_deg, direction, placed_margin)
+        outcome = evaluate(scenario, result, probe, sim.world, nominal_height, stand_code, friction, angle_deg, direction, placed_margin, config.fall)
     outcome.wall_time = wall
     return InclineRun(outcome, result, scenario, plan)

@@ -26,15 +26,41 @@ from .scenario import GoalRegion, Terrain, write_map
 from .tools import run_tool
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
 class FallThresholds:
-    """A fall: base lower than `min_base_height` above the terrain, roll/pitch beyond the limits (rad), or controller damping."""
+    """The harness's fall rule: while walking, the base lower than `min_base_height` above the
+    terrain, roll or pitch beyond the limits (rad), or the controller in its damping state, looked
+    at every `every_steps`-th physics step. The co-simulation stops on it (`fallen`) and the
+    metrics judge a log by it (`judge_fall`): both name the same fall time."""
 
     min_base_height: float = 0.12
-    max_roll: float = 1.0
-    max_pitch: float = 1.0
+    # Absolute tilt: on rough ground the local slope under the base is too noisy a reference
+    # (±0.3 m windows on the scenario meshes reach 30°); 1 rad plus a margin for the slope a
+    # walkable route tilts a standing body by (≤ ~15°).
+    max_roll: float = 1.3
+    max_pitch: float = 1.3
+    # A look costs a height lookup and a quaternion's angles; a fall lasts far longer than 10 ms.
+    every_steps: int = 10
+
+    def too_low(self, base_height: FloatArray | float) -> BoolArray | bool:
+        return base_height < self.min_base_height
+
+    def too_rolled(self, roll: FloatArray | float) -> BoolArray | bool:
+        return abs(roll) > self.max_roll
+
+    def too_pitched(self, pitch: FloatArray | float) -> BoolArray | bool:
+        return abs(pitch) > self.max_pitch
+
+    def fallen(self, base_height: float, roll: float, pitch: float) -> bool:
+        """Height and tilt at one sample (the caller adds the damping state and when to look)."""
+        return bool(self.too_low(base_height) or self.too_rolled(roll) or self.too_pitched(pitch))
+
+    def looks_at(self, steps: NDArray[np.intp]) -> BoolArray:
+        """Which physics steps (log rows) the rule is applied at."""
+        return steps % self.every_steps == 0
 
 
 class CostModelError(PlannerError, ValueError):
@@ -200,23 +226,21 @@ def walking_mask(log: dict[str, FloatArray]) -> NDArray[np.bool_]:
 
 
 def judge_fall(log: dict[str, FloatArray], terrain: Terrain, thresholds: FallThresholds, tilt_from: float | None = None) -> FallVerdict:
-    """The harness's fall rule: the base too low, too much roll or pitch, or the controller in damping.
+    """The fall rule (`FallThresholds`) applied to a log, at the steps the co-simulation looks at.
 
     Height is judged from the walk start on (the robot starts crouched); tilt and damping from
     `tilt_from` (default: the walk start too), so a caller can also judge the stand-up.
     """
     t = log["t"]
     pos = log["base_pos"]
-    walking = walking_mask(log)
-    tilt_judged = walking if tilt_from is None else t >= tilt_from
+    looked = thresholds.looks_at(np.arange(len(t)))
+    walking = walking_mask(log) & looked
+    tilt_judged = (walking if tilt_from is None else t >= tilt_from) & looked
     roll, pitch, _ = roll_pitch_yaw(log["base_quat"])
     base_height = pos[:, 2] - terrain.height(pos[:, 0], pos[:, 1])
-    too_low = (base_height < thresholds.min_base_height) & walking
-    # Absolute tilt: on rough ground the local slope under the base is too noisy a reference
-    # (±0.3 m windows on the scenario meshes reach 30°), and no walkable slope tilts a standing
-    # body anywhere near the thresholds.
-    too_rolled = (np.abs(roll) > thresholds.max_roll) & tilt_judged
-    too_pitched = (np.abs(pitch) > thresholds.max_pitch) & tilt_judged
+    too_low = thresholds.too_low(base_height) & walking
+    too_rolled = thresholds.too_rolled(roll) & tilt_judged
+    too_pitched = thresholds.too_pitched(pitch) & tilt_judged
     # The controller's damping state is its own verdict that the robot is down (the log carries
     # the FMU's code of that state, read from its modelDescription).
     damping = ((log["fsm"] == log["fsm_damping"]) if "fsm" in log else np.zeros_like(too_low)) & tilt_judged

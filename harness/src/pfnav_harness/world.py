@@ -281,6 +281,11 @@ def terrain_digest(terrain: Terrain) -> str:
     return h.hexdigest()[:16]
 
 
+# Coulomb friction of feet and ground unless a run sets its own: rubber feet on dry ground, above
+# the coefficient the controller's MPC assumes (mpc.mu), so a default run has friction to spare.
+DEFAULT_FRICTION = 0.8
+
+
 def set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
     """Friction coefficient of every collision shape of `skeleton` (restitution 0)."""
     if not (math.isfinite(mu) and mu > 0.0):
@@ -357,7 +362,7 @@ class QuadrupedWorld:
         robot: RobotDescription,
         cache_dir: Path,
         time_step: float = 0.001,
-        friction: float = 0.8,
+        friction: float = DEFAULT_FRICTION,
         enforce_joint_limits: bool = True,
         payload: Payload | None = None,
         mesh_collisions: str = "boxes",

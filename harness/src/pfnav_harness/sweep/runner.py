@@ -26,6 +26,7 @@ import numpy as np
 
 from ..body_sensors import BodySensorConfig
 from ..cosim import CoSimConfig, CoSimulation, ForkPoint, prefix_config, prefix_signature, walk_start_step
+from ..fmu_runner import DEFAULT_ESTIMATOR
 from ..metrics import RunMetrics, TraversabilityField, compute_metrics
 from ..planner_client import Plan
 from ..pushes import HEADING_DIRECTIONS, PushSchedule, horizontal_push
@@ -61,7 +62,7 @@ class RunTask:
     duration: float
     stand_time: float
     spec_hash: str
-    estimator: str = "groundTruth"
+    estimator: str = DEFAULT_ESTIMATOR
     # Start from the group's fork when the run is long enough to have one (`forkable`).
     fork: bool = False
 

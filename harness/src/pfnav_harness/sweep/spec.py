@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import HarnessError
-from ..fmu_runner import ESTIMATOR_MODES
+from ..fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from ..pushes import HEADING_DIRECTIONS
+from ..world import DEFAULT_FRICTION
 
 SAMPLINGS = ("random", "grid")
 SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "fork", "factors")
@@ -64,7 +65,7 @@ FACTORS: dict[str, FactorInfo] = {
     "payload_offset_x": FactorInfo("payload offset from the trunk's centre of mass, forward", "m", 0.0),
     "payload_offset_y": FactorInfo("payload offset from the trunk's centre of mass, left", "m", 0.0),
     "payload_offset_z": FactorInfo("payload offset from the trunk's centre of mass, up", "m", 0.0),
-    "friction": FactorInfo("ground and foot friction coefficient", "", 0.8, low=0.0, low_open=True),
+    "friction": FactorInfo("ground and foot friction coefficient", "", DEFAULT_FRICTION, low=0.0, low_open=True),
     # Default: the scenario's own seed (resolved when the scenario is exported).
     "terrain_seed": FactorInfo("scenario generator seed (a new terrain, exported and planned once per seed)", "", -1, low=0, integer=True),
     "comm_step": FactorInfo("FMU communication step (a multiple of the 1 ms physics step)", "s", 0.001, low=0.0, low_open=True),
@@ -123,7 +124,7 @@ class SweepSpec:
     factors: dict[str, Factor] = field(default_factory=dict)
     source: Path | None = None
     # What the controller runs on: "groundTruth" (the simulator's state) or "kalman" (its estimator on the body sensors).
-    estimator: str = "groundTruth"
+    estimator: str = DEFAULT_ESTIMATOR
     # Start runs from their group's saved post-stand-up state (docs/sweeps.md, "Forks"); off: every run stands up itself.
     fork: bool = True
 
@@ -275,7 +276,7 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     stand_time = data.get("stand_time", 1.5)
     if isinstance(stand_time, bool) or not isinstance(stand_time, int | float) or not (math.isfinite(stand_time) and stand_time >= 0):
         raise SpecError(f"{where}`stand_time` must be >= 0 s, got {stand_time!r}")
-    estimator = data.get("estimator", "groundTruth")
+    estimator = data.get("estimator", DEFAULT_ESTIMATOR)
     if estimator not in ESTIMATOR_MODES:
         raise SpecError(f"{where}`estimator` must be one of {', '.join(ESTIMATOR_MODES)}, got {estimator!r}")
     fork = data.get("fork", True)
