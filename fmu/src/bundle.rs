@@ -341,6 +341,17 @@ pub fn write_resources(
     std::fs::write(&path, config).map_err(|source| BundleError::Io { path, source })
 }
 
+/// The resources of the repository's own robot, written into `dir` (tests build FMU instances on them).
+#[cfg(test)]
+pub(crate) fn write_default_resources(dir: &Path) {
+    write_resources(
+        &default_robot_config(),
+        &quad_controller::PackagePath::default(),
+        dir,
+    )
+    .expect("the repository's robot writes its resources");
+}
+
 /// The `binaries/` members of the FMU archive at `path`, by platform.
 fn binaries_of_archive(path: &Path) -> Result<Vec<(Platform, Vec<u8>)>, BundleError> {
     let zip_error = |source| BundleError::Zip {

@@ -432,12 +432,7 @@ mod tests {
 
     fn our_resources() -> tempfile::TempDir {
         let dir = tempfile::tempdir().unwrap();
-        crate::bundle::write_resources(
-            &crate::bundle::default_robot_config(),
-            &quad_controller::PackagePath::default(),
-            dir.path(),
-        )
-        .unwrap();
+        crate::bundle::write_default_resources(dir.path());
         dir
     }
 

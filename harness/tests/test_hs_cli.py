@@ -122,6 +122,8 @@ def test_bad_arguments(fake_tools: dict[str, str], tmp_path: Path) -> None:
     assert_clean_failure(proc, 1, "unknown method(s) rrt")
     proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--duration", "-1", cwd=tmp_path)
     assert_clean_failure(proc, 1, "--duration must be positive")
+    proc = run_cli(fake_tools, "demo", "--jobs", "0", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert_clean_failure(proc, 1, "--jobs must be >= 1, got 0")
     proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--footprint-radius=-0.1", cwd=tmp_path)
     assert_clean_failure(proc, 1, "--footprint-radius must be finite and >= 0")
 

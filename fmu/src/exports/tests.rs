@@ -32,12 +32,7 @@ fn wrong_guid_type_or_name_give_null() {
     let guid = our_guid();
     // Good resources: the GUID alone is wrong (another interface's, or garbage).
     let dir = tempfile::tempdir().unwrap();
-    crate::bundle::write_resources(
-        &crate::bundle::default_robot_config(),
-        &quad_controller::PackagePath::default(),
-        dir.path(),
-    )
-    .unwrap();
+    crate::bundle::write_default_resources(dir.path());
     let good_resources =
         std::ffi::CString::new(format!("file://{}", dir.path().display())).unwrap();
     let mut other_interface = guid.clone().into_bytes();
@@ -108,12 +103,7 @@ fn wrong_guid_type_or_name_give_null() {
 /// A live instance on the repository's robot, from `fmi2Instantiate` with a resources folder
 /// written for the test.
 fn instantiate(dir: &std::path::Path, name: &std::ffi::CStr) -> crate::ffi::Fmi2Component {
-    crate::bundle::write_resources(
-        &crate::bundle::default_robot_config(),
-        &quad_controller::PackagePath::default(),
-        dir,
-    )
-    .unwrap();
+    crate::bundle::write_default_resources(dir);
     let uri = std::ffi::CString::new(format!("file://{}", dir.display())).unwrap();
     let guid = our_guid();
     // SAFETY: valid C strings, NULL callbacks are allowed.

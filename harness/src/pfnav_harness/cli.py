@@ -477,6 +477,8 @@ def _run_all(context: RunContext, jobs: Sequence[RunJob], parallel: int) -> dict
 
 def execute(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    if args.jobs < 1:
+        raise HarnessError(f"--jobs must be >= 1, got {args.jobs}")
     results_page = getattr(args, "results_page", None)
     # The stamp names the commit and the load the measurement started with.
     stamp = _start_stamp() if results_page else None
@@ -541,8 +543,6 @@ def execute(args: argparse.Namespace) -> int:
         for i, (name, scenario) in enumerate(scenarios.items())
         for k, method in enumerate(methods)
     ]
-    if args.jobs < 1:
-        raise HarnessError(f"--jobs must be >= 1, got {args.jobs}")
     # An already running service (--connect) listens on one channel prefix: its online runs share it, one at a time.
     parallel = min(args.jobs, len(jobs)) if not (args.connect and online_config is not None) else 1
     context = RunContext(args, out, fmu, robot, config, online_config, show_progress=not args.no_progress and parallel == 1)
