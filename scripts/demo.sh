@@ -16,9 +16,25 @@ cd "$ROOT"
 start=$SECONDS
 bash scripts/setup.sh
 target/release/pf-plan demo --out out/planner
-bash scripts/netns.sh .venv/bin/pfnav-demo demo --out out "$@"
-bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online \
+# Steps 2 and 3 run side by side, each in its own private network namespace and with half the
+# CPUs (a --jobs among the extra arguments overrides that): the longer online step keeps the
+# terminal, the co-simulation step writes out/cosim.log, shown when it ends.
+jobs=$(( ($(nproc) + 1) / 2 ))
+mkdir -p out
+bash scripts/netns.sh .venv/bin/pfnav-demo demo --out out --jobs "$jobs" --no-progress "$@" \
+    > out/cosim.log 2>&1 &
+cosim=$!
+trap 'kill "$cosim" 2>/dev/null || true' EXIT
+bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online --jobs "$jobs" \
     --scenario mountain_pass --scenario pits --scenario c_shape --scenario surprise "$@"
+cosim_status=0
+wait "$cosim" || cosim_status=$?
+trap - EXIT
+cat out/cosim.log
+if ((cosim_status != 0)); then
+    echo "demo: the co-simulation step failed (exit $cosim_status), log above: out/cosim.log" >&2
+    exit "$cosim_status"
+fi
 echo "planner report: $ROOT/out/planner/report.md"
 echo "co-simulation report: $ROOT/out/report.md"
 echo "online navigation report: $ROOT/out/online/report.md"

@@ -44,7 +44,7 @@ def main() -> None:
     slave.setupExperiment(startTime=0.0)
     slave.enterInitializationMode()
     slave.exitInitializationMode()
-    # Standing pose from the controller itself (the reference binary built by setup.sh).
+    # Standing pose from the controller itself (the reference binary built by setup.sh --tests).
     reference = os.environ.get(
         "PFNAV_FMU_DIRECT_REFERENCE", str(REPO / "target" / "release" / "fmu-direct-reference")
     )

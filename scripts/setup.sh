@@ -4,9 +4,19 @@
 # release build of the workspace (the one build the demo, the Python tests and the Rust tests
 # share) and the bundled FMU (its binary relinked portable to glibc >= 2.17).
 # Safe to run again: it skips what is done.
+#
+# Usage: scripts/setup.sh [--tests]
+#   (default)  what the demo runs: the harness, the planner's binaries, the FMU and its bundler;
+#   --tests    also the test tools (pytest, ruff, the FMU checkers), the third-party robot data
+#              and the workspace's test-only binaries (scripts/test.sh passes it).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+case "${1:-}" in
+    "") for_tests=0 ;;
+    --tests) for_tests=1 ;;
+    *) echo "usage: $0 [--tests]" >&2; exit 2 ;;
+esac
 log() { printf '\033[1;34m[setup %4ds]\033[0m %s\n' "$SECONDS" "$*"; }
 
 # gcc, patch, ca-certificates: the patched liblcm (scripts/build_liblcm.sh; its source comes from
@@ -41,18 +51,25 @@ bash scripts/build_liblcm.sh "$ROOT/.venv/bin/python"
 
 # The Python packages download and unpack while cargo compiles (the two overlap on a fresh
 # machine); only the FMU's link below needs them (zig comes from PyPI).
-stamp=.venv/.pfnav-requirements
 # The pins: harness/pyproject.toml (the harness and every tool), the robot data (--no-deps).
-want="$(cat harness/pyproject.toml scripts/requirements-robots.txt | sha256sum | cut -d' ' -f1)"
+# The stamp holds their hash and which set is installed; the test set includes the demo's.
+stamp=.venv/.pfnav-requirements
+pins="$(cat harness/pyproject.toml scripts/requirements-robots.txt | sha256sum | cut -d' ' -f1)"
+installed="$(cat "$stamp" 2>/dev/null || true)"
 pip_pid=""
 pip_log=build/setup-pip.log
-if [[ "$(cat "$stamp" 2>/dev/null)" != "$want" ]]; then
+if [[ "$installed" != "$pins tests" && ( $for_tests == 1 || "$installed" != "$pins demo" ) ]]; then
     log "installing pinned Python packages (in the background, log: $pip_log)"
     mkdir -p build
     (
-        .venv/bin/pip install -q --disable-pip-version-check -e 'harness[dev,build]' &&
-        .venv/bin/pip install -q --disable-pip-version-check --no-deps -r scripts/requirements-robots.txt &&
-        echo "$want" > "$stamp"
+        if ((for_tests)); then
+            .venv/bin/pip install -q --disable-pip-version-check -e 'harness[dev,build]' &&
+            .venv/bin/pip install -q --disable-pip-version-check --no-deps -r scripts/requirements-robots.txt &&
+            echo "$pins tests" > "$stamp"
+        else
+            .venv/bin/pip install -q --disable-pip-version-check -e 'harness[build]' &&
+            echo "$pins demo" > "$stamp"
+        fi
     ) > "$pip_log" 2>&1 &
     pip_pid=$!
 fi
@@ -69,10 +86,18 @@ trap '[[ -n "$pip_pid" ]] && kill "$pip_pid" 2>/dev/null; true' EXIT
 
 # One build for the demo, the Python tests and the Rust tests. Everything but the FMU's shared
 # library first: that one is linked by zig for glibc 2.17 (fmu/binary/link-gcc.sh), which the
-# Python packages bring. (Excluding it leaves every dependency's features as they are, so the
-# second command only compiles and links that crate.)
-log "cargo build --release --workspace (all but the FMU binary)"
-cargo build --release --workspace --exclude quad-controller-fmu-binary --quiet
+# Python packages bring. The demo needs only the binaries named below. Every command selects the
+# whole workspace (then excludes packages or picks targets) so that every dependency keeps the
+# features it has in the full build: the second command and the tests' build reuse this one.
+if ((for_tests)); then
+    first_targets=()
+    second_targets=()
+else
+    first_targets=(--bin pf-plan --bin pf-planner-service --bin bundle-fmu)
+    second_targets=(--lib --exclude lcm-codegen)
+fi
+log "cargo build --release --workspace (all but the FMU binary${first_targets[*]:+: ${first_targets[*]}})"
+cargo build --release --workspace --exclude quad-controller-fmu-binary "${first_targets[@]}" --quiet
 wait_for_pip
 log "Python packages installed"
 
@@ -108,8 +133,8 @@ if [[ -x lcm_types/gen_python.sh ]] || [[ -f lcm_types/gen_python.sh ]]; then
     echo "$ROOT/build/lcm_python" > "$site/pfnav_lcm_types.pth"
 fi
 
-log "cargo build --release --workspace"
-cargo build --release --workspace --quiet
+log "cargo build --release --workspace${second_targets[*]:+ ${second_targets[*]}}"
+cargo build --release --workspace "${second_targets[@]}" --quiet
 log "bundling the FMU (scripts/build_fmu_portable.sh)"
 bash scripts/build_fmu_portable.sh
 log "done"

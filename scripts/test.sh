@@ -10,7 +10,7 @@ start=$SECONDS
 # Each line carries the seconds since the start, so a slow phase shows in the CI log.
 log() { printf '\033[1;32m[test %4ds]\033[0m %s\n' "$((SECONDS - start))" "$*"; }
 
-bash scripts/setup.sh
+bash scripts/setup.sh --tests
 
 log "cargo fmt --check"
 cargo fmt --all -- --check

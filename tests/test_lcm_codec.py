@@ -60,7 +60,7 @@ def roundtrip_binary() -> Path:
         if candidate.is_file():
             return candidate
     pytest.fail(
-        "lcm-roundtrip not built: run `cargo build --release -p lcm-types` (or set PFNAV_LCM_ROUNDTRIP)"
+        "lcm-roundtrip not built: run `bash scripts/setup.sh --tests` (or set PFNAV_LCM_ROUNDTRIP)"
     )
 
 
