@@ -130,7 +130,16 @@ class Terrain:
         return z, dzdu / self.resolution, dzdv / self.resolution
 
     def height(self, x: FloatArray | float, y: FloatArray | float) -> FloatArray:
-        return self.height_and_gradient(x, y)[0]
+        """Surface height at points (vectorised): `height_and_gradient`'s height, the same
+        operations (bit for bit) without the gradient (ray casting asks for many points)."""
+        ix, iy, u, v = self._locate(np.asarray(x), np.asarray(y))
+        h = self.heights
+        za = h[iy, ix]
+        zb = h[iy, ix + 1]
+        zc = h[iy + 1, ix + 1]
+        zd = h[iy + 1, ix]
+        lower = u >= v
+        return za + u * np.where(lower, zb - za, zc - zd) + v * np.where(lower, zc - zb, zd - za)
 
     def height_at(self, x: float, y: float) -> float:
         """`height(x, y)` at one point: the same operations on Python floats (bit for bit), without

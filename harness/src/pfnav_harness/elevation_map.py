@@ -1,0 +1,313 @@
+"""A robot-centric elevation map: terrain heights with variances, fused from a terrain sensor's
+returns in the robot's odometry frame (after Fankhauser et al., RA-L 2018, ANYbotics'
+`elevation_mapping`).
+
+The map lives in the frame the state estimator defines: every return is placed with the
+*estimated* trunk pose and the sensor's mounting (`TerrainSensorConfig.mount_xyz` and tilt), never
+with the truth. Where the estimate has drifted, the map is shifted with it, consistently with
+where the robot believes it is.
+
+Per cell: height h and variance σ² (NaN and inf while unknown).
+- Each return gets a height variance from the range noise projected on z, d_z²·σ_r(r)², plus the
+  trunk's roll/pitch uncertainty carried along the lever arm from the trunk to the point
+  (J Σ_θ Jᵀ, J = −(R e_z) × v). Position and yaw uncertainty are common to the map and the robot;
+  what matters is how much they grow between a cell's measurement and now (`grow`).
+- The returns of one scan that fall in one cell are screened against the cell's median (a return
+  more than `gate` robust standard deviations away is a "scan outlier"), then averaged with
+  inverse-variance weights; the cell's measurement variance is that of the weighted mean plus the
+  spread of the returns in the cell (a slope seen from one side).
+- A 1-D Kalman update fuses the measurement into the cell, unless the Mahalanobis distance
+  |z − h| / √(σ² + σ_m²) exceeds `gate`: then the measurement is rejected ("gated") and the
+  cell's variance grows by `rejection_inflation`, so a lasting disagreement (the ground changed,
+  or the pose drifted) is taken after a few scans instead of never.
+- `grow` adds the increase of the estimator's position variance since the last call: vertical,
+  plus horizontal times the squared local slope. A cell whose variance passes `max_variance` is
+  unknown again.
+- `lower`/`upper` are the confidence bounds h ∓ k·σ (k = `confidence_sigmas`).
+
+Bad input never changes the map: a scan with a non-finite pose or covariance, or captured before
+the last fused one, is rejected whole with a reason; non-finite returns, returns beyond
+`max_point_range` and returns outside the map are counted per reason and dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .body_sensors import quaternion_to_matrix
+from .errors import SimulationError
+from .terrain_sensor import SensorScan, TerrainSensorConfig
+
+FloatArray = NDArray[np.float64]
+
+# Why a return or a cell measurement did not change the map (FuseReport.counts keys).
+NO_RETURN = "no return"
+NON_FINITE = "non-finite"
+OUT_OF_RANGE = "out of range"
+OUTSIDE_MAP = "outside map"
+SCAN_OUTLIER = "scan outlier"
+GATED = "gated"
+FUSED = "fused"
+# Why a whole scan was rejected (FuseReport.rejected).
+BAD_POSE = "pose not finite or not a rotation"
+BAD_COVARIANCE = "covariance not finite, not symmetric or negative"
+STALE = "captured before the last fused scan"
+BAD_SHAPE = "points are not an (n, 3) array"
+
+# 1.4826 · MAD estimates a Gaussian's standard deviation.
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class PoseBelief:
+    """The estimator's trunk pose in its odometry frame and how uncertain it is."""
+
+    position: FloatArray
+    # (w, x, y, z), trunk → odometry frame.
+    quaternion: FloatArray
+    # Position covariance, m² (3 × 3).
+    position_covariance: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
+    # Variance of roll, pitch, yaw about the trunk axes, rad².
+    attitude_variance: FloatArray = field(default_factory=lambda: np.full(3, 1e-4))
+
+    def problem(self) -> str | None:
+        """Why this pose cannot be used, or None."""
+        p, q = np.asarray(self.position, dtype=np.float64), np.asarray(self.quaternion, dtype=np.float64)
+        if p.shape != (3,) or q.shape != (4,) or not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+            return BAD_POSE
+        if not 0.5 < float(np.linalg.norm(q)) < 2.0:
+            return BAD_POSE
+        c, a = np.asarray(self.position_covariance, dtype=np.float64), np.asarray(self.attitude_variance, dtype=np.float64)
+        if c.shape != (3, 3) or a.shape != (3,) or not (np.all(np.isfinite(c)) and np.all(np.isfinite(a))):
+            return BAD_COVARIANCE
+        if not np.allclose(c, c.T, atol=1e-12) or np.any(np.diag(c) < 0.0) or np.any(a < 0.0):
+            return BAD_COVARIANCE
+        return None
+
+
+@dataclass(frozen=True)
+class ElevationMapConfig:
+    mahalanobis_gate: float = 3.0
+    # m² added to a cell's variance each time a measurement of it is gated.
+    rejection_inflation: float = 0.01
+    # m²: a cell more uncertain than this is unknown again.
+    max_variance: float = 1.0
+    # m²: floor of a measurement's variance (a noiseless sensor still has rounding).
+    min_variance: float = 1e-8
+    confidence_sigmas: float = 2.0
+    # m: returns farther than this from the sensor are not physical (hostile or corrupt data).
+    max_point_range: float = 100.0
+
+    def validate(self) -> None:
+        checks = {
+            "mahalanobis_gate": self.mahalanobis_gate > 0.0,
+            "rejection_inflation": self.rejection_inflation >= 0.0,
+            "max_variance": self.max_variance > 0.0,
+            "min_variance": 0.0 < self.min_variance < self.max_variance,
+            "confidence_sigmas": self.confidence_sigmas >= 0.0,
+            "max_point_range": self.max_point_range > 0.0,
+        }
+        for name, ok in checks.items():
+            value = getattr(self, name)
+            if not (math.isfinite(value) and ok):
+                raise SimulationError(f"elevation map: invalid {name} = {value}")
+
+
+@dataclass
+class FuseReport:
+    """What one `fuse` call did: returns and cells per outcome, or why the scan was rejected."""
+
+    capture_time: float
+    rejected: str | None = None
+    counts: dict[str, int] = field(default_factory=dict)
+    # Cells whose height or variance changed.
+    changed_cells: int = 0
+
+
+class ElevationMap:
+    """Heights and variances on a grid of the odometry frame (see the module text)."""
+
+    def __init__(
+        self,
+        origin: tuple[float, float],
+        resolution: float,
+        shape: tuple[int, int],
+        sensor: TerrainSensorConfig,
+        config: ElevationMapConfig | None = None,
+    ) -> None:
+        self.config = config or ElevationMapConfig()
+        self.config.validate()
+        sensor.validate()
+        if not (all(math.isfinite(v) for v in origin) and math.isfinite(resolution) and resolution > 0.0):
+            raise SimulationError(f"elevation map: invalid origin {origin} or resolution {resolution}")
+        ny, nx = shape
+        if not (1 <= ny <= 8192 and 1 <= nx <= 8192):
+            raise SimulationError(f"elevation map: invalid shape {shape}")
+        self.origin = (float(origin[0]), float(origin[1]))
+        self.resolution = float(resolution)
+        self.shape = (int(ny), int(nx))
+        self.mount = np.asarray(sensor.mount_xyz, dtype=np.float64)
+        self.mount_rotation = sensor.rotation_on_trunk()
+        self.sensor = sensor
+        self.heights = np.full(self.shape, np.nan)
+        self.variances = np.full(self.shape, np.inf)
+        self.last_capture_time = -math.inf
+        self.totals: dict[str, int] = {}
+
+    @property
+    def known(self) -> NDArray[np.bool_]:
+        return np.isfinite(self.heights)
+
+    def lower(self) -> FloatArray:
+        """Lower confidence bound h − k σ (NaN where unknown)."""
+        return self.heights - self.config.confidence_sigmas * np.sqrt(self.variances)
+
+    def upper(self) -> FloatArray:
+        """Upper confidence bound h + k σ (NaN where unknown)."""
+        return self.heights + self.config.confidence_sigmas * np.sqrt(self.variances)
+
+    def cell_centres(self) -> tuple[FloatArray, FloatArray]:
+        ny, nx = self.shape
+        xs = self.origin[0] + (np.arange(nx) + 0.5) * self.resolution
+        ys = self.origin[1] + (np.arange(ny) + 0.5) * self.resolution
+        return xs, ys
+
+    def _count(self, report: FuseReport, reason: str, n: int) -> None:
+        if n:
+            report.counts[reason] = report.counts.get(reason, 0) + int(n)
+            self.totals[reason] = self.totals.get(reason, 0) + int(n)
+
+    def _reject(self, report: FuseReport, reason: str) -> FuseReport:
+        report.rejected = reason
+        self.totals["rejected scans"] = self.totals.get("rejected scans", 0) + 1
+        return report
+
+    def fuse(self, scan: SensorScan, pose: PoseBelief) -> FuseReport:
+        """Fuses one scan taken at the estimated trunk pose `pose`."""
+        report = FuseReport(capture_time=scan.capture_time)
+        if not math.isfinite(scan.capture_time) or scan.capture_time < self.last_capture_time:
+            return self._reject(report, STALE)
+        points = np.asarray(scan.points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            return self._reject(report, BAD_SHAPE)
+        problem = pose.problem()
+        if problem is not None:
+            return self._reject(report, problem)
+        self.last_capture_time = scan.capture_time
+        c = self.config
+
+        nan_rows = np.all(np.isnan(points), axis=1)
+        self._count(report, NO_RETURN, int(nan_rows.sum()))
+        finite = np.all(np.isfinite(points), axis=1)
+        self._count(report, NON_FINITE, int((~finite & ~nan_rows).sum()))
+        points = points[finite]
+        ranges = np.linalg.norm(points, axis=1)
+        in_range = ranges <= c.max_point_range
+        self._count(report, OUT_OF_RANGE, int((~in_range).sum()))
+        points, ranges = points[in_range], ranges[in_range]
+        if points.size == 0:
+            return report
+
+        quaternion = np.asarray(pose.quaternion, dtype=np.float64)
+        trunk = quaternion_to_matrix(quaternion / np.linalg.norm(quaternion))
+        # Points in the trunk frame (lever arms from the trunk origin), then the odometry frame.
+        lever = points @ self.mount_rotation.T + self.mount
+        world = lever @ trunk.T + np.asarray(pose.position, dtype=np.float64)
+        ix = np.floor((world[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
+        iy = np.floor((world[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
+        ny, nx = self.shape
+        inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+        self._count(report, OUTSIDE_MAP, int((~inside).sum()))
+        if not inside.any():
+            return report
+        world, lever, ranges, ix, iy = world[inside], lever[inside], ranges[inside], ix[inside], iy[inside]
+
+        # Height variance of each return: range noise along the ray's vertical component, plus
+        # roll/pitch/yaw uncertainty along the lever arm.
+        ray_z = (world[:, 2] - (trunk @ self.mount + pose.position)[2]) / np.maximum(ranges, 1e-9)
+        sigma_r = self.sensor.sigma(ranges)
+        jacobian = -np.cross(trunk[2, :], lever)
+        variance = ray_z**2 * sigma_r**2 + (jacobian**2) @ np.asarray(pose.attitude_variance, dtype=np.float64)
+        variance = np.maximum(variance, c.min_variance)
+
+        cell = iy * nx + ix
+        z = world[:, 2]
+        # Screen each cell's returns against its median (robust scale: MAD, at least the returns' own σ).
+        order = np.lexsort((z, cell))
+        cell, z, variance = cell[order], z[order], variance[order]
+        starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
+        counts = np.diff(np.r_[starts, len(cell)])
+        group = np.repeat(np.arange(len(starts)), counts)
+        median = 0.5 * (z[starts + (counts - 1) // 2] + z[starts + counts // 2])
+        deviation = np.abs(z - median[group])
+        dev_order = np.lexsort((deviation, group))
+        sorted_dev = deviation[dev_order]
+        mad = 0.5 * (sorted_dev[starts + (counts - 1) // 2] + sorted_dev[starts + counts // 2])
+        scale = np.sqrt((_MAD_TO_SIGMA * mad[group]) ** 2 + variance)
+        keep = deviation <= c.mahalanobis_gate * scale
+        self._count(report, SCAN_OUTLIER, int((~keep).sum()))
+        cell, z, variance, group = cell[keep], z[keep], variance[keep], group[keep]
+
+        # Inverse-variance mean per cell, its variance plus the spread of the cell's returns.
+        n_groups = len(starts)
+        weight = 1.0 / variance
+        w_sum = np.bincount(group, weight, n_groups)
+        used = w_sum > 0.0
+        w_sum_safe = np.where(used, w_sum, 1.0)
+        mean = np.bincount(group, weight * z, n_groups) / w_sum_safe
+        spread = np.bincount(group, weight * (z - mean[group]) ** 2, n_groups) / w_sum_safe
+        measured = mean[used]
+        measured_variance = 1.0 / w_sum[used] + spread[used]
+        cells = np.zeros(n_groups, dtype=np.int64)
+        cells[group] = cell
+        cells = cells[used]
+
+        h = self.heights.reshape(-1)
+        v = self.variances.reshape(-1)
+        prior_h, prior_v = h[cells], v[cells]
+        unknown = ~np.isfinite(prior_h)
+        # Unknown cells take the measurement as it is (gain 1); placeholders keep the arithmetic finite.
+        known_h = np.where(unknown, measured, prior_h)
+        known_v = np.where(unknown, 1.0, prior_v)
+        distance = np.abs(measured - known_h) / np.sqrt(known_v + measured_variance)
+        gated = ~unknown & (distance > c.mahalanobis_gate)
+        accept = ~gated
+        gain = np.where(unknown, 1.0, known_v / (known_v + measured_variance))
+        new_h = known_h + gain * (measured - known_h)
+        new_v = np.where(unknown, measured_variance, (1.0 - gain) * known_v)
+        h[cells[accept]] = new_h[accept]
+        v[cells[accept]] = np.maximum(new_v[accept], c.min_variance)
+        v[cells[gated]] = prior_v[gated] + c.rejection_inflation
+        self._forget(cells[gated])
+        self._count(report, GATED, int(gated.sum()))
+        self._count(report, FUSED, int(accept.sum()))
+        report.changed_cells = len(cells)
+        return report
+
+    def grow(self, position_variance_increase: FloatArray) -> None:
+        """Adds the growth of the estimator's position variance (x, y, z; m²) since the last call."""
+        increase = np.asarray(position_variance_increase, dtype=np.float64)
+        if increase.shape != (3,) or not np.all(np.isfinite(increase)):
+            raise SimulationError(f"elevation map: the variance increase must be three finite numbers, got {increase}")
+        increase = np.maximum(increase, 0.0)
+        if not increase.any():
+            return
+        with np.errstate(invalid="ignore"):
+            gy, gx = np.gradient(self.heights, self.resolution) if min(self.shape) >= 2 else (np.zeros(self.shape), np.zeros(self.shape))
+        gx = np.nan_to_num(gx, nan=0.0)
+        gy = np.nan_to_num(gy, nan=0.0)
+        known = self.known
+        self.variances[known] += increase[2] + gx[known] ** 2 * increase[0] + gy[known] ** 2 * increase[1]
+        self._forget(np.flatnonzero((self.variances > self.config.max_variance) & known))
+
+    def _forget(self, cells: NDArray[np.int64]) -> None:
+        """Cells past `max_variance` become unknown."""
+        v = self.variances.reshape(-1)
+        gone = cells[v[cells] > self.config.max_variance]
+        if gone.size:
+            self.heights.reshape(-1)[gone] = np.nan
+            v[gone] = np.inf
