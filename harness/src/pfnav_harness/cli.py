@@ -124,7 +124,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         "P-F feedback field at the robot's current position (default online)",
     )
     p.add_argument("--online", action="store_true", help="sense the terrain while walking, publish map updates and replan (P-F: feedback mode)")
-    p.add_argument("--sensor-range", type=float, default=3.0, help="online: height sensor range around the base, m (default 3)")
+    p.add_argument("--sensor-range", type=float, default=3.0, help="online, ideal sensor: range of the disc it reveals around the base, m (default 3)")
+    p.add_argument(
+        "--terrain-sensor",
+        choices=("ideal", "depth_camera", "lidar"),
+        default="ideal",
+        help="online: the ideal disc (true cells around the believed position), or a ray-cast depth camera or lidar "
+        "with noise, fused into an elevation map at the estimated pose (default ideal)",
+    )
+    p.add_argument("--terrain-sensor-seed", type=int, default=0, help="online: seed of the terrain sensor's noise, dropouts and outliers (default 0)")
     p.add_argument(
         "--unknown-traversability",
         type=float,
@@ -259,8 +267,17 @@ def _online_config(args: argparse.Namespace) -> OnlineConfig:
     from .online import OnlineConfig
     from .sensing import SensorConfig
 
+    perception = None
+    if args.terrain_sensor != "ideal":
+        from .perception import PerceptionConfig
+        from .terrain_sensor import TerrainSensorConfig
+
+        seed = args.terrain_sensor_seed
+        sensor = TerrainSensorConfig.lidar(seed=seed) if args.terrain_sensor == "lidar" else TerrainSensorConfig(seed=seed)
+        perception = PerceptionConfig(sensor=sensor, unknown_traversability=args.unknown_traversability)
     config = OnlineConfig(
         sensor=SensorConfig(range_m=args.sensor_range, unknown_traversability=args.unknown_traversability),
+        perception=perception,
         update_period=args.update_period,
         apply_delay=args.replan_budget,
         options=_request_options(args),

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from . import fmu_runner as fr
 from .body_sensors import BodyReadings, BodySensorConfig, BodySensors, BodySensorsState
+from .elevation_map import PoseBelief
 from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
@@ -485,6 +486,8 @@ class CoSimulation:
         # The feedback law is sampled at the believed pose every step.
         pose_every_step = block_source is None
         online = self.online
+        # A real terrain sensor scans from the true trunk; its map places the returns at the belief.
+        senses_terrain = online is not None and online.senses_terrain
         pushes = c.pushes
         push_force = np.zeros(3)
         goal_since = loop.goal_since
@@ -533,6 +536,9 @@ class CoSimulation:
                 pose[0] = state[0] + offset[0]
                 pose[1] = state[1] + offset[1]
                 pose[2] = true_yaw + offset[3]
+            if senses_terrain and walking and comm:
+                assert online is not None
+                online.sense(tau, state[0:3].copy(), state[3:7].copy(), believed_trunk_pose(state, offset))
             if online is not None and walking and comm:
                 answer = online.tick(tau, float(pose[0]), float(pose[1]), float(pose[2]))
                 if answer is not None:
@@ -765,6 +771,20 @@ class EstimatorInTheLoop:
             "encoder_model": np.array(sensors.encoder.name),
             "contact_sensor": np.array(sensors.contact_sensor),
         }
+
+
+def believed_trunk_pose(state: NDArray[np.float64], offset: NDArray[np.float64]) -> PoseBelief:
+    """The trunk pose the robot believes: the truth moved by the estimate's offset (dx, dy, dz, dyaw).
+
+    The position covariance is not among the FMU's outputs yet: zero (the map then grows no
+    variance with the drift).
+    """
+    half = 0.5 * float(offset[3])
+    cz, sz = math.cos(half), math.sin(half)
+    w, x, y, z = state[3:7].tolist()
+    # q_yaw ⊗ q_true: the yaw error turns the trunk about the world's vertical.
+    quaternion = np.array([cz * w - sz * z, cz * x - sz * y, cz * y + sz * x, cz * z + sz * w])
+    return PoseBelief(state[0:3] + offset[0:3], quaternion)
 
 
 def replan_log(online: OnlineNavigator) -> dict[str, NDArray[np.float64]]:

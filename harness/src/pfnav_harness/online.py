@@ -20,8 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .elevation_map import PoseBelief
 from .errors import PlannerError, SimulationError
 from .feedback_field import FeedbackField
+from .perception import PerceptionConfig, SensedMap
 from .planner_client import PlanAnswer, PlannerClient, RequestOptions, StartPose, terrain_map_message
 from .scenario import Scenario
 from .sensing import BeliefMap, SensorConfig
@@ -38,7 +40,10 @@ STALE_SEQ_AGE = 1000
 
 @dataclass(frozen=True)
 class OnlineConfig:
+    # The ideal disc sensor (reveals true cells around the believed position)...
     sensor: SensorConfig = field(default_factory=SensorConfig)
+    # ... unless a real terrain sensor and its elevation map are given.
+    perception: PerceptionConfig | None = None
     # Simulated seconds between map updates (2 Hz).
     update_period: float = 0.5
     # Simulated seconds from a map update to the new plan being in use: the latency budget.
@@ -52,6 +57,8 @@ class OnlineConfig:
 
     def validate(self) -> None:
         self.sensor.validate()
+        if self.perception is not None:
+            self.perception.validate()
         if not (math.isfinite(self.update_period) and self.update_period > 0.0):
             raise SimulationError(f"the map update period must be positive, got {self.update_period}")
         if not (math.isfinite(self.apply_delay) and 0.0 <= self.apply_delay < self.update_period):
@@ -99,7 +106,11 @@ class OnlineNavigator:
         self.client = client
         self.scenario = scenario
         self.config = config
-        self.belief = BeliefMap(scenario.terrain, scenario.prior, config.sensor)
+        self.belief: BeliefMap | SensedMap
+        if config.perception is None:
+            self.belief = BeliefMap(scenario.terrain, scenario.prior, config.sensor)
+        else:
+            self.belief = SensedMap(scenario.terrain, scenario.prior, config.perception)
         self.replans: list[Replan] = []
         self._pending: Replan | None = None
         self._next_update = 0.0
@@ -108,9 +119,30 @@ class OnlineNavigator:
         self._first_seq = -1
         self._bad_updates = list(config.bad_updates)
 
-    def start(self, x: float, y: float, yaw: float, timeout: float, retries: int) -> PlanAnswer:
-        """Senses at the start pose and plans on that knowledge (blocking): the first plan."""
-        changed = self.belief.observe(x, y)
+    @property
+    def senses_terrain(self) -> bool:
+        """Whether the co-simulation must call `sense` with the trunk's true and estimated pose."""
+        return isinstance(self.belief, SensedMap)
+
+    def sense(self, t: float, true_position: NDArray[np.float64], true_quaternion: NDArray[np.float64], belief: PoseBelief) -> None:
+        """The terrain sensor's scans due by walk time `t`, fused at the estimated pose `belief`."""
+        if isinstance(self.belief, SensedMap):
+            self.belief.sense(t, true_position, true_quaternion, belief)
+
+    def start(self, x: float, y: float, yaw: float, timeout: float, retries: int, trunk_height: float | None = None) -> PlanAnswer:
+        """Senses at the start pose and plans on that knowledge (blocking): the first plan.
+
+        With a real terrain sensor the robot scans once standing at the start, its trunk
+        `trunk_height` above the ground (its estimate is the truth there).
+        """
+        changed = self._observe(x, y)
+        if isinstance(self.belief, SensedMap):
+            if trunk_height is None:
+                raise SimulationError("a terrain sensor scans from the trunk: give the start's trunk height")
+            position = np.array([x, y, float(self.scenario.terrain.height_at(x, y)) + trunk_height])
+            quaternion = np.array([math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)])
+            self.belief.sense(0.0, position, quaternion, PoseBelief(position, quaternion))
+            changed = self.belief.take_changed()
         seq = self._publish_belief()
         self._first_seq = seq
         published = time.time()
@@ -160,12 +192,18 @@ class OnlineNavigator:
             pending.outcome = f"no answer within {self.config.answer_timeout:.0f} s; kept the last plan"
         return answer
 
+    def _observe(self, x: float, y: float) -> int:
+        """The ideal sensor reveals the cells around (x, y); a real one has been fusing scans all along."""
+        if isinstance(self.belief, BeliefMap):
+            return self.belief.observe(x, y)
+        return self.belief.take_changed()
+
     def _publish_belief(self) -> int:
         b = self.belief
-        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.config.unknown_traversability)
+        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.unknown_traversability)
 
     def _send_update(self, t: float, x: float, y: float, yaw: float) -> None:
-        changed = self.belief.observe(x, y)
+        changed = self._observe(x, y)
         kind = "update"
         if self._bad_updates and len(self.replans) >= 2:
             kind = self._bad_updates.pop(0)
@@ -186,12 +224,12 @@ class OnlineNavigator:
         if kind == "stale":
             # A map stamped before anything this robot has sent: a delayed, superseded update.
             seq = self._first_seq - STALE_SEQ_AGE
-            message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.config.unknown_traversability)
+            message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.unknown_traversability)
             message.heights = [h + 0.01 for h in message.heights]
             self.client.publish_raw_map(message)
             return seq
         seq = self.client.reserve_map_seq()
-        message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.config.unknown_traversability)
+        message = terrain_map_message(terrain, seq, known=known, unknown_traversability=b.unknown_traversability)
         if kind == "nan":
             heights = list(message.heights)
             heights[len(heights) // 2] = math.nan
@@ -200,7 +238,7 @@ class OnlineNavigator:
             from .scenario import Terrain
 
             coarse = Terrain(terrain.origin, terrain.resolution * 2.0, terrain.heights[::2, ::2].copy(), None)
-            message = terrain_map_message(coarse, seq, unknown_traversability=b.config.unknown_traversability)
+            message = terrain_map_message(coarse, seq, unknown_traversability=b.unknown_traversability)
         self.client.publish_raw_map(message)
         return seq
 

@@ -147,7 +147,8 @@ def simulate_online(
     )
     full_plan = full.plan_or_raise(method)
     navigator = OnlineNavigator(client, scenario, online_config)
-    first = navigator.start(start.x, start.y, start.yaw, timeout=plan_timeout, retries=retries)
+    trunk_height = config.body_height if config.body_height > 0.0 else robot.stand_height
+    first = navigator.start(start.x, start.y, start.yaw, timeout=plan_timeout, retries=retries, trunk_height=trunk_height)
     check_first_answer(first, method)
     assert first.plan is not None
     outcome = simulate(scenario, first.plan, fmu, robot, cache_dir, config, log_path, show_progress, field, feedback_field=first.field, online=navigator)

@@ -91,6 +91,10 @@ class BeliefMap:
         return Terrain(self.truth.origin, self.truth.resolution, self.heights.copy(), obstacles if obstacles.any() else None)
 
     @property
+    def unknown_traversability(self) -> float:
+        return self.config.unknown_traversability
+
+    @property
     def known_fraction(self) -> float:
         return float(self.known.mean())
 

@@ -1,0 +1,109 @@
+"""What a robot with a real terrain sensor knows: an elevation map fused, at the sensor's rate,
+from scans taken at the true trunk pose and placed with the estimated one.
+
+`SensedMap` stands beside `sensing.BeliefMap` (the ideal disc sensor, kept for comparison) and
+answers the online navigator the same questions: the terrain to plan on, which cells are known,
+how many cells the last update changed. The map lives in the estimator's frame (`elevation_map`),
+so the map, the plan and the feedback field sampled at the estimate agree with each other even
+where the estimate has drifted from the truth.
+
+The planner gets each known cell's height; unknown cells (never seen, or forgotten when their
+variance passed the map's limit) carry the prior traversability. A scenario's prior map starts
+the elevation map at `prior_variance`: a surprise in it is gated first, then taken once it has
+been seen a few times (the map's variance inflation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .elevation_map import ElevationMap, ElevationMapConfig, FuseReport, PoseBelief
+from .errors import SimulationError
+from .scenario import Terrain
+from .sensing import PLANNER_DEFAULT
+from .terrain_sensor import TerrainSensor, TerrainSensorConfig
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    sensor: TerrainSensorConfig = field(default_factory=TerrainSensorConfig)
+    elevation_map: ElevationMapConfig = field(default_factory=ElevationMapConfig)
+    # m²: variance of a scenario's prior map heights.
+    prior_variance: float = 0.01
+    # Traversability p the planner gives unknown cells, in (0, 1]; 0: the planner's default.
+    unknown_traversability: float = PLANNER_DEFAULT
+
+    def validate(self) -> None:
+        self.sensor.validate()
+        self.elevation_map.validate()
+        if not (math.isfinite(self.prior_variance) and 0.0 < self.prior_variance < self.elevation_map.max_variance):
+            raise SimulationError(f"the prior map's variance must lie in (0, max_variance), got {self.prior_variance}")
+        p = self.unknown_traversability
+        if not (p == PLANNER_DEFAULT or (math.isfinite(p) and 0.0 < p <= 1.0)):
+            raise SimulationError(f"the traversability of unknown cells must lie in (0, 1] (or be 0: the planner's default), got {p}")
+
+
+class SensedMap:
+    """The terrain sensor and the elevation map of one run."""
+
+    def __init__(self, truth: Terrain, prior: Terrain | None, config: PerceptionConfig) -> None:
+        config.validate()
+        self.config = config
+        self.truth = truth
+        self.sensor = TerrainSensor(truth, config.sensor)
+        self.map = ElevationMap(truth.origin, truth.resolution, truth.shape, config.sensor, config.elevation_map)
+        if prior is not None:
+            if prior.shape != truth.shape or prior.origin != truth.origin or prior.resolution != truth.resolution:
+                raise SimulationError(f"the prior map ({prior.shape}, origin {prior.origin}) does not cover the terrain ({truth.shape}, origin {truth.origin})")
+            self.map.heights[:] = prior.heights
+            self.map.variances[:] = config.prior_variance
+        self._next_scan = -math.inf
+        self._last_position_variance = np.zeros(3)
+        self.reports: list[FuseReport] = []
+        self._changed_since_update = 0
+
+    def sense(self, t: float, true_position: FloatArray, true_quaternion: FloatArray, belief: PoseBelief) -> None:
+        """Takes the scans due by time `t` (at the sensor's rate) and fuses them at `belief`."""
+        variance = np.diag(np.asarray(belief.position_covariance, dtype=np.float64))
+        if np.all(np.isfinite(variance)):
+            self.map.grow(variance - self._last_position_variance)
+            self._last_position_variance = variance
+        # Scans at multiples of the sensor period, whatever the callers' clock.
+        if t + 1e-9 < self._next_scan:
+            return
+        self._next_scan = (math.floor(t / self.sensor.period + 1e-9) + 1) * self.sensor.period
+        scan = self.sensor.scan(t, true_position, true_quaternion)
+        report = self.map.fuse(scan, belief)
+        self.reports.append(report)
+        self._changed_since_update += report.changed_cells
+
+    def take_changed(self) -> int:
+        """Cells changed since the last call (a map update's "changed cells")."""
+        changed, self._changed_since_update = self._changed_since_update, 0
+        return changed
+
+    def terrain(self) -> Terrain:
+        """The believed terrain: known heights, unknown cells at 0 (their mask goes with them)."""
+        return Terrain(self.truth.origin, self.truth.resolution, np.nan_to_num(self.map.heights, nan=0.0), None)
+
+    @property
+    def known(self) -> NDArray[np.bool_]:
+        return self.map.known
+
+    def known_mask(self) -> NDArray[np.bool_] | None:
+        known = self.map.known
+        return None if bool(known.all()) else known.copy()
+
+    @property
+    def known_fraction(self) -> float:
+        return float(self.map.known.mean())
+
+    @property
+    def unknown_traversability(self) -> float:
+        return self.config.unknown_traversability

@@ -1,0 +1,120 @@
+"""The online navigator with a real terrain sensor: scans at the sensor's rate, the map in the believed frame."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_hs_online import ScriptedClient
+
+from pfnav_harness.cosim import believed_trunk_pose
+from pfnav_harness.elevation_map import PoseBelief
+from pfnav_harness.errors import SimulationError
+from pfnav_harness.online import OnlineConfig, OnlineNavigator
+from pfnav_harness.perception import PerceptionConfig, SensedMap
+from pfnav_harness.scenario import GoalRegion, Scenario, Terrain
+from pfnav_harness.terrain_sensor import TerrainSensorConfig
+from pfnav_harness.world import quaternion_to_rpy
+
+RES = 0.25
+NOISELESS = TerrainSensorConfig(sigma0=0.0, sigma_r2=0.0, dropout=0.0, outlier=0.0)
+
+
+def step_scenario(prior: bool = False) -> Scenario:
+    """Flat ground with a 0.3 m step up at x = 5 m."""
+    heights = np.zeros((32, 48))
+    heights[:, 20:] = 0.3
+    terrain = Terrain((0.0, 0.0), RES, heights)
+    prior_map = Terrain((0.0, 0.0), RES, np.zeros((32, 48))) if prior else None
+    return Scenario("step", terrain, (2.0, 4.0), 0.0, GoalRegion((10.0, 4.0), 0.5), prior=prior_map)
+
+
+def trunk(x: float, y: float, yaw: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([x, y, 0.32]), np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def test_scans_come_at_the_sensor_rate_and_see_what_lies_ahead() -> None:
+    scenario = step_scenario()
+    sensed = SensedMap(scenario.terrain, None, PerceptionConfig(sensor=NOISELESS))
+    for k in range(100):
+        position, quaternion = trunk(2.0 + 0.005 * k, 4.0)
+        sensed.sense(0.01 * k, position, quaternion, PoseBelief(position, quaternion))
+    assert len(sensed.reports) == 5  # 5 Hz over one second
+    known = sensed.known
+    xs = (np.arange(48) + 0.5) * RES
+    seen_x = np.broadcast_to(xs, known.shape)[known]
+    assert seen_x.min() > 2.0, "a forward camera sees nothing behind the trunk"
+    heights = sensed.terrain().heights
+    x = np.broadcast_to(xs, known.shape)
+    # Away from the step's cells (the mesh ramps between the centres either side of x = 5 m).
+    assert np.all(np.abs(heights[known & (x < 4.7)]) < 0.02)
+    assert np.all(np.abs(heights[known & (x > 5.3)] - 0.3) < 0.02)
+    assert sensed.take_changed() > 0 and sensed.take_changed() == 0
+
+
+def test_the_step_is_mapped_where_the_robot_believes_it_is() -> None:
+    scenario = step_scenario()
+    sensed = SensedMap(scenario.terrain, None, PerceptionConfig(sensor=NOISELESS))
+    position, quaternion = trunk(3.0, 4.0)
+    believed = position + np.array([0.5, 0.0, 0.0])  # the estimate is 0.5 m ahead of the truth
+    sensed.sense(0.0, position, quaternion, PoseBelief(believed, quaternion))
+    heights, known = sensed.terrain().heights, sensed.known
+    column = heights[16]
+    seen = np.flatnonzero(known[16])
+    # The step (true x = 5 m, column 20) appears 0.5 m (two cells) further on.
+    first_high = seen[column[seen] > 0.15][0]
+    assert first_high == 22
+
+
+def test_the_prior_map_starts_the_map_and_a_surprise_is_taken_after_a_few_scans() -> None:
+    scenario = step_scenario(prior=True)
+    config = PerceptionConfig(sensor=NOISELESS, prior_variance=0.001)
+    sensed = SensedMap(scenario.terrain, scenario.prior, config)
+    assert sensed.known.all() and np.all(sensed.map.variances == 0.001)
+    position, quaternion = trunk(4.0, 4.0)
+    sensed.sense(0.0, position, quaternion, PoseBelief(position, quaternion))
+    assert sensed.reports[0].counts.get("gated", 0) > 0
+    assert np.all(sensed.terrain().heights[:, 21:] < 0.05), "one look does not overrule the prior"
+    for k in range(1, 10):
+        sensed.sense(0.2 * k, position, quaternion, PoseBelief(position, quaternion))
+    heights = sensed.terrain().heights
+    on_step = heights[:, 22:]
+    assert np.count_nonzero(np.abs(on_step - 0.3) < 0.03) > 10, "the step was taken"
+    assert np.all(np.abs(heights[:, :18]) < 1e-6)
+
+
+def test_the_navigator_scans_at_the_start_and_publishes_the_sensed_map() -> None:
+    client = ScriptedClient()
+    config = OnlineConfig(perception=PerceptionConfig(sensor=NOISELESS))
+    navigator = OnlineNavigator(client, step_scenario(), config)  # type: ignore[arg-type]
+    assert navigator.senses_terrain
+    with pytest.raises(SimulationError, match="trunk height"):
+        navigator.start(2.0, 4.0, 0.0, timeout=1.0, retries=0)
+    navigator.start(2.0, 4.0, 0.0, timeout=1.0, retries=0, trunk_height=0.32)
+    _, _, known, _ = client.maps[0]
+    assert known is not None and 0 < known.sum() < known.size
+    assert navigator.replans[0].changed_cells == known.sum()
+    for k in range(1, 60):
+        t = 0.01 * k
+        position, quaternion = trunk(2.0 + 0.5 * t, 4.0)
+        navigator.sense(t, position, quaternion, PoseBelief(position, quaternion))
+        navigator.tick(t, float(position[0]), 4.0, 0.0)
+    assert len(client.maps) == 2  # the start and the update at 0.5 s
+    assert navigator.replans[1].changed_cells > 0
+    assert client.maps[1][2].sum() > known.sum()
+
+
+def test_believed_trunk_pose_applies_the_estimate_offset() -> None:
+    state = np.zeros(37)
+    state[0:3] = [1.0, 2.0, 0.3]
+    roll, pitch, yaw = 0.1, -0.05, 0.4
+    cr, sr, cp, sp, cy, sy = (math.cos(roll / 2), math.sin(roll / 2), math.cos(pitch / 2), math.sin(pitch / 2), math.cos(yaw / 2), math.sin(yaw / 2))
+    state[3:7] = [cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]
+    offset = np.array([0.2, -0.1, 0.05, 0.3])
+    belief = believed_trunk_pose(state, offset)
+    np.testing.assert_allclose(belief.position, [1.2, 1.9, 0.35])
+    r, p, y = quaternion_to_rpy(belief.quaternion)
+    assert abs(math.remainder(y - (yaw + 0.3), math.tau)) < 1e-9
+    assert abs(r - roll) < 0.05 and abs(p - pitch) < 0.05  # yaw rotates about the world vertical
+    assert abs(np.linalg.norm(belief.quaternion) - 1.0) < 1e-12
