@@ -49,10 +49,11 @@ if ((${#pins[@]})); then
 fi
 
 # fmu/binary/link-gcc.sh (the workspace's linker, .cargo/config.toml) links the FMU's library with zig.
-# Built with the whole workspace, as setup.sh builds it, so the dependencies keep the features of
-# that one build and nothing is compiled twice (a no-op after setup.sh).
-log "cargo build --release --workspace (the FMU's library linked by zig for glibc $GLIBC)"
-cargo build --quiet --release --workspace
+# The whole workspace is selected, as setup.sh selects it, so the dependencies keep the features of
+# that one build and nothing is compiled twice (a no-op after setup.sh); of its targets only the
+# libraries (the FMU's among them) and the bundler are built.
+log "cargo build --release --workspace --lib --bin bundle-fmu (the FMU's library linked by zig for glibc $GLIBC)"
+cargo build --quiet --release --workspace --lib --exclude lcm-codegen --bin bundle-fmu
 [[ -f "$LIB" ]] || { echo "expected $LIB after the build" >&2; exit 1; }
 binaries=(--lib "$LIB")
 

@@ -62,6 +62,31 @@ fn terrain_colour(fraction: f64) -> RGBColor {
 type MapChart<'a, 'b> =
     ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A chart of the map rectangle `lo`–`hi` (metres) on `area`: caption, labelled axes, no grid.
+fn map_chart<'a, 'b>(
+    area: &'a DrawingArea<BitMapBackend<'b>, Shift>,
+    caption: String,
+    font_size: u32,
+    (lo, hi): (Point, Point),
+    out: &Path,
+) -> Result<MapChart<'a, 'b>, PlanError> {
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", font_size))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
+        .map_err(|e| plot_error(out, e))?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("x [m]")
+        .y_desc("y [m]")
+        .draw()
+        .map_err(|e| plot_error(out, e))?;
+    Ok(chart)
+}
+
 /// The goal disc's outline (at least half a cell wide, so a point goal stays visible).
 fn draw_goal<'a, 'b: 'a>(
     chart: &mut MapChart<'a, 'b>,
@@ -167,23 +192,9 @@ pub fn plot_plans(
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
                 (a.min(h), b.max(h))
             });
-        let mut chart = ChartBuilder::on(&upper)
-            .caption(
-                format!("{title}   (colour: height {h_min:.2}–{h_max:.2} m; black: obstacles)"),
-                ("sans-serif", 18),
-            )
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(45)
-            .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
-            .map_err(|e| plot_error(out, e))?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x [m]")
-            .y_desc("y [m]")
-            .draw()
-            .map_err(|e| plot_error(out, e))?;
+        let caption =
+            format!("{title}   (colour: height {h_min:.2}–{h_max:.2} m; black: obstacles)");
+        let mut chart = map_chart(&upper, caption, 18, (lo, hi), out)?;
         let span = (h_max - h_min).max(1e-9);
         let res = map.resolution;
         chart
@@ -298,25 +309,10 @@ pub fn plot_feedback_field(
             .filter(|c| c.is_finite() && *c >= 0.0)
             .fold(0.0f64, f64::max)
             .max(1e-12);
-        let mut chart = ChartBuilder::on(root)
-        .caption(
-            format!(
-                "{title}: feedback law (colour: ∫p ds to the goal, 0–{max_cost:.3} in {COST_BANDS} bands; dark: unreachable)"
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(45)
-        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
-        .map_err(|e| plot_error(out, e))?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x [m]")
-            .y_desc("y [m]")
-            .draw()
-            .map_err(|e| plot_error(out, e))?;
+        let caption = format!(
+            "{title}: feedback law (colour: ∫p ds to the goal, 0–{max_cost:.3} in {COST_BANDS} bands; dark: unreachable)"
+        );
+        let mut chart = map_chart(root, caption, 16, (lo, hi), out)?;
         chart
             .draw_series((0..field.len()).map(|i| {
                 let (ix, iy) = (i % field.width, i / field.width);
