@@ -372,7 +372,7 @@ def test_package_layout_and_description(fmu_file: Path, fmu_model_description: A
     assert by_name["cmd.mode"].type == "Enumeration" and by_name["stance[1]"].type == "Boolean"
     assert by_name["mpc.horizon"].type == "Integer" and by_name["gait.kind"].declaredType.name == "GaitKind"
     outputs_ = [u.variable.name for u in md.outputs]
-    assert len(outputs_) == 41 and "joint.tau[12]" in outputs_ and "mpc.solveTime" in outputs_
+    assert len(outputs_) == 47 and "joint.tau[12]" in outputs_ and "mpc.solveTime" in outputs_ and "est.posVar[3]" in outputs_
 
 
 def test_standing_torques_hold_the_weight_and_equal_a_direct_call(

@@ -512,6 +512,13 @@ pub struct EstimateReport {
     pub velocity: [f64; 3],
     /// Roll, pitch, yaw (ZYX Euler angles), rad.
     pub rpy: [f64; 3],
+    /// Variance of the base origin per world axis, m² (the Kalman filter's position covariance
+    /// diagonal; 0 in ground-truth mode). A map built on this estimate grows its cells'
+    /// variances with it.
+    pub position_variance: [f64; 3],
+    /// Variance of the attitude error about the body axes, rad² (the orientation filter's
+    /// covariance diagonal; 0 in ground-truth mode).
+    pub attitude_variance: [f64; 3],
     /// Estimator status bits ([`crate::estimator::StatusFlag`]); 0 = healthy.
     pub status: u32,
 }

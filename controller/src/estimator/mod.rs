@@ -196,10 +196,20 @@ impl StateEstimator {
             ),
             EstimatorKind::Kalman => self.kalman_tick(model, state, sensors, plan, dt),
         };
+        let (position_variance, attitude_variance) =
+            self.filters.as_ref().map_or(([0.0; 3], [0.0; 3]), |f| {
+                let p = f.kalman.position_covariance();
+                (
+                    [p[(0, 0)], p[(1, 1)], p[(2, 2)]],
+                    f.orientation.attitude_variance(),
+                )
+            });
         self.report = EstimateReport {
             position: estimate.position.into(),
             velocity: estimate.velocity.into(),
             rpy: estimate.rpy.into(),
+            position_variance,
+            attitude_variance,
             status: status.bits(),
         };
         estimate

@@ -81,6 +81,11 @@ impl OrientationFilter {
         self.bias
     }
 
+    /// Variance of the attitude error about the body axes, rad².
+    pub fn attitude_variance(&self) -> [f64; 3] {
+        [0, 1, 2].map(|i| self.covariance[(i, i)])
+    }
+
     /// Whether the state and covariance are finite and bounded.
     pub fn is_healthy(&self) -> bool {
         self.attitude.coords.iter().all(|v| v.is_finite())

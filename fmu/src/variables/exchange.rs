@@ -208,6 +208,8 @@ pub fn read_output(binding: Binding, command: &Command) -> Option<Value> {
         Binding::EstimatedPosition(i) => Value::Real(command.estimate.position[i]),
         Binding::EstimatedVelocity(i) => Value::Real(command.estimate.velocity[i]),
         Binding::EstimatedRpy(i) => Value::Real(command.estimate.rpy[i]),
+        Binding::EstimatedPositionVariance(i) => Value::Real(command.estimate.position_variance[i]),
+        Binding::EstimatedAttitudeVariance(i) => Value::Real(command.estimate.attitude_variance[i]),
         // The status word has 7 bits: it always fits.
         Binding::EstimatorStatus => {
             Value::Integer(i32::try_from(command.estimate.status).unwrap_or(i32::MAX))

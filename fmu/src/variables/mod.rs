@@ -102,6 +102,10 @@ pub enum Binding {
     EstimatedVelocity(usize),
     /// `Command::estimate.rpy[i]`.
     EstimatedRpy(usize),
+    /// `Command::estimate.position_variance[i]`.
+    EstimatedPositionVariance(usize),
+    /// `Command::estimate.attitude_variance[i]`.
+    EstimatedAttitudeVariance(usize),
     /// `Command::estimate.status`.
     EstimatorStatus,
     /// Element `element` of the field `field` (index into [`ControllerConfig::FIELDS`]).

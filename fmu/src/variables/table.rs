@@ -461,6 +461,24 @@ pub(super) fn build_table(
             Binding::EstimatedRpy(i),
         );
     }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.output(
+            format!("est.posVar[{}]", i + 1),
+            Value::Real(estimate.position_variance[i]),
+            format!("Variance of est.pos[{}] (the Kalman filter's position covariance diagonal, world {axis}; 0 in groundTruth mode)", i + 1),
+            Some(SquareMetre),
+            Binding::EstimatedPositionVariance(i),
+        );
+    }
+    for (i, axis) in AXES.iter().enumerate() {
+        t.output(
+            format!("est.attVar[{}]", i + 1),
+            Value::Real(estimate.attitude_variance[i]),
+            format!("Variance of the attitude error about body {axis} (the orientation filter's covariance diagonal; 0 in groundTruth mode)"),
+            Some(SquareRadian),
+            Binding::EstimatedAttitudeVariance(i),
+        );
+    }
     let bits: Vec<String> = StatusFlag::ALL
         .iter()
         .map(|&(flag, name, description)| format!("{} {name}: {description}", flag.bit()))

@@ -19,8 +19,9 @@ fn table_has_the_documented_signals() {
     // 3 pos + 4 quat + 3 vel + 3 omega + 12 q + 12 dq + 10 reference/terrain + cmd.mode
     // + height map (x0, y0, spacing, 121 heights) + 3 gyro + 3 acc + 4 contact + 3 fix + valid
     assert_eq!(count(Causality::Input), 48 + 3 + HEIGHT_MAP_CELLS + 14);
-    // 12 tau + 4 stance + fsm + 12 force + solve time + solved + est pos/vel/rpy + est.status
-    assert_eq!(count(Causality::Output), 31 + 10);
+    // 12 tau + 4 stance + fsm + 12 force + solve time + solved + est pos/vel/rpy
+    // + est posVar/attVar + est.status
+    assert_eq!(count(Causality::Output), 31 + 6 + 10);
     for name in [
         "base.quat.w",
         "joint.q[12]",
@@ -37,6 +38,8 @@ fn table_has_the_documented_signals() {
         "est.pos[1]",
         "est.vel[3]",
         "est.rpy[3]",
+        "est.posVar[2]",
+        "est.attVar[3]",
         "est.status",
         "estimator",
         "est.fixNoise",

@@ -133,11 +133,15 @@ pub enum Unit {
     MetrePerSecondSquaredPerRootHertz,
     /// Position random-walk density, m/√s.
     MetrePerRootSecond,
+    /// Square metre (position variance).
+    SquareMetre,
+    /// Square radian (attitude variance).
+    SquareRadian,
 }
 
 impl Unit {
     /// Every unit, in declaration order.
-    pub const ALL: [Unit; 14] = [
+    pub const ALL: [Unit; 16] = [
         Unit::Metre,
         Unit::Second,
         Unit::Radian,
@@ -152,6 +156,8 @@ impl Unit {
         Unit::RadianPerSecondSquaredPerRootHertz,
         Unit::MetrePerSecondSquaredPerRootHertz,
         Unit::MetrePerRootSecond,
+        Unit::SquareMetre,
+        Unit::SquareRadian,
     ];
 
     /// Unit name (FMI/Modelica notation).
@@ -171,6 +177,8 @@ impl Unit {
             Unit::RadianPerSecondSquaredPerRootHertz => "rad/s2/sqrt(Hz)",
             Unit::MetrePerSecondSquaredPerRootHertz => "m/s2/sqrt(Hz)",
             Unit::MetrePerRootSecond => "m/sqrt(s)",
+            Unit::SquareMetre => "m2",
+            Unit::SquareRadian => "rad2",
         }
     }
 
@@ -189,6 +197,8 @@ impl Unit {
             Unit::NewtonMetrePerRadian => &[("kg", 1), ("m", 2), ("s", -2), ("rad", -1)],
             Unit::NewtonMetreSecondPerRadian => &[("kg", 1), ("m", 2), ("s", -1), ("rad", -1)],
             Unit::MetrePerSecondSquared => &[("m", 1), ("s", -2)],
+            Unit::SquareMetre => &[("m", 2)],
+            Unit::SquareRadian => &[("rad", 2)],
             Unit::RadianPerSecondPerRootHertz
             | Unit::RadianPerSecondSquaredPerRootHertz
             | Unit::MetrePerSecondSquaredPerRootHertz

@@ -538,7 +538,8 @@ class CoSimulation:
                 pose[2] = true_yaw + offset[3]
             if senses_terrain and walking and comm:
                 assert online is not None
-                online.sense(tau, state[0:3].copy(), state[3:7].copy(), believed_trunk_pose(state, offset))
+                io = None if estimator is None else estimator.io
+                online.sense(tau, state[0:3].copy(), state[3:7].copy(), believed_trunk_pose(state, offset, io))
             if online is not None and walking and comm:
                 answer = online.tick(tau, float(pose[0]), float(pose[1]), float(pose[2]))
                 if answer is not None:
@@ -702,8 +703,8 @@ class EstimatorInTheLoop:
         readings = BodyReadings(gyro=io.gyro, acc=io.acc, fix_pos=io.fix_pos)
         self.sensors = BodySensors(config.body_sensors, config.comm_step, readings)
         self.joint_q = fmu.inputs.view(fr.JOINT_Q)
-        # est.pos, est.vel, est.rpy | imu.gyro, imu.acc | fix.pos
-        self._log = np.zeros((n_steps, 18))
+        # est.pos, est.vel, est.rpy | imu.gyro, imu.acc | fix.pos | est.posVar
+        self._log = np.zeros((n_steps, 21))
         self._status = np.zeros(n_steps, dtype=np.int32)
         self._fix_valid = np.zeros(n_steps, dtype=bool)
         self._new_fix = False
@@ -737,6 +738,7 @@ class EstimatorInTheLoop:
         row = self._log[k]
         row[0:9] = io.estimate_block
         row[9:18] = io.sensor_block
+        row[18:21] = io.est_pos_var
         self._status[k] = io.est_status[0]
         self._fix_valid[k] = self._new_fix
         self._new_fix = False
@@ -759,6 +761,7 @@ class EstimatorInTheLoop:
             "est_pos": self._log[:n, 0:3],
             "est_vel": self._log[:n, 3:6],
             "est_rpy": self._log[:n, 6:9],
+            "est_pos_var": self._log[:n, 18:21],
             "est_status": self._status[:n],
             "imu_gyro": self._log[:n, 9:12],
             "imu_acc": self._log[:n, 12:15],
@@ -773,18 +776,18 @@ class EstimatorInTheLoop:
         }
 
 
-def believed_trunk_pose(state: NDArray[np.float64], offset: NDArray[np.float64]) -> PoseBelief:
-    """The trunk pose the robot believes: the truth moved by the estimate's offset (dx, dy, dz, dyaw).
-
-    The position covariance is not among the FMU's outputs yet: zero (the map then grows no
-    variance with the drift).
+def believed_trunk_pose(state: NDArray[np.float64], offset: NDArray[np.float64], io: fr.EstimationIo | None = None) -> PoseBelief:
+    """The trunk pose the robot believes: the truth moved by the estimate's offset (dx, dy, dz, dyaw),
+    with the estimator's position and attitude variances (`io`; none: ground truth, exact).
     """
     half = 0.5 * float(offset[3])
     cz, sz = math.cos(half), math.sin(half)
     w, x, y, z = state[3:7].tolist()
     # q_yaw ⊗ q_true: the yaw error turns the trunk about the world's vertical.
     quaternion = np.array([cz * w - sz * z, cz * x - sz * y, cz * y + sz * x, cz * z + sz * w])
-    return PoseBelief(state[0:3] + offset[0:3], quaternion)
+    if io is None:
+        return PoseBelief(state[0:3] + offset[0:3], quaternion, np.zeros((3, 3)), np.zeros(3))
+    return PoseBelief(state[0:3] + offset[0:3], quaternion, np.diag(io.est_pos_var), io.est_att_var.copy())
 
 
 def replan_log(online: OnlineNavigator) -> dict[str, NDArray[np.float64]]:

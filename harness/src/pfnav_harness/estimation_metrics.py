@@ -12,7 +12,9 @@ Run logs of kalman-mode runs carry the FMU's estimate (`est_pos`, `est_vel`, `es
 * yaw error: wrap(est yaw − true yaw), final and largest magnitude, rad;
 * tracking RMS: true horizontal position against the plan's reference (what the robot did,
   judged by the truth, not by its own belief);
-* status: the OR of every `est.status` bit seen while walking.
+* status: the OR of every `est.status` bit seen while walking;
+* the estimator's own horizontal uncertainty at the end, σ = √(var x + var y) from `est_pos_var`
+  (logs that carry it), and whether the final horizontal error lies within 2σ.
 """
 
 from __future__ import annotations
@@ -69,6 +71,15 @@ class EstimationMetrics:
     tracking_rms: float
     status_bits: int
     fixes: int
+    # √(var x + var y) of the estimate at the end, m (NaN: the log has no `est_pos_var`).
+    position_sigma_final: float = math.nan
+
+    @property
+    def final_error_within_2sigma(self) -> bool | None:
+        """Whether the final horizontal error lies inside the estimator's own 2σ (None: no σ logged)."""
+        if not math.isfinite(self.position_sigma_final):
+            return None
+        return self.position_error_final <= 2.0 * self.position_sigma_final
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -140,7 +151,15 @@ def compute_estimation_metrics(log: dict[str, Any], until: float | None = None) 
         tracking_rms=_rms(tracking),
         status_bits=int(np.bitwise_or.reduce(status)) if status.size else 0,
         fixes=int(fix_valid.sum()),
+        position_sigma_final=_final_sigma(log, walking),
     )
+
+
+def _final_sigma(log: dict[str, Any], walking: NDArray[np.bool_]) -> float:
+    if "est_pos_var" not in log:
+        return math.nan
+    variance = np.asarray(log["est_pos_var"])[walking]
+    return float(math.sqrt(max(0.0, float(variance[-1, 0] + variance[-1, 1])))) if len(variance) else math.nan
 
 
 def plot_estimation(log: dict[str, Any], title: str, path: Path) -> None:

@@ -115,7 +115,10 @@ ESTIMATION_REAL_INPUTS = IMU_GYRO + IMU_ACC + FIX_POS
 EST_POS = tuple(f"est.pos[{i}]" for i in range(1, 4))
 EST_VEL = tuple(f"est.vel[{i}]" for i in range(1, 4))
 EST_RPY = tuple(f"est.rpy[{i}]" for i in range(1, 4))
-ESTIMATION_REAL_OUTPUTS = EST_POS + EST_VEL + EST_RPY
+# Variances of the position (world axes, m²) and of the attitude error (body axes, rad²).
+EST_POS_VAR = tuple(f"est.posVar[{i}]" for i in range(1, 4))
+EST_ATT_VAR = tuple(f"est.attVar[{i}]" for i in range(1, 4))
+ESTIMATION_REAL_OUTPUTS = EST_POS + EST_VEL + EST_RPY + EST_POS_VAR + EST_ATT_VAR
 EST_STATUS = "est.status"
 ESTIMATOR_PARAMETER = "estimator"
 # Estimator modes by item name; the codes are read from the parameter's enumeration type.
@@ -270,6 +273,8 @@ class EstimationIo:
     est_pos: NDArray[np.float64]
     est_vel: NDArray[np.float64]
     est_rpy: NDArray[np.float64]
+    est_pos_var: NDArray[np.float64]
+    est_att_var: NDArray[np.float64]
     est_status: NDArray[np.int32]
     # gyro, acc, fix_pos and est_pos, est_vel, est_rpy as the one block each is (for logging).
     sensor_block: NDArray[np.float64]
@@ -278,7 +283,7 @@ class EstimationIo:
     @classmethod
     def detached(cls) -> EstimationIo:
         """Arrays of the right shapes bound to no FMU (for stand-ins of the controller FMU)."""
-        sensors, estimate = np.zeros(9), np.zeros(9)
+        sensors, estimate = np.zeros(9), np.zeros(len(ESTIMATION_REAL_OUTPUTS))
         return cls(
             gyro=sensors[0:3],
             acc=sensors[3:6],
@@ -288,9 +293,11 @@ class EstimationIo:
             est_pos=estimate[0:3],
             est_vel=estimate[3:6],
             est_rpy=estimate[6:9],
+            est_pos_var=estimate[9:12],
+            est_att_var=estimate[12:15],
             est_status=np.zeros(1, dtype=np.int32),
             sensor_block=sensors,
-            estimate_block=estimate,
+            estimate_block=estimate[0:9],
         )
 
 
@@ -494,9 +501,11 @@ class ControllerFmu:
             est_pos=outputs.view(EST_POS),
             est_vel=outputs.view(EST_VEL),
             est_rpy=outputs.view(EST_RPY),
+            est_pos_var=outputs.view(EST_POS_VAR),
+            est_att_var=outputs.view(EST_ATT_VAR),
             est_status=np.ctypeslib.as_array(status_val),
             sensor_block=inputs.values,
-            estimate_block=outputs.values,
+            estimate_block=outputs.values[0:9],
         )
         return self.estimation
 

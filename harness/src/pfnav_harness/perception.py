@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from .elevation_map import ElevationMap, ElevationMapConfig, FuseReport, PoseBelief
 from .errors import SimulationError
 from .scenario import Terrain
-from .sensing import PLANNER_DEFAULT
+from .sensing import PLANNER_DEFAULT, check_prior_covers, check_unknown_traversability
 from .terrain_sensor import TerrainSensor, TerrainSensorConfig
 
 FloatArray = NDArray[np.float64]
@@ -44,9 +44,7 @@ class PerceptionConfig:
         self.elevation_map.validate()
         if not (math.isfinite(self.prior_variance) and 0.0 < self.prior_variance < self.elevation_map.max_variance):
             raise SimulationError(f"the prior map's variance must lie in (0, max_variance), got {self.prior_variance}")
-        p = self.unknown_traversability
-        if not (p == PLANNER_DEFAULT or (math.isfinite(p) and 0.0 < p <= 1.0)):
-            raise SimulationError(f"the traversability of unknown cells must lie in (0, 1] (or be 0: the planner's default), got {p}")
+        check_unknown_traversability(self.unknown_traversability)
 
 
 class SensedMap:
@@ -59,8 +57,7 @@ class SensedMap:
         self.sensor = TerrainSensor(truth, config.sensor)
         self.map = ElevationMap(truth.origin, truth.resolution, truth.shape, config.sensor, config.elevation_map)
         if prior is not None:
-            if prior.shape != truth.shape or prior.origin != truth.origin or prior.resolution != truth.resolution:
-                raise SimulationError(f"the prior map ({prior.shape}, origin {prior.origin}) does not cover the terrain ({truth.shape}, origin {truth.origin})")
+            check_prior_covers(prior, truth)
             self.map.heights[:] = prior.heights
             self.map.variances[:] = config.prior_variance
         self._next_scan = -math.inf

@@ -48,6 +48,10 @@ class TerrainPlane:
     dzdy: float
 
 
+# Corner heights a, b, c, d, cell coordinates u, v and the lower-triangle flag of points.
+_TrianglePoints = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]
+
+
 class Terrain:
     """The piecewise-linear surface through the cell-centre heights of a grid map."""
 
@@ -115,15 +119,16 @@ class Terrain:
         iy = np.minimum(np.floor(fy).astype(np.int64), ny - 2)
         return ix, iy, fx - ix, fy - iy
 
-    def height_and_gradient(self, x: FloatArray | float, y: FloatArray | float) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Surface height and its gradient (dz/dx, dz/dy) at points (vectorised)."""
+    def _triangle(self, x: FloatArray | float, y: FloatArray | float) -> _TrianglePoints:
+        """The heights of the cell corners around each point (a, b, c, d counter-clockwise from
+        the lower left), the point's place in the cell (u, v) and which triangle holds it."""
         ix, iy, u, v = self._locate(np.asarray(x), np.asarray(y))
         h = self.heights
-        za = h[iy, ix]
-        zb = h[iy, ix + 1]
-        zc = h[iy + 1, ix + 1]
-        zd = h[iy + 1, ix]
-        lower = u >= v
+        return h[iy, ix], h[iy, ix + 1], h[iy + 1, ix + 1], h[iy + 1, ix], u, v, u >= v
+
+    def height_and_gradient(self, x: FloatArray | float, y: FloatArray | float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Surface height and its gradient (dz/dx, dz/dy) at points (vectorised)."""
+        za, zb, zc, zd, u, v, lower = self._triangle(x, y)
         dzdu = np.where(lower, zb - za, zc - zd)
         dzdv = np.where(lower, zc - zb, zd - za)
         z = za + u * dzdu + v * dzdv
@@ -132,13 +137,7 @@ class Terrain:
     def height(self, x: FloatArray | float, y: FloatArray | float) -> FloatArray:
         """Surface height at points (vectorised): `height_and_gradient`'s height, the same
         operations (bit for bit) without the gradient (ray casting asks for many points)."""
-        ix, iy, u, v = self._locate(np.asarray(x), np.asarray(y))
-        h = self.heights
-        za = h[iy, ix]
-        zb = h[iy, ix + 1]
-        zc = h[iy + 1, ix + 1]
-        zd = h[iy + 1, ix]
-        lower = u >= v
+        za, zb, zc, zd, u, v, lower = self._triangle(x, y)
         return za + u * np.where(lower, zb - za, zc - zd) + v * np.where(lower, zc - zb, zd - za)
 
     def height_at(self, x: float, y: float) -> float:

@@ -32,9 +32,19 @@ class SensorConfig:
     def validate(self) -> None:
         if not (math.isfinite(self.range_m) and self.range_m > 0.0):
             raise SimulationError(f"the sensor range must be a positive number of metres, got {self.range_m}")
-        p = self.unknown_traversability
-        if not (p == PLANNER_DEFAULT or (math.isfinite(p) and 0.0 < p <= 1.0)):
-            raise SimulationError(f"the traversability of unknown cells must lie in (0, 1] (or be 0: the planner's default), got {p}")
+        check_unknown_traversability(self.unknown_traversability)
+
+
+def check_unknown_traversability(p: float) -> None:
+    """The traversability of unknown cells: in (0, 1], or 0 for the planner's default."""
+    if not (p == PLANNER_DEFAULT or (math.isfinite(p) and 0.0 < p <= 1.0)):
+        raise SimulationError(f"the traversability of unknown cells must lie in (0, 1] (or be 0: the planner's default), got {p}")
+
+
+def check_prior_covers(prior: Terrain, truth: Terrain) -> None:
+    """A prior map must lie on the true map's grid."""
+    if prior.shape != truth.shape or prior.origin != truth.origin or prior.resolution != truth.resolution:
+        raise SimulationError(f"the prior map ({prior.shape}, origin {prior.origin}) does not cover the terrain ({truth.shape}, origin {truth.origin})")
 
 
 class BeliefMap:
@@ -42,8 +52,8 @@ class BeliefMap:
 
     def __init__(self, truth: Terrain, prior: Terrain | None, config: SensorConfig) -> None:
         config.validate()
-        if prior is not None and (prior.shape != truth.shape or prior.origin != truth.origin or prior.resolution != truth.resolution):
-            raise SimulationError(f"the prior map ({prior.shape}, origin {prior.origin}) does not cover the terrain ({truth.shape}, origin {truth.origin})")
+        if prior is not None:
+            check_prior_covers(prior, truth)
         self.truth = truth
         self.config = config
         ny, nx = truth.shape
