@@ -192,3 +192,22 @@ def test_the_standalone_example_walks_on_the_default_friction(code: dict[str, st
 
     found = re.findall(r"^FRICTION = (\S+)$", code[STANDALONE_EXAMPLE], flags=re.MULTILINE)
     assert found and float(found[0]) == DEFAULT_FRICTION, f"{STANDALONE_EXAMPLE}: FRICTION = {found}, the harness's DEFAULT_FRICTION = {DEFAULT_FRICTION}"
+
+
+# Prose that quotes the height-map size (docs may quote values; these quotes are checked).
+HEIGHT_MAP_PROSE = ("controller/README.md", "fmu/README.md", "docs/estimation.md")
+
+
+def test_prose_quotes_the_declared_height_map_size() -> None:
+    api = (REPO / "controller/src/api.rs").read_text()
+    size = int(re.search(r"pub const HEIGHT_MAP_SIZE: usize = (\d+);", api).group(1))  # type: ignore[union-attr]
+    quoted = 0
+    for name in HEIGHT_MAP_PROSE:
+        text = (REPO / name).read_text()
+        for a, b in re.findall(r"(\d+) × (\d+)(?= (?:local|samples|elevation))", text):
+            assert (int(a), int(b)) == (size, size), f"{name} says {a} × {b}; controller/src/api.rs declares HEIGHT_MAP_SIZE = {size}"
+            quoted += 1
+        for cells in re.findall(r"terrain\.map\.\{[^}]*h\[1\.\.(\d+)\]", text):
+            assert int(cells) == size * size, f"{name} says h[1..{cells}]; HEIGHT_MAP_SIZE² = {size * size}"
+            quoted += 1
+    assert quoted >= 4, "the READMEs no longer quote the height-map size: update HEIGHT_MAP_PROSE"
