@@ -2,19 +2,20 @@
 """Cost of one elevation-map update (fuse a scan + grow the variances) on a 128² map, beside the
 cost of simulating the scan itself (ray casting), for the depth camera and the lidar.
 
-Usage: .venv/bin/python scripts/bench_mapping.py [--repeats 30] [--size 128]
-Prints min / median / max milliseconds over the repeats, with the machine and the date.
+Usage: .venv/bin/python scripts/bench_mapping.py [--repeats 30] [--size 128] [--results-page mapping]
+Prints min / median / max milliseconds over the repeats (with --results-page also
+docs/results/NAME.md, stamped with commit, machine and date).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
-import platform
+import sys
 import time
 
 import numpy as np
+from pfnav_harness import results_page
 from pfnav_harness.elevation_map import ElevationMap, PoseBelief
 from pfnav_harness.scenario import Terrain
 from pfnav_harness.terrain_sensor import TerrainSensor, TerrainSensorConfig
@@ -37,11 +38,21 @@ def main() -> int:
     parser.add_argument("--size", type=int, default=128, help="map cells per side")
     parser.add_argument("--resolution", type=float, default=0.125, help="m per cell")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--results-page", default=None, metavar="NAME", help="also publish the table as docs/results/NAME.md")
     args = parser.parse_args()
+    if args.repeats < 1 or not 8 <= args.size <= 2048 or not 0.01 <= args.resolution <= 10.0:
+        parser.error("--repeats >= 1, --size in [8, 2048], --resolution in [0.01, 10] m")
+    if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
+        parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    stamp = results_page.collect_stamp() if args.results_page else None
     terrain = hills(args.size, args.resolution, args.seed)
     centre = 0.5 * args.size * args.resolution
-    print(f"{platform.node()} {platform.processor() or platform.machine()}, {datetime.date.today()}, map {args.size}² at {args.resolution} m")
-    print(f"{'sensor':<14}{'rays':>6}{'returns':>9}  {'scan sim, ms (min/med/max)':>28}  {'map update, ms (min/med/max)':>30}")
+    rows = [
+        f"Map {args.size}² cells of {args.resolution} m (hills, seed {args.seed}); the trunk circles 1 m around the centre; {args.repeats} scans per sensor.",
+        "",
+        "| sensor | rays | returns (median) | scan simulation, ms (min / median / max) | map update (fuse + grow), ms (min / median / max) |",
+        "|---|---:|---:|---|---|",
+    ]
     for name, config in (("depth_camera", TerrainSensorConfig(seed=args.seed)), ("lidar", TerrainSensorConfig.lidar(seed=args.seed))):
         sensor = TerrainSensor(terrain, config)
         emap = ElevationMap(terrain.origin, terrain.resolution, terrain.shape, config)
@@ -62,9 +73,14 @@ def main() -> int:
             returns.append(scan.returns)
 
         def stats(values: list[float]) -> str:
-            return f"{min(values):7.2f} {float(np.median(values)):7.2f} {max(values):7.2f}"
+            return f"{min(values):.2f} / {float(np.median(values)):.2f} / {max(values):.2f}"
 
-        print(f"{name:<14}{len(sensor.directions):>6}{int(np.median(returns)):>9}  {stats(scan_ms):>28}  {stats(map_ms):>30}")
+        rows.append(f"| {name} | {len(sensor.directions)} | {int(np.median(returns))} | {stats(scan_ms)} | {stats(map_ms)} |")
+    print("\n".join(rows))
+    if args.results_page:
+        command = results_page.regenerate_command(".venv/bin/python scripts/bench_mapping.py", sys.argv[1:])
+        path = results_page.write_results_page(args.results_page, "Elevation mapping: cost per update", "\n".join(rows), command, stamp)
+        print(f"results page: {path}", file=sys.stderr)
     return 0
 
 
