@@ -118,3 +118,22 @@ def test_believed_trunk_pose_applies_the_estimate_offset() -> None:
     assert abs(math.remainder(y - (yaw + 0.3), math.tau)) < 1e-9
     assert abs(r - roll) < 0.05 and abs(p - pitch) < 0.05  # yaw rotates about the world vertical
     assert abs(np.linalg.norm(belief.quaternion) - 1.0) < 1e-12
+
+
+def test_the_map_grows_with_the_estimators_position_variance_between_scans() -> None:
+    scenario = step_scenario()
+    sensed = SensedMap(scenario.terrain, None, PerceptionConfig(sensor=NOISELESS))
+    position, quaternion = trunk(2.0, 4.0)
+    sensed.sense(0.0, position, quaternion, PoseBelief(position, quaternion, np.diag([0.0, 0.0, 0.001])))
+    seen = sensed.known.copy()
+    before = sensed.map.variances[seen].copy()
+    # The robot turns away: the cells seen first are not seen again, they only grow.
+    away, turned = trunk(2.0, 4.0, yaw=math.pi)
+    sensed.sense(0.1, away, turned, PoseBelief(away, turned, np.diag([0.0, 0.0, 0.004])))  # not a scan time: nothing
+    np.testing.assert_array_equal(sensed.map.variances[seen], before)
+    sensed.sense(0.2, away, turned, PoseBelief(away, turned, np.diag([0.0, 0.0, 0.004])))
+    still = seen & sensed.known
+    # Flat ground where the first scan looked: the growth is the vertical variance's, 0.003 m².
+    grown = sensed.map.variances[still] - before[still[seen]]
+    assert still.sum() > 50
+    np.testing.assert_allclose(np.median(grown), 0.003, rtol=1e-6)

@@ -66,15 +66,16 @@ class SensedMap:
         self._changed_since_update = 0
 
     def sense(self, t: float, true_position: FloatArray, true_quaternion: FloatArray, belief: PoseBelief) -> None:
-        """Takes the scans due by time `t` (at the sensor's rate) and fuses them at `belief`."""
-        variance = np.diag(np.asarray(belief.position_covariance, dtype=np.float64))
-        if np.all(np.isfinite(variance)):
-            self.map.grow(variance - self._last_position_variance)
-            self._last_position_variance = variance
+        """Takes the scan due by time `t` (at the sensor's rate) and fuses it at `belief`, after
+        growing the map's variances by the estimator's growth since the last scan."""
         # Scans at multiples of the sensor period, whatever the callers' clock.
         if t + 1e-9 < self._next_scan:
             return
         self._next_scan = (math.floor(t / self.sensor.period + 1e-9) + 1) * self.sensor.period
+        variance = np.diag(np.asarray(belief.position_covariance, dtype=np.float64))
+        if np.all(np.isfinite(variance)):
+            self.map.grow(variance - self._last_position_variance)
+            self._last_position_variance = variance
         scan = self.sensor.scan(t, true_position, true_quaternion)
         report = self.map.fuse(scan, belief)
         self.reports.append(report)
