@@ -538,8 +538,10 @@ class CoSimulation:
                 pose[2] = true_yaw + offset[3]
             if senses_terrain and walking and comm:
                 assert online is not None
-                io = None if estimator is None else estimator.io
-                online.sense(tau, state[0:3].copy(), state[3:7].copy(), believed_trunk_pose(state, offset, io))
+                # The poses are built only when a scan is due (5–10 Hz), not every control step.
+                if online.scan_due(tau):
+                    io = None if estimator is None else estimator.io
+                    online.sense(tau, state[0:3].copy(), state[3:7].copy(), believed_trunk_pose(state, offset, io))
             if online is not None and walking and comm:
                 answer = online.tick(tau, float(pose[0]), float(pose[1]), float(pose[2]))
                 if answer is not None:

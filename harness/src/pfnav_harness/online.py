@@ -124,6 +124,10 @@ class OnlineNavigator:
         """Whether the co-simulation must call `sense` with the trunk's true and estimated pose."""
         return isinstance(self.belief, SensedMap)
 
+    def scan_due(self, t: float) -> bool:
+        """Whether `sense` at walk time `t` would scan (the co-simulation builds the poses only then)."""
+        return isinstance(self.belief, SensedMap) and self.belief.scan_due(t)
+
     def sense(self, t: float, true_position: NDArray[np.float64], true_quaternion: NDArray[np.float64], belief: PoseBelief) -> None:
         """The terrain sensor's scans due by walk time `t`, fused at the estimated pose `belief`."""
         if isinstance(self.belief, SensedMap):

@@ -68,8 +68,7 @@ class SensedMap:
     def sense(self, t: float, true_position: FloatArray, true_quaternion: FloatArray, belief: PoseBelief) -> None:
         """Takes the scan due by time `t` (at the sensor's rate) and fuses it at `belief`, after
         growing the map's variances by the estimator's growth since the last scan."""
-        # Scans at multiples of the sensor period, whatever the callers' clock.
-        if t + 1e-9 < self._next_scan:
+        if not self.scan_due(t):
             return
         self._next_scan = (math.floor(t / self.sensor.period + 1e-9) + 1) * self.sensor.period
         variance = np.diag(np.asarray(belief.position_covariance, dtype=np.float64))
@@ -80,6 +79,10 @@ class SensedMap:
         report = self.map.fuse(scan, belief)
         self.reports.append(report)
         self._changed_since_update += report.changed_cells
+
+    def scan_due(self, t: float) -> bool:
+        """Whether a scan is due at time `t`: scans come at multiples of the sensor period."""
+        return t + 1e-9 >= self._next_scan
 
     def take_changed(self) -> int:
         """Cells changed since the last call (a map update's "changed cells")."""
