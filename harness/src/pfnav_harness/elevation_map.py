@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from .body_sensors import quaternion_to_matrix
 from .errors import SimulationError
-from .terrain_sensor import SensorScan, TerrainSensorConfig
+from .terrain_sensor import SensorScan, TerrainSensorConfig, trunk_pose_problem
 
 FloatArray = NDArray[np.float64]
 
@@ -76,10 +76,7 @@ class PoseBelief:
 
     def problem(self) -> str | None:
         """Why this pose cannot be used, or None."""
-        p, q = np.asarray(self.position, dtype=np.float64), np.asarray(self.quaternion, dtype=np.float64)
-        if p.shape != (3,) or q.shape != (4,) or not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
-            return BAD_POSE
-        if not 0.5 < float(np.linalg.norm(q)) < 2.0:
+        if trunk_pose_problem(self.position, self.quaternion) is not None:
             return BAD_POSE
         c, a = np.asarray(self.position_covariance, dtype=np.float64), np.asarray(self.attitude_variance, dtype=np.float64)
         if c.shape != (3, 3) or a.shape != (3,) or not (np.all(np.isfinite(c)) and np.all(np.isfinite(a))):

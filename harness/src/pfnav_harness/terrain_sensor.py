@@ -178,6 +178,17 @@ class SensorScan:
         return int(np.count_nonzero(np.isfinite(self.ranges)))
 
 
+def trunk_pose_problem(position: FloatArray, quaternion: FloatArray) -> str | None:
+    """What is wrong with a trunk pose (position, quaternion w, x, y, z), or None."""
+    p, q = np.asarray(position, dtype=np.float64), np.asarray(quaternion, dtype=np.float64)
+    if p.shape != (3,) or q.shape != (4,) or not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+        return "the trunk pose must be a finite position (3) and quaternion (4)"
+    norm = float(np.linalg.norm(q))
+    if not 0.5 < norm < 2.0:
+        return f"the trunk quaternion is not a rotation (norm {norm:.3g})"
+    return None
+
+
 def ray_cast(terrain: Terrain, origin: FloatArray, directions: FloatArray, max_range: float, step: float) -> FloatArray:
     """Distance along each unit direction from `origin` to the terrain surface; inf: no hit.
 
@@ -264,13 +275,12 @@ class TerrainSensor:
 
     def scan(self, t: float, base_position: FloatArray, base_quaternion: FloatArray) -> SensorScan:
         """A scan captured at time `t` with the trunk at `base_position`, `base_quaternion` (w, x, y, z)."""
+        problem = trunk_pose_problem(base_position, base_quaternion)
+        if problem is not None:
+            raise SimulationError(f"terrain sensor: {problem}")
         position = np.asarray(base_position, dtype=np.float64)
         quaternion = np.asarray(base_quaternion, dtype=np.float64)
-        if position.shape != (3,) or quaternion.shape != (4,) or not (np.all(np.isfinite(position)) and np.all(np.isfinite(quaternion))):
-            raise SimulationError("terrain sensor: the trunk pose must be a finite position (3) and quaternion (4)")
         norm = float(np.linalg.norm(quaternion))
-        if not 0.5 < norm < 2.0:
-            raise SimulationError(f"terrain sensor: the trunk quaternion is not a rotation (norm {norm:.3g})")
         c = self.config
         trunk = quaternion_to_matrix(quaternion / norm)
         sensor_rotation = trunk @ self.mount_rotation
