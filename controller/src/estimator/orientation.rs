@@ -6,13 +6,12 @@
 //! the bias about gravity are not observable from these two sensors: the update leaves them alone
 //! and their variance grows.
 
-use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, SMatrix, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::api::GRAVITY;
 
 type Matrix6 = SMatrix<f64, 6, 6>;
-type Vector6 = SVector<f64, 6>;
 
 /// The accelerometer is a gravity reference only while `| |f| − g | ≤ ACC_GATE · g`.
 pub const ACC_GATE: f64 = 0.1;
