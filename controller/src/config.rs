@@ -483,6 +483,13 @@ controller_config! {
         est_foot_drift: f64 = 0.02,
             fmi "est.footDrift", range limits::EST_FOOT_DRIFT, unit "m/sqrt(s)",
             "Process noise density of a stance foot's world position (rolling foot sphere, slip)";
+        /// Horizontal position random walk per distance walked, m/√m: legged odometry drifts
+        /// with the distance (slip, kinematic errors) by amounts the leg measurements cannot see,
+        /// so the whole robot (trunk and feet together) is let wander by this much. It changes
+        /// the reported position variance and the weight of position fixes, not the estimate.
+        est_odometry_drift: f64 = 0.03,
+            fmi "est.odometryDrift", range limits::EST_ODOMETRY_DRIFT, unit "m/sqrt(m)",
+            "Horizontal position random walk per distance walked (the reported position variance grows with the distance)";
         /// Standard deviation of an absolute position fix, m.
         est_fix_noise: f64 = 0.02,
             fmi "est.fixNoise", range limits::EST_FIX_NOISE, unit "m",
@@ -573,7 +580,7 @@ mod tests {
                 .iter()
                 .map(|f| f.len)
                 .sum::<usize>(),
-            56
+            57
         );
     }
 

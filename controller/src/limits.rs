@@ -66,6 +66,8 @@ pub const EST_LEG_POSITION_NOISE: RangeInclusive<f64> = 1e-5..=1.0;
 pub const EST_LEG_VELOCITY_NOISE: RangeInclusive<f64> = 1e-4..=10.0;
 /// `est_foot_drift`, m/√s.
 pub const EST_FOOT_DRIFT: RangeInclusive<f64> = 1e-6..=1.0;
+/// `est_odometry_drift`, m/√m (0: the position variance does not grow with distance).
+pub const EST_ODOMETRY_DRIFT: RangeInclusive<f64> = 0.0..=1.0;
 /// `est_fix_noise`, m.
 pub const EST_FIX_NOISE: RangeInclusive<f64> = 1e-4..=100.0;
 /// `est_swing_noise_factor`.

@@ -266,3 +266,18 @@ def test_estimation_flags_reach_the_config() -> None:
     default = _config(build_parser().parse_args(["run", "--scenario", "pits", "--fix-rate", "2"]))
     assert (default.estimator, default.body_sensors.fix_rate) == ("kalman", 2.0)
     assert _config(build_parser().parse_args(["run", "--scenario", "pits", "--estimator", "groundTruth"])).estimator == "groundTruth"
+
+
+def test_the_final_error_is_judged_against_the_estimators_own_sigma(tmp_path: Path) -> None:
+    log = _log()
+    final_error = compute_estimation_metrics(log).position_error_final  # √(0.1² + 0.08²)
+    assert final_error == pytest.approx(math.hypot(0.1, 0.08))
+    for sigma, verdict in ((0.07, "within"), (0.06, "outside")):
+        log["est_pos_var"] = np.full((len(log["t"]), 3), sigma**2 / 2)
+        e = compute_estimation_metrics(log)
+        assert e.position_sigma_final == pytest.approx(sigma)
+        assert e.final_error_within_2sigma is (verdict == "within")
+        text = "\n".join(estimation_section({"synthetic": [_record(log, True)]}, tmp_path))
+        assert f"| {sigma:.3f} ({verdict} 2σ) |" in text
+    del log["est_pos_var"]
+    assert compute_estimation_metrics(log).final_error_within_2sigma is None

@@ -132,13 +132,16 @@ impl LegKalman {
     /// Prediction over `dt` with world acceleration `acceleration` (m/s²): p += v·dt + a·dt²/2,
     /// v += a·dt, feet constant. `acc_density` (m/s²/√Hz) is the white acceleration noise, whose
     /// exact discretisation gives the position/velocity process noise; `foot_density[leg]`
-    /// (m/√s) the random walk of each foot.
+    /// (m/√s) the random walk of each foot; `translation_variance` (m²) that of the whole robot
+    /// horizontally (trunk and feet moved together: invisible to the leg measurements, so the
+    /// estimate is unchanged and only fixes can take that variance back).
     pub fn predict(
         &mut self,
         acceleration: &Vector3<f64>,
         dt: f64,
         acc_density: f64,
         foot_density: &[f64; NUM_LEGS],
+        translation_variance: f64,
     ) {
         for i in 0..3 {
             self.x[POSITION + i] += self.x[VELOCITY + i] * dt + 0.5 * acceleration[i] * dt * dt;
@@ -166,6 +169,14 @@ impl LegKalman {
             self.p[(VELOCITY + i, VELOCITY + i)] += q * dt;
             for (leg, density) in foot_density.iter().enumerate() {
                 self.p[(foot(leg) + i, foot(leg) + i)] += density * density * dt;
+            }
+        }
+        let bodies = || std::iter::once(POSITION).chain((0..NUM_LEGS).map(foot));
+        for i in 0..2 {
+            for a in bodies() {
+                for b in bodies() {
+                    self.p[(a + i, b + i)] += translation_variance;
+                }
             }
         }
     }

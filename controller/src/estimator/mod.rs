@@ -60,6 +60,8 @@ struct LegNoise {
     leg_position_variance: f64,
     leg_velocity_variance: f64,
     foot_drift: f64,
+    /// Variance of the robot's horizontal translation per metre walked, m²/m.
+    odometry_variance_per_metre: f64,
     fix_sigma: f64,
     swing_factor: f64,
     /// Rolling radius of a stance foot, m (foot radius × `est_foot_rolling`).
@@ -126,6 +128,7 @@ impl StateEstimator {
                 leg_position_variance: config.est_leg_position_noise.powi(2),
                 leg_velocity_variance: config.est_leg_velocity_noise.powi(2),
                 foot_drift: config.est_foot_drift,
+                odometry_variance_per_metre: config.est_odometry_drift.powi(2),
                 fix_sigma: config.est_fix_noise,
                 swing_factor: config.est_swing_noise_factor,
                 rolling_radius: config.est_foot_rolling * model.foot_radius(),
@@ -335,9 +338,14 @@ impl StateEstimator {
         });
         let suspicion = trust.map(|t| 1.0 + (1.0 - t) * noise.swing_factor);
         let foot_density = suspicion.map(|k| noise.foot_drift * k.sqrt());
-        filters
-            .kalman
-            .predict(&acceleration, dt, noise.acc_density, &foot_density);
+        let walked = filters.kalman.velocity().xy().norm() * dt;
+        filters.kalman.predict(
+            &acceleration,
+            dt,
+            noise.acc_density,
+            &foot_density,
+            noise.odometry_variance_per_metre * walked,
+        );
 
         // Leg kinematics: every foot relative to the trunk; the trunk velocity from the feet
         // trusted to stand still.

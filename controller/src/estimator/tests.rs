@@ -281,6 +281,49 @@ fn constant_velocity_trot_is_tracked() {
     assert!(drift < 0.01 * distance, "drift {drift} m over {distance} m");
 }
 
+/// The odometry drift term lets the whole robot wander with the distance walked: the same trot
+/// gives the same estimate with and without it (the leg measurements cannot see a common
+/// translation), and the horizontal position variance grows by drift² per metre walked.
+#[test]
+fn position_variance_grows_with_the_distance_walked() {
+    let model = model();
+    let velocity = Vector3::new(0.4, 0.1, 0.0);
+    let run = |odometry_drift: f64| {
+        let config = ControllerConfig {
+            est_odometry_drift: odometry_drift,
+            ..kalman_config()
+        };
+        let mut estimator = StateEstimator::new(&model, &config);
+        let mut walk = TrotWalk::new(&model, velocity);
+        let mut position = Vector3::zeros();
+        for k in 0..6000 {
+            let (truth, plan) = walk.at(k as f64 * DT);
+            let (state, imu) = truth.measure(&model);
+            position = estimator
+                .update(&model, &state, &sensors(imu), &plan, DT)
+                .position;
+        }
+        (position, estimator.report().position_variance)
+    };
+    let (still, variance_without) = run(0.0);
+    let drift = 0.03;
+    let (wandering, variance_with) = run(drift);
+    assert!((still - wandering).norm() < 1e-9, "{still} vs {wandering}");
+    let distance = velocity.xy().norm() * 6.0;
+    for axis in 0..2 {
+        let added = variance_with[axis] - variance_without[axis];
+        let expected = drift * drift * distance;
+        assert!(
+            (added - expected).abs() < 0.1 * expected,
+            "axis {axis}: variance grew by {added:e} m², expected {expected:e} m²"
+        );
+    }
+    assert!(
+        (variance_with[2] - variance_without[2]).abs() < 1e-12,
+        "height variance changed"
+    );
+}
+
 /// Turning in place at 0.5 rad/s for 2 s: the yaw estimate is the integrated rate, 1 rad.
 #[test]
 fn yaw_rate_integrates_to_the_known_angle() {

@@ -133,6 +133,8 @@ pub enum Unit {
     MetrePerSecondSquaredPerRootHertz,
     /// Position random-walk density, m/√s.
     MetrePerRootSecond,
+    /// Position random walk per distance travelled, m/√m.
+    MetrePerRootMetre,
     /// Square metre (position variance).
     SquareMetre,
     /// Square radian (attitude variance).
@@ -141,7 +143,7 @@ pub enum Unit {
 
 impl Unit {
     /// Every unit, in declaration order.
-    pub const ALL: [Unit; 16] = [
+    pub const ALL: [Unit; 17] = [
         Unit::Metre,
         Unit::Second,
         Unit::Radian,
@@ -156,6 +158,7 @@ impl Unit {
         Unit::RadianPerSecondSquaredPerRootHertz,
         Unit::MetrePerSecondSquaredPerRootHertz,
         Unit::MetrePerRootSecond,
+        Unit::MetrePerRootMetre,
         Unit::SquareMetre,
         Unit::SquareRadian,
     ];
@@ -177,6 +180,7 @@ impl Unit {
             Unit::RadianPerSecondSquaredPerRootHertz => "rad/s2/sqrt(Hz)",
             Unit::MetrePerSecondSquaredPerRootHertz => "m/s2/sqrt(Hz)",
             Unit::MetrePerRootSecond => "m/sqrt(s)",
+            Unit::MetrePerRootMetre => "m/sqrt(m)",
             Unit::SquareMetre => "m2",
             Unit::SquareRadian => "rad2",
         }
@@ -202,7 +206,8 @@ impl Unit {
             Unit::RadianPerSecondPerRootHertz
             | Unit::RadianPerSecondSquaredPerRootHertz
             | Unit::MetrePerSecondSquaredPerRootHertz
-            | Unit::MetrePerRootSecond => &[],
+            | Unit::MetrePerRootSecond
+            | Unit::MetrePerRootMetre => &[],
         }
     }
 }

@@ -162,6 +162,13 @@ def _final_sigma(log: dict[str, Any], walking: NDArray[np.bool_]) -> float:
     return float(math.sqrt(max(0.0, float(variance[-1, 0] + variance[-1, 1])))) if len(variance) else math.nan
 
 
+def _sigma_cell(e: EstimationMetrics) -> str:
+    within = e.final_error_within_2sigma
+    if within is None:
+        return "–"
+    return f"{_fmt(e.position_sigma_final)} ({'within' if within else 'outside'} 2σ)"
+
+
 def plot_estimation(log: dict[str, Any], title: str, path: Path) -> None:
     """Estimate against truth: xy path, velocity error and position error over time."""
     t = np.asarray(log["t"])
@@ -224,11 +231,13 @@ def estimation_section(runs: dict[str, Sequence[EstimationRun]], out_dir: Path) 
         "where stated, noisy position fixes; the truth is the DART trunk. Measured while walking. Drift: horizontal "
         "position error accrued during the walk over the length walked. Tracking: the true position against the plan.",
         "",
-        "A run that fell is measured up to its fall (column 'until').",
+        "A run that fell is measured up to its fall (column 'until'). Own σ: the estimator's final horizontal "
+        "standard deviation √(σx² + σy²); 'within 2σ' when the final error is at most twice that.",
         "",
         "| scenario | run | until [s] | fixes [Hz / m] | velocity RMS 3-D / horiz. [m/s] | RMS vx / vy / vz [m/s] | drift [% of m] | "
-        "position err final / max / RMS [m] | height err RMS [m] | yaw err final / max [°] | tracking RMS [m] | status bits |",
-        "|" + "---|" * 12,
+        "position err final / max / RMS [m] | own σ final [m] | height err RMS [m] | yaw err final / max [°] | "
+        "tracking RMS [m] | status bits |",
+        "|" + "---|" * 13,
     ]
     for name, rec in estimated:
         e = rec.estimation
@@ -239,7 +248,8 @@ def estimation_section(runs: dict[str, Sequence[EstimationRun]], out_dir: Path) 
             f"| {name} | {rec.metrics.method} | {e.measured_until:.1f}{' (fell)' if rec.metrics.fell else ''} | {fixes} | "
             f"{_fmt(e.velocity_rms)} / {_fmt(e.velocity_rms_horizontal)} | "
             f"{_fmt(vx)} / {_fmt(vy)} / {_fmt(vz)} | {_fmt(e.drift_percent, 2)} of {_fmt(e.path_length, 1)} | "
-            f"{_fmt(e.position_error_final)} / {_fmt(e.position_error_max)} / {_fmt(e.position_rms)} | {_fmt(e.height_error_rms)} | "
+            f"{_fmt(e.position_error_final)} / {_fmt(e.position_error_max)} / {_fmt(e.position_rms)} | {_sigma_cell(e)} | "
+            f"{_fmt(e.height_error_rms)} | "
             f"{_fmt(math.degrees(e.yaw_error_final), 2)} / {_fmt(math.degrees(e.yaw_error_max), 2)} | {_fmt(e.tracking_rms)} | "
             f"{e.status_bits:#x} |"
         )
