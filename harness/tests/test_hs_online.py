@@ -93,10 +93,11 @@ def _scenario() -> Scenario:
 
 
 def _walk(navigator: OnlineNavigator, seconds: float, dt: float = 0.01) -> list[tuple[float, PlanAnswer]]:
+    """Walks along +x at 0.5 m/s, the position's σ growing by 2 cm per second."""
     used = []
     for k in range(round(seconds / dt)):
         t = k * dt
-        answer = navigator.tick(t, 1.0 + 0.5 * t, 4.0, 0.0)
+        answer = navigator.tick(t, 1.0 + 0.5 * t, 4.0, 0.0, 0.02 * t)
         if answer is not None:
             used.append((t, answer))
     return used
@@ -117,6 +118,9 @@ def test_updates_go_out_at_the_period_and_answers_are_used_after_the_budget() ->
     np.testing.assert_allclose([t for t, _ in used], [0.7, 1.2, 1.7, 2.2, 2.7], atol=1e-9)
     # Every replan starts from the pose at its update.
     assert [round(pose.x, 6) for _, pose, _ in client.requests[1:]] == [round(1.0 + 0.5 * t, 6) for t in publish_times]
+    # ... with the position's uncertainty at that moment, for the planner's margin.
+    assert client.requests[0][1].sigma == 0.0
+    assert [round(pose.sigma, 6) for _, pose, _ in client.requests[1:]] == [round(0.02 * t, 6) for t in publish_times]
     summary = latency_summary(navigator.replans)
     assert summary["map_updates"] == 5 and summary["replans_in_use"] == 5
 

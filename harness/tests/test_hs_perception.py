@@ -137,3 +137,16 @@ def test_the_map_grows_with_the_estimators_position_variance_between_scans() -> 
     grown = sensed.map.variances[still] - before[still[seen]]
     assert still.sum() > 50
     np.testing.assert_allclose(np.median(grown), 0.003, rtol=1e-6)
+
+
+def test_noise_below_the_lowest_ground_is_clipped_to_the_planners_datum() -> None:
+    """Flat ground at h = 0 seen by a noisy sensor: about half the returns lie below 0, which the
+    planner's cost h/h_max refuses; the published terrain never goes below 0."""
+    scenario = step_scenario()
+    noisy = TerrainSensorConfig(sigma0=0.02, sigma_r2=0.0, dropout=0.0, outlier=0.0, seed=3)
+    sensed = SensedMap(scenario.terrain, None, PerceptionConfig(sensor=noisy))
+    position, quaternion = trunk(2.0, 4.0)
+    sensed.sense(0.0, position, quaternion, PoseBelief(position, quaternion))
+    assert np.nanmin(sensed.map.heights) < 0.0
+    heights = sensed.terrain().heights
+    assert heights.min() == 0.0 and np.any(heights[sensed.known] > 0.0)

@@ -166,8 +166,10 @@ class OnlineNavigator:
         self._next_update = self.config.update_period
         return answer
 
-    def tick(self, t: float, x: float, y: float, yaw: float) -> PlanAnswer | None:
-        """Called with the walk clock `t`; returns an answer to put in use now, else None."""
+    def tick(self, t: float, x: float, y: float, yaw: float, sigma: float = 0.0) -> PlanAnswer | None:
+        """Called with the walk clock `t` and the believed pose (`sigma`: its position standard
+        deviation, m, which the planner keeps a margin for); returns an answer to put in use now,
+        else None."""
         answer_now: PlanAnswer | None = None
         pending = self._pending
         if pending is not None and t >= pending.t_publish + self.config.apply_delay - 1e-9:
@@ -180,7 +182,7 @@ class OnlineNavigator:
             goal = self.scenario.goal
             # Inside the goal region there is nothing left to plan.
             if math.hypot(x - goal.center[0], y - goal.center[1]) > goal.radius:
-                self._send_update(t, x, y, yaw)
+                self._send_update(t, x, y, yaw, sigma)
         return answer_now
 
     def _collect(self, pending: Replan) -> PlanAnswer | None:
@@ -206,7 +208,7 @@ class OnlineNavigator:
         b = self.belief
         return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.unknown_traversability)
 
-    def _send_update(self, t: float, x: float, y: float, yaw: float) -> None:
+    def _send_update(self, t: float, x: float, y: float, yaw: float, sigma: float) -> None:
         changed = self._observe(x, y)
         kind = "update"
         if self._bad_updates and len(self.replans) >= 2:
@@ -215,7 +217,7 @@ class OnlineNavigator:
         else:
             seq = self._publish_belief()
         published = time.time()
-        request_id = self.client.send_request(StartPose(x, y, yaw), self.scenario.goal, self.config.method, seq, self.config.options)
+        request_id = self.client.send_request(StartPose(x, y, yaw, sigma), self.scenario.goal, self.config.method, seq, self.config.options)
         replan = Replan(t, seq, request_id, changed, kind=kind, _published_wall=published)
         self.replans.append(replan)
         self._pending = replan

@@ -90,8 +90,12 @@ class SensedMap:
         return changed
 
     def terrain(self) -> Terrain:
-        """The believed terrain: known heights, unknown cells at 0 (their mask goes with them)."""
-        return Terrain(self.truth.origin, self.truth.resolution, np.nan_to_num(self.map.heights, nan=0.0), None)
+        """The believed terrain: known heights, unknown cells at 0 (their mask goes with them).
+
+        Heights are clipped at 0, the datum of the planner's cost h/h_max (which refuses a map
+        with a negative cell): range noise puts returns from the lowest ground a little below it.
+        """
+        return Terrain(self.truth.origin, self.truth.resolution, np.clip(np.nan_to_num(self.map.heights, nan=0.0), 0.0, None), None)
 
     @property
     def known(self) -> NDArray[np.bool_]:

@@ -100,6 +100,9 @@ class StartPose:
     x: float
     y: float
     yaw: float
+    # Standard deviation of the position, m (the estimator's, worst horizontal axis; 0: exact):
+    # the service widens the footprint by confidence_sigmas times it.
+    sigma: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -110,6 +113,8 @@ class RequestOptions:
     directions: int = 0
     sample_period: float = 0.0
     max_solve_time: float = 0.0
+    # κ of the margin for the start's uncertainty (0: the service's default, 2).
+    confidence_sigmas: float = 0.0
 
 
 @dataclass
@@ -407,6 +412,8 @@ class PlannerClient:
         req.options.speed = options.speed
         req.options.sample_period = options.sample_period
         req.options.max_solve_time = options.max_solve_time
+        req.options.confidence_sigmas = options.confidence_sigmas
+        req.start_sigma = pose.sigma
         self.lc.publish(self.prefix + PLANNER.plan_request, req.encode())
         return request_id
 

@@ -82,7 +82,9 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
             sample_period: 0.1,
             max_solve_time: 5.0,
             solver: PlanOptions::SOLVER_CLARABEL,
+            confidence_sigmas: 2.5,
         },
+        start_sigma: 0.15,
     };
     let samples: Vec<TrajectorySample> = (0..4)
         .map(|i| {

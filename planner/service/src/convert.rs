@@ -12,6 +12,7 @@ use pf_planner::map::{GridMap, MapKnowledge, Point};
 use pf_planner::pf::StartDensity;
 use pf_planner::plan::Method;
 use pf_planner::trajectory::{MAX_SAMPLES, MAX_SPEED};
+use pf_planner::traversability::TraversabilityParams;
 
 /// Why a message is not planned: the reply status (`PlanReply::STATUS_*`) and the reason.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -230,7 +231,17 @@ pub struct ResolvedOptions {
     pub sample_period: f64,
     pub max_solve_time: f64,
     pub solver: LpSolver,
+    /// κ of the start-uncertainty margin (standard deviations).
+    pub confidence_sigmas: f64,
 }
+
+/// κ when `options.confidence_sigmas` is 0: a Gaussian belief's true position lies outside
+/// κσ with probability exp(−κ²/2) = 13.5 %.
+pub const DEFAULT_CONFIDENCE_SIGMAS: f64 = 2.0;
+/// Largest accepted κ (exp(−κ²/2) = 4·10⁻⁶: beyond, the margin only blocks the map).
+pub const MAX_CONFIDENCE_SIGMAS: f64 = 5.0;
+/// Largest accepted `start_sigma`, metres.
+pub const MAX_START_SIGMA: f64 = 10.0;
 
 /// Largest number of basis functions (grid_size²) for which Clarabel may be requested: its
 /// interior-point iterations grow with the grid (128²: 2–4 s, 256²: minutes), so larger grids
@@ -307,6 +318,16 @@ pub fn resolve_options(
             )))
         }
     };
+    let confidence_sigmas = positive_or_default(
+        options.confidence_sigmas,
+        DEFAULT_CONFIDENCE_SIGMAS,
+        "confidence_sigmas",
+    )?;
+    if confidence_sigmas > MAX_CONFIDENCE_SIGMAS {
+        return Err(Rejection::invalid_request(format!(
+            "options.confidence_sigmas must be <= {MAX_CONFIDENCE_SIGMAS}, got {confidence_sigmas}"
+        )));
+    }
     if solver == LpSolver::Clarabel && grid_size * grid_size > MAX_CLARABEL_FUNCTIONS {
         return Err(Rejection::invalid_request(format!(
             "options.solver = clarabel is limited to {MAX_CLARABEL_FUNCTIONS} basis functions (grid_size <= 128), got grid_size {grid_size}; use the exact solver"
@@ -319,6 +340,7 @@ pub fn resolve_options(
         )));
     }
     Ok(ResolvedOptions {
+        confidence_sigmas,
         solver,
         basis,
         grid_size,
@@ -352,6 +374,21 @@ pub struct ValidatedRequest {
     pub start_yaw: f64,
     pub goal: GoalRegion,
     pub options: ResolvedOptions,
+    /// Standard deviation of the start position, metres (0: exact).
+    pub start_sigma: f64,
+}
+
+impl ValidatedRequest {
+    /// The service's cost model with the footprint widened by κ·σ of the start: a path point
+    /// then costs the worst p within the robot's reach for every true position within κσ of
+    /// the believed one, which holds with probability 1 − exp(−κ²/2) for a Gaussian belief.
+    pub fn traversability(&self, service: &TraversabilityParams) -> TraversabilityParams {
+        TraversabilityParams {
+            footprint_radius_m: service.footprint_radius_m
+                + self.options.confidence_sigmas * self.start_sigma,
+            ..*service
+        }
+    }
 }
 
 /// Where a request's map comes from when it is not inline.
@@ -396,6 +433,12 @@ pub fn validate_request(
                 "{name} must be finite, got {value}"
             )));
         }
+    }
+    if !(msg.start_sigma.is_finite() && (0.0..=MAX_START_SIGMA).contains(&msg.start_sigma)) {
+        return Err(Rejection::invalid_request(format!(
+            "start_sigma must be finite in 0 ..= {MAX_START_SIGMA} m, got {}",
+            msg.start_sigma
+        )));
     }
     if !(msg.goal_radius.is_finite() && msg.goal_radius > 0.0) {
         return Err(Rejection::invalid_request(format!(
@@ -447,6 +490,7 @@ pub fn validate_request(
             radius: msg.goal_radius,
         },
         options,
+        start_sigma: msg.start_sigma,
     })
 }
 
@@ -511,6 +555,18 @@ mod tests {
         assert_eq!(v.options.directions, 8);
         assert_eq!(v.options.speed, 0.5);
         assert_eq!(v.options.start_density, StartDensity::UniformFree);
+        assert_eq!(v.options.confidence_sigmas, DEFAULT_CONFIDENCE_SIGMAS);
+        assert_eq!(v.start_sigma, 0.0);
+        let service = TraversabilityParams {
+            footprint_radius_m: 0.25,
+            ..TraversabilityParams::default()
+        };
+        assert_eq!(v.traversability(&service), service);
+        let mut uncertain = request();
+        uncertain.start_sigma = 0.1;
+        uncertain.options.confidence_sigmas = 3.0;
+        let v = validate_request(&uncertain, &NoMaps, 100, &OptionDefaults::default()).unwrap();
+        assert!((v.traversability(&service).footprint_radius_m - 0.55).abs() < 1e-12);
     }
 
     #[test]
@@ -552,6 +608,36 @@ mod tests {
                 Box::new(|r| r.options.basis = 9),
                 PlanReply::STATUS_INVALID_REQUEST,
                 "basis",
+            ),
+            (
+                Box::new(|r| r.start_sigma = f64::NAN),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "start_sigma",
+            ),
+            (
+                Box::new(|r| r.start_sigma = -0.1),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "start_sigma",
+            ),
+            (
+                Box::new(|r| r.start_sigma = 11.0),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "start_sigma",
+            ),
+            (
+                Box::new(|r| r.options.confidence_sigmas = -2.0),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "confidence_sigmas",
+            ),
+            (
+                Box::new(|r| r.options.confidence_sigmas = 6.0),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "confidence_sigmas",
+            ),
+            (
+                Box::new(|r| r.options.confidence_sigmas = f64::INFINITY),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "confidence_sigmas",
             ),
             (
                 Box::new(|r| r.options.speed = -1.0),
