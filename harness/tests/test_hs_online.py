@@ -93,11 +93,11 @@ def _scenario() -> Scenario:
 
 
 def _walk(navigator: OnlineNavigator, seconds: float, dt: float = 0.01) -> list[tuple[float, PlanAnswer]]:
-    """Walks along +x at 0.5 m/s, the position's σ growing by 2 cm per second."""
+    """Walks along +x at 0.5 m/s, the position's σ growing by 2 cm per second along y (1 cm along x)."""
     used = []
     for k in range(round(seconds / dt)):
         t = k * dt
-        answer = navigator.tick(t, 1.0 + 0.5 * t, 4.0, 0.0, 0.02 * t)
+        answer = navigator.tick(t, 1.0 + 0.5 * t, 4.0, 0.0, np.array([(0.01 * t) ** 2, (0.02 * t) ** 2, 1.0]))
         if answer is not None:
             used.append((t, answer))
     return used

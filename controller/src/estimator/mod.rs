@@ -118,11 +118,7 @@ impl StateEstimator {
         let gait = Gait::new(config.gait, config.gait_period);
         StateEstimator {
             kind: config.estimator,
-            orientation_noise: OrientationNoise {
-                gyro: config.est_gyro_noise,
-                gyro_bias_walk: config.est_gyro_bias_walk,
-                acc_tilt: config.est_acc_tilt_noise,
-            },
+            orientation_noise: OrientationNoise::from_config(config),
             leg_noise: LegNoise {
                 acc_density: config.est_acc_noise,
                 leg_position_variance: config.est_leg_position_noise.powi(2),

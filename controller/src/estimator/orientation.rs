@@ -10,6 +10,7 @@ use nalgebra::{Matrix3, SMatrix, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::api::GRAVITY;
+use crate::config::ControllerConfig;
 
 type Matrix6 = SMatrix<f64, 6, 6>;
 
@@ -38,6 +39,17 @@ pub struct OrientationNoise {
     pub gyro_bias_walk: f64,
     /// Accelerometer standard deviation as a gravity reference, m/s².
     pub acc_tilt: f64,
+}
+
+impl OrientationNoise {
+    /// The noise model of `config` (`est_gyro_noise`, `est_gyro_bias_walk`, `est_acc_tilt_noise`).
+    pub fn from_config(config: &ControllerConfig) -> Self {
+        OrientationNoise {
+            gyro: config.est_gyro_noise,
+            gyro_bias_walk: config.est_gyro_bias_walk,
+            acc_tilt: config.est_acc_tilt_noise,
+        }
+    }
 }
 
 /// Attitude (body → world) and gyro bias with their error covariance.

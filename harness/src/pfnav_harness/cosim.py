@@ -543,8 +543,8 @@ class CoSimulation:
                     io = None if estimator is None else estimator.io
                     online.sense(tau, state[0:3].copy(), state[3:7].copy(), believed_trunk_pose(state, offset, io))
             if online is not None and walking and comm:
-                sigma = 0.0 if estimator is None else math.sqrt(max(float(estimator.io.est_pos_var[0]), float(estimator.io.est_pos_var[1]), 0.0))
-                answer = online.tick(tau, float(pose[0]), float(pose[1]), float(pose[2]), sigma)
+                variance = None if estimator is None else estimator.io.est_pos_var
+                answer = online.tick(tau, float(pose[0]), float(pose[1]), float(pose[2]), variance)
                 if answer is not None:
                     if isinstance(source, FieldSource):
                         assert answer.field is not None  # the navigator only passes on P-F answers with a field

@@ -98,6 +98,14 @@ class Replan:
         return self.outcome not in (OUTCOME_IN_USE, OUTCOME_PENDING, OUTCOME_RUN_ENDED)
 
 
+def horizontal_sigma(position_variance: NDArray[np.float64] | None) -> float:
+    """The position's standard deviation along its worse horizontal axis, m (what the planner
+    widens the footprint by, times κ); 0 without a variance."""
+    if position_variance is None:
+        return 0.0
+    return math.sqrt(max(float(position_variance[0]), float(position_variance[1]), 0.0))
+
+
 class OnlineNavigator:
     """Sensing, map updates and replanning for one run; the co-simulation asks it every control step."""
 
@@ -166,10 +174,10 @@ class OnlineNavigator:
         self._next_update = self.config.update_period
         return answer
 
-    def tick(self, t: float, x: float, y: float, yaw: float, sigma: float = 0.0) -> PlanAnswer | None:
-        """Called with the walk clock `t` and the believed pose (`sigma`: its position standard
-        deviation, m, which the planner keeps a margin for); returns an answer to put in use now,
-        else None."""
+    def tick(self, t: float, x: float, y: float, yaw: float, position_variance: NDArray[np.float64] | None = None) -> PlanAnswer | None:
+        """Called with the walk clock `t` and the believed pose (`position_variance`: the
+        estimator's x, y, z variances, m², read only when an update goes out; None: exact);
+        returns an answer to put in use now, else None."""
         answer_now: PlanAnswer | None = None
         pending = self._pending
         if pending is not None and t >= pending.t_publish + self.config.apply_delay - 1e-9:
@@ -182,7 +190,7 @@ class OnlineNavigator:
             goal = self.scenario.goal
             # Inside the goal region there is nothing left to plan.
             if math.hypot(x - goal.center[0], y - goal.center[1]) > goal.radius:
-                self._send_update(t, x, y, yaw, sigma)
+                self._send_update(t, x, y, yaw, horizontal_sigma(position_variance))
         return answer_now
 
     def _collect(self, pending: Replan) -> PlanAnswer | None:
