@@ -124,6 +124,9 @@ def terrain_map(
     m.num_known_cells = m.num_cells if with_known else 0
     m.known_mask = [(i % 5) != 1 for i in range(m.num_known_cells)]
     m.unknown_traversability = 0.35 if with_known else 0.0
+    # Height variances go with a sensed (partially known) map; 0 entries = exact heights.
+    m.num_variance_cells = m.num_cells if with_known else 0
+    m.height_variances = [1e-4 * (1 + i % 11) for i in range(m.num_variance_cells)]
     return m
 
 
@@ -299,10 +302,10 @@ def test_rust_rejects_corrupt_payloads_with_a_reason() -> None:
     payload = terrain_map(4, 4, True).encode()
     with pytest.raises(RuntimeError, match="truncated"):
         run_rust("decode", payload[:20])
-    # Cut inside the obstacle mask (followed by num_known_cells and unknown_traversability,
-    # 12 bytes): the declared length no longer fits the bytes left.
+    # Cut inside the obstacle mask (followed by num_known_cells, unknown_traversability and
+    # num_variance_cells, 16 bytes): the declared length no longer fits the bytes left.
     with pytest.raises(RuntimeError, match="obstacle_mask: 16 elements cannot fit"):
-        run_rust("decode", payload[: -(12 + 3)])
+        run_rust("decode", payload[: -(16 + 3)])
     with pytest.raises(RuntimeError, match="fingerprint"):
         run_rust("decode", b"\x00" * 8 + payload[8:])
     # num_cells claims 2^31-1 heights: refused before allocation, with the field named.

@@ -49,11 +49,14 @@ class ScriptedClient:
     maps: list[Any] = field(default_factory=list)
     raw: list[Any] = field(default_factory=list)
     requests: list[tuple[int, StartPose, int]] = field(default_factory=list)
+    # The height variances sent with each map of `maps` (None: exact heights).
+    variances: list[Any] = field(default_factory=list)
     seq: int = 100
 
-    def publish_map(self, terrain: Terrain, known: Any = None, unknown_traversability: float = 0.0) -> int:
+    def publish_map(self, terrain: Terrain, known: Any = None, unknown_traversability: float = 0.0, variances: Any = None) -> int:
         self.seq += 1
         self.maps.append((self.seq, terrain, known, unknown_traversability))
+        self.variances.append(variances)
         return self.seq
 
     def reserve_map_seq(self) -> int:
@@ -111,6 +114,7 @@ def test_updates_go_out_at_the_period_and_answers_are_used_after_the_budget() ->
     # The first map already carries what the sensor saw at the start: a partial map with a mask.
     _, _, known, prior_p = client.maps[0]
     assert known is not None and 0 < known.sum() < known.size and prior_p == 0.0  # the planner's default
+    assert client.variances[0] is None  # the ideal sensor's heights are exact
     used = _walk(navigator, 3.0)
     publish_times = [r.t_publish for r in navigator.replans[1:]]
     # The start plan covers t = 0; updates follow every period.

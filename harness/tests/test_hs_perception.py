@@ -103,6 +103,13 @@ def test_the_navigator_scans_at_the_start_and_publishes_the_sensed_map() -> None
     assert len(client.maps) == 2  # the start and the update at 0.5 s
     assert navigator.replans[1].changed_cells > 0
     assert client.maps[1][2].sum() > known.sum()
+    # Each known cell goes out with the map's variance of its height, unknown cells with 0.
+    variances = client.variances[1]
+    sensed = navigator.belief
+    assert isinstance(sensed, SensedMap)
+    np.testing.assert_array_equal(variances[client.maps[1][2]], sensed.map.variances[client.maps[1][2]])
+    assert np.all(variances[~client.maps[1][2]] == 0.0)
+    assert np.all(variances[client.maps[1][2]] > 0.0)
 
 
 def test_believed_trunk_pose_applies_the_estimate_offset() -> None:

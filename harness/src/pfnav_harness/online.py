@@ -214,7 +214,7 @@ class OnlineNavigator:
 
     def _publish_belief(self) -> int:
         b = self.belief
-        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.unknown_traversability)
+        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.unknown_traversability, variances=b.height_variances())
 
     def _send_update(self, t: float, x: float, y: float, yaw: float, sigma: float) -> None:
         changed = self._observe(x, y)

@@ -105,6 +105,10 @@ class SensedMap:
         known = self.map.known
         return None if bool(known.all()) else known.copy()
 
+    def height_variances(self) -> FloatArray:
+        """Each cell's height variance for the planner (m²; 0 where unknown, ignored there)."""
+        return np.where(self.map.known, self.map.variances, 0.0)
+
     @property
     def known_fraction(self) -> float:
         return float(self.map.known.mean())

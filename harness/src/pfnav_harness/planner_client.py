@@ -146,11 +146,13 @@ def terrain_map_message(
     utime: int | None = None,
     known: NDArray[np.bool_] | None = None,
     unknown_traversability: float = 0.0,
+    variances: NDArray[np.float64] | None = None,
 ) -> Any:
     """The terrain as `pfnav.terrain_map_t` (heights row-major iy·width + ix, like the map).
 
     `known` marks the observed cells of a partially known map (None: every cell is known); the
-    planner gives the others `unknown_traversability` (0: its default).
+    planner gives the others `unknown_traversability` (0: its default). `variances` (m², None:
+    exact heights) lets the planner price each known cell from its confidence bounds.
     """
     pfnav = _import_types()
     msg = pfnav.terrain_map_t()
@@ -179,6 +181,14 @@ def terrain_map_message(
         msg.num_known_cells = nx * ny
         msg.known_mask = [bool(v) for v in known.ravel()]
     msg.unknown_traversability = float(unknown_traversability)
+    if variances is None:
+        msg.num_variance_cells = 0
+        msg.height_variances = []
+    else:
+        if variances.shape != terrain.shape:
+            raise PlannerError(f"height variances of shape {variances.shape} differ from the map's {terrain.shape}")
+        msg.num_variance_cells = nx * ny
+        msg.height_variances = variances.ravel().tolist()
     return msg
 
 
@@ -367,10 +377,16 @@ class PlannerClient:
         self.close()
 
     # --- requests -----------------------------------------------------------------------------
-    def publish_map(self, terrain: Terrain, known: NDArray[np.bool_] | None = None, unknown_traversability: float = 0.0) -> int:
+    def publish_map(
+        self,
+        terrain: Terrain,
+        known: NDArray[np.bool_] | None = None,
+        unknown_traversability: float = 0.0,
+        variances: NDArray[np.float64] | None = None,
+    ) -> int:
         """Publishes the terrain on `<prefix>MAP` with a new sequence number and returns it."""
         seq = self.reserve_map_seq()
-        self._published_map = terrain_map_message(terrain, seq, known=known, unknown_traversability=unknown_traversability)
+        self._published_map = terrain_map_message(terrain, seq, known=known, unknown_traversability=unknown_traversability, variances=variances)
         self.lc.publish(self.prefix + PLANNER.map, self._published_map.encode())
         return seq
 

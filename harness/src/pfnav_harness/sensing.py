@@ -111,3 +111,7 @@ class BeliefMap:
     def known_mask(self) -> NDArray[np.bool_] | None:
         """The known cells, or None when every cell is known (the map message then sends no mask)."""
         return None if bool(self.known.all()) else self.known.copy()
+
+    def height_variances(self) -> NDArray[np.float64] | None:
+        """None: the ideal sensor's heights are exact."""
+        return None

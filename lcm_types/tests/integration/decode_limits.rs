@@ -90,8 +90,9 @@ fn a_map_claiming_two_billion_cells_is_rejected_without_allocating() {
         }) => {
             assert_eq!(field, "heights");
             assert_eq!(elements, i32::MAX as u128);
-            // The heights, then num_obstacle_cells, num_known_cells, unknown_traversability.
-            assert_eq!(available, 16 * 8 + 4 + 4 + 8);
+            // The heights, then num_obstacle_cells, num_known_cells, unknown_traversability,
+            // num_variance_cells.
+            assert_eq!(available, 16 * 8 + 4 + 4 + 8 + 4);
         }
         other => panic!("expected ArrayExceedsBuffer, got {other:?}"),
     }

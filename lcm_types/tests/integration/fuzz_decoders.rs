@@ -55,6 +55,8 @@ fn sample_map() -> TerrainMap {
         num_known_cells: 6,
         known_mask: vec![true, true, false, true, false, true],
         unknown_traversability: 0.7,
+        num_variance_cells: 6,
+        height_variances: vec![0.01, 0.0, 0.0, 2.5e-3, 0.0, 1.0],
     }
 }
 

@@ -31,6 +31,15 @@ pub enum MapError {
     NegativeHeight { ix: usize, iy: usize, value: f64 },
     #[error("unknown_traversability (the p of unobserved cells) must lie in (0, 1], got {0}")]
     BadUnknownTraversability(f64),
+    #[error(
+        "height variance of cell ({ix}, {iy}) is {value} m^2; it must be finite in 0 ..= {max} m^2"
+    )]
+    BadHeightVariance {
+        ix: usize,
+        iy: usize,
+        value: f64,
+        max: f64,
+    },
 }
 
 /// Why a planning request cannot be answered. Every stage (grid, graph search, P-F pipeline,

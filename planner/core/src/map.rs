@@ -193,13 +193,22 @@ impl GridMap {
 /// (h_max, slope, roughness) use known cells only. An obstacle flag on an unknown cell must
 /// also not block planning cells: [`MapKnowledge::clear_unknown_obstacles`] removes it from
 /// the map the planning grid is built from.
+///
+/// A mapped height is an estimate: [`MapKnowledge::with_height_variances`] adds each cell's
+/// variance, and the traversability model then prices a known cell from its confidence bounds
+/// (`TraversabilityParams::height_confidence_sigmas`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MapKnowledge {
     /// `true` where the cell's height was observed, row-major like the heights.
     known: Vec<bool>,
     /// p of every unknown cell, in (0, 1].
     unknown_traversability: f64,
+    /// Variance of each cell's height, m², row-major (`None`: heights exact).
+    height_variances: Option<Vec<f64>>,
 }
+
+/// Largest accepted height variance, m² (σ = 10 m: beyond any terrain this planner maps).
+pub const MAX_HEIGHT_VARIANCE: f64 = 100.0;
 
 impl MapKnowledge {
     /// Checks the mask length against `map` and the prior p against (0, 1].
@@ -224,7 +233,52 @@ impl MapKnowledge {
         Ok(Self {
             known,
             unknown_traversability,
+            height_variances: None,
         })
+    }
+
+    /// Adds the variance of every cell of `map` (m², row-major like its heights). Each must be
+    /// finite in 0 ..= [`MAX_HEIGHT_VARIANCE`]; unknown cells' values are checked, then ignored.
+    pub fn with_height_variances(
+        mut self,
+        map: &GridMap,
+        variances: &[f64],
+    ) -> Result<Self, MapError> {
+        if variances.len() != map.len() || self.known.len() != map.len() {
+            return Err(MapError::LengthMismatch {
+                what: "height_variances",
+                expected: map.len(),
+                actual: variances.len(),
+            });
+        }
+        if let Some(i) = variances
+            .iter()
+            .position(|v| !(v.is_finite() && (0.0..=MAX_HEIGHT_VARIANCE).contains(v)))
+        {
+            return Err(MapError::BadHeightVariance {
+                ix: i % map.width,
+                iy: i / map.width,
+                value: variances[i],
+                max: MAX_HEIGHT_VARIANCE,
+            });
+        }
+        self.height_variances = Some(variances.to_vec());
+        Ok(self)
+    }
+
+    /// σ of the height of the cell with row-major index `index`, metres (0 without variances
+    /// or for an unknown cell).
+    #[inline]
+    pub fn height_sigma(&self, index: usize) -> f64 {
+        match &self.height_variances {
+            Some(variances) if self.known[index] => variances[index].sqrt(),
+            _ => 0.0,
+        }
+    }
+
+    /// The heights' variances, m², row-major (`None`: heights exact).
+    pub fn height_variances(&self) -> Option<&[f64]> {
+        self.height_variances.as_deref()
     }
 
     /// Whether the cell with row-major index `index` was observed.

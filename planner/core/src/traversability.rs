@@ -30,6 +30,15 @@
 //! expensive, and with part of the map unknown (priced at the prior p) crossing it can look
 //! cheaper than going around. With a limit set, [`block_steep_cells`] turns every known cell
 //! steeper than it into a hard obstacle before planning.
+//!
+//! **Uncertain heights** (`height_confidence_sigmas` κ > 0 and a map whose
+//! [`MapKnowledge`] carries height variances): a mapped height is an estimate, so a known cell
+//! is priced from its confidence bounds. The height term uses h + κσ (an uncertain cell costs
+//! more); the slope term uses the upper bound of the slope, each central difference widened by
+//! κ times its σ; the walkable-slope limit blocks a cell only when the lower bound of its slope
+//! (each difference narrowed by κσ, at least 0) exceeds the limit, so that range noise on flat
+//! ground blocks nothing while a flank measured to a few centimetres stays blocked. Without
+//! variances, or with κ = 0, every bound is the mapped value itself (the model above, bit for bit).
 
 use std::borrow::Cow;
 
@@ -62,6 +71,9 @@ pub struct TraversabilityParams {
     /// Steepest walkable slope, degrees: known cells steeper than this are hard obstacles
     /// (`None`: no limit, the paper's model).
     pub max_slope_deg: Option<f64>,
+    /// κ of the heights' confidence bounds (module docs); 0 prices the mapped heights themselves.
+    /// Acts only on maps whose knowledge carries height variances.
+    pub height_confidence_sigmas: f64,
 }
 
 /// Largest footprint radius in cells; bounds the filter's cost (cells × (2R + 1)).
@@ -79,6 +91,7 @@ impl Default for TraversabilityParams {
             h_max: None,
             footprint_radius_m: 0.0,
             max_slope_deg: None,
+            height_confidence_sigmas: 0.0,
         }
     }
 }
@@ -128,6 +141,15 @@ impl TraversabilityParams {
             return bad(
                 "traversability.footprint_radius_m",
                 format!("must be finite and >= 0, got {}", self.footprint_radius_m),
+            );
+        }
+        if !(self.height_confidence_sigmas.is_finite() && self.height_confidence_sigmas >= 0.0) {
+            return bad(
+                "traversability.height_confidence_sigmas",
+                format!(
+                    "must be finite and >= 0, got {}",
+                    self.height_confidence_sigmas
+                ),
             );
         }
         if let Some(limit) = self.max_slope_deg {
@@ -223,14 +245,19 @@ impl TraversabilityField {
                     );
                     continue;
                 }
-                let h = map.heights[index];
+                let kappa_sigma = params.height_confidence_sigmas
+                    * knowledge.map_or(0.0, |k| k.height_sigma(index));
+                let h = map.heights[index] + kappa_sigma;
                 let height_term = if h_max > 0.0 {
                     (h / h_max).min(1.0)
                 } else {
                     0.0
                 };
                 let slope_term = if params.slope_weight > 0.0 {
-                    (slope_deg_over(map, known, ix, iy) / params.slope_ref_deg).min(1.0)
+                    (gradient_over(map, knowledge, ix, iy)
+                        .slope_deg(params.height_confidence_sigmas, Bound::Upper)
+                        / params.slope_ref_deg)
+                        .min(1.0)
                 } else {
                     0.0
                 };
@@ -408,13 +435,14 @@ pub fn block_steep_cells<'a>(
     let Some(limit) = params.max_slope_deg else {
         return Cow::Borrowed(map);
     };
-    let known = knowledge.map(MapKnowledge::known);
-    let is_known = |i: usize| known.map_or(true, |m| m[i]);
+    let is_known = |i: usize| knowledge.map_or(true, |k| k.is_known(i));
     let steep: Vec<usize> = (0..map.len())
         .filter(|&i| {
             is_known(i)
                 && !map.obstacles.as_ref().is_some_and(|mask| mask[i])
-                && slope_deg_over(map, known, i % map.width, i / map.width) > limit
+                && gradient_over(map, knowledge, i % map.width, i / map.width)
+                    .slope_deg(params.height_confidence_sigmas, Bound::Lower)
+                    > limit
         })
         .collect();
     if steep.is_empty() {
@@ -432,19 +460,60 @@ pub fn block_steep_cells<'a>(
 
 /// Terrain inclination at a cell centre in degrees (central differences, one-sided at the edge).
 pub fn slope_deg(map: &GridMap, ix: usize, iy: usize) -> f64 {
-    slope_deg_over(map, None, ix, iy)
+    gradient_over(map, None, ix, iy).slope_deg(0.0, Bound::Upper)
 }
 
-/// [`slope_deg`] from known cells only (`known`: row-major mask, `None` = all known): an unknown
-/// neighbour is replaced by the cell itself, so the difference turns one-sided.
-fn slope_deg_over(map: &GridMap, known: Option<&[bool]>, ix: usize, iy: usize) -> f64 {
-    let usable = |x: usize, y: usize| known.map_or(true, |m| m[map.index(x, y)]);
+/// Which confidence bound of a slope to take.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Bound {
+    /// Each difference narrowed by κσ (at least 0): steep beyond doubt.
+    Lower,
+    /// Each difference widened by κσ: as steep as the heights allow.
+    Upper,
+}
+
+/// The height gradient at a cell centre from central differences, and the standard deviation
+/// of each component from the heights' σ (0 without variances).
+#[derive(Debug, Clone, Copy)]
+struct Gradient {
+    dx: f64,
+    dy: f64,
+    sigma_dx: f64,
+    sigma_dy: f64,
+}
+
+impl Gradient {
+    /// Slope in degrees with each component's magnitude moved by κσ towards `bound`.
+    fn slope_deg(&self, kappa: f64, bound: Bound) -> f64 {
+        let moved = |d: f64, sigma: f64| match bound {
+            Bound::Lower => (d.abs() - kappa * sigma).max(0.0),
+            Bound::Upper => d.abs() + kappa * sigma,
+        };
+        moved(self.dx, self.sigma_dx)
+            .hypot(moved(self.dy, self.sigma_dy))
+            .atan()
+            .to_degrees()
+    }
+}
+
+/// [`Gradient`] from known cells only (`knowledge`: `None` = all known, no variances): an
+/// unknown neighbour is replaced by the cell itself, so the difference turns one-sided.
+fn gradient_over(
+    map: &GridMap,
+    knowledge: Option<&MapKnowledge>,
+    ix: usize,
+    iy: usize,
+) -> Gradient {
+    let usable = |x: usize, y: usize| knowledge.map_or(true, |k| k.is_known(map.index(x, y)));
     let h = |x: usize, y: usize| map.heights[map.index(x, y)];
-    let derivative = |lo: usize, hi: usize, hl: f64, hh: f64| {
+    let sigma = |x: usize, y: usize| knowledge.map_or(0.0, |k| k.height_sigma(map.index(x, y)));
+    // (derivative, its σ) of the difference from cell `lo` to cell `hi` along one axis.
+    let derivative = |lo: usize, hi: usize, (hl, sl): (f64, f64), (hh, sh): (f64, f64)| {
         if hi > lo {
-            (hh - hl) / ((hi - lo) as f64 * map.resolution)
+            let run = (hi - lo) as f64 * map.resolution;
+            ((hh - hl) / run, sl.hypot(sh) / run)
         } else {
-            0.0
+            (0.0, 0.0)
         }
     };
     let pick = |candidate: usize, own: usize, is_x: bool| {
@@ -463,9 +532,15 @@ fn slope_deg_over(map: &GridMap, known: Option<&[bool]>, ix: usize, iy: usize) -
     let xh = pick((ix + 1).min(map.width - 1), ix, true);
     let yl = pick(iy.saturating_sub(1), iy, false);
     let yh = pick((iy + 1).min(map.height - 1), iy, false);
-    let dx = derivative(xl, xh, h(xl, iy), h(xh, iy));
-    let dy = derivative(yl, yh, h(ix, yl), h(ix, yh));
-    dx.hypot(dy).atan().to_degrees()
+    let at = |x: usize, y: usize| (h(x, y), sigma(x, y));
+    let (dx, sigma_dx) = derivative(xl, xh, at(xl, iy), at(xh, iy));
+    let (dy, sigma_dy) = derivative(yl, yh, at(ix, yl), at(ix, yh));
+    Gradient {
+        dx,
+        dy,
+        sigma_dx,
+        sigma_dy,
+    }
 }
 
 /// RMS deviation of the heights of the 3×3 neighbourhood (clipped at the edge) from their mean, metres.
@@ -768,5 +843,116 @@ mod tests {
             let err = params.validate().expect_err("refused");
             assert!(err.to_string().contains("max_slope_deg"), "{err}");
         }
+    }
+
+    /// A map of `width` × 3 cells of 0.125 m with heights `row` on every row, all known, each
+    /// height with variance `variance`.
+    fn measured(row: &[f64], variance: f64) -> (GridMap, MapKnowledge) {
+        let width = row.len();
+        let heights = (0..3 * width).map(|i| row[i % width]).collect();
+        let map = GridMap::new([0.0, 0.0], 0.125, width, 3, heights, None).expect("map");
+        let knowledge = MapKnowledge::new(&map, vec![true; 3 * width], 0.5)
+            .and_then(|k| k.with_height_variances(&map, &vec![variance; 3 * width]))
+            .expect("knowledge");
+        (map, knowledge)
+    }
+
+    fn blocked_count(map: &GridMap, knowledge: &MapKnowledge, kappa: f64) -> usize {
+        let params = TraversabilityParams {
+            max_slope_deg: Some(30.0),
+            height_confidence_sigmas: kappa,
+            ..Default::default()
+        };
+        block_steep_cells(map, Some(knowledge), &params)
+            .obstacles
+            .as_ref()
+            .map_or(0, |mask| mask.iter().filter(|&&b| b).count())
+    }
+
+    #[test]
+    fn range_noise_on_flat_ground_is_not_a_wall() {
+        // Flat ground measured with σ = 4 cm: returns ±2σ apart give central differences of
+        // 0.16 m over 0.25 m, 32.6° on the mapped heights, above a 30° limit.
+        let sigma: f64 = 0.04;
+        let noise = [0.0, 2.0 * sigma, 0.0, -2.0 * sigma];
+        let row: Vec<f64> = (0..16).map(|i| 1.0 + noise[i % 4]).collect();
+        let (map, knowledge) = measured(&row, sigma * sigma);
+        assert!(
+            blocked_count(&map, &knowledge, 0.0) > 0,
+            "the mapped heights alone look steep"
+        );
+        assert_eq!(blocked_count(&map, &knowledge, 2.0), 0);
+    }
+
+    #[test]
+    fn a_flank_measured_to_centimetres_stays_blocked() {
+        // A 60° flank (rise 0.2165 m per 0.125 m cell) mapped with σ = 2 cm.
+        let rise = 0.125 * 60f64.to_radians().tan();
+        let row: Vec<f64> = (0..12)
+            .map(|i| 1.0 + rise * (i as f64 - 6.0).max(0.0))
+            .collect();
+        let (map, knowledge) = measured(&row, 0.02 * 0.02);
+        let exact = blocked_count(&map, &knowledge, 0.0);
+        assert!(
+            exact >= 3 * 5,
+            "{exact} cells blocked on the mapped heights"
+        );
+        assert_eq!(blocked_count(&map, &knowledge, 2.0), exact);
+    }
+
+    #[test]
+    fn an_uncertain_cell_costs_its_upper_confidence_bound() {
+        let row = [1.0, 2.0, 3.0, 4.0];
+        let (map, knowledge) = measured(&row, 0.0);
+        let mut variances = vec![0.0; 12];
+        variances[5] = 0.25 * 0.25; // σ = 0.25 m at (1, 1), mapped at 2 m
+        let uncertain = MapKnowledge::new(&map, vec![true; 12], 0.5)
+            .and_then(|k| k.with_height_variances(&map, &variances))
+            .expect("knowledge");
+        let params = |kappa: f64| TraversabilityParams {
+            height_confidence_sigmas: kappa,
+            ..Default::default()
+        };
+        let field = |k: &MapKnowledge, kappa: f64| {
+            TraversabilityField::from_partial_map(&map, Some(k), &params(kappa))
+                .expect("field")
+                .values
+        };
+        let certain = field(&knowledge, 2.0);
+        let priced = field(&uncertain, 2.0);
+        // h_max is the highest mapped height (4 m): p = (2 + 2 · 0.25) / 4.
+        assert_eq!(priced[5], 0.625);
+        assert_eq!(certain[5], 0.5);
+        for i in (0..12).filter(|&i| i != 5) {
+            assert_eq!(priced[i], certain[i], "cell {i}");
+        }
+        // κ = 0 prices the mapped height, bit for bit the map without variances.
+        let plain = TraversabilityField::from_map(&map, &params(0.0)).expect("field");
+        assert_eq!(field(&uncertain, 0.0), plain.values);
+    }
+
+    #[test]
+    fn height_variances_are_checked() {
+        let (map, _) = measured(&[0.0, 1.0], 0.0);
+        let knowledge = || MapKnowledge::new(&map, vec![true; 6], 0.5).expect("knowledge");
+        for bad in [f64::NAN, -1e-6, f64::INFINITY, 100.5] {
+            let err = knowledge()
+                .with_height_variances(&map, &[0.0, 0.0, 0.0, bad, 0.0, 0.0])
+                .expect_err("refused");
+            assert!(err.to_string().contains("cell (1, 1)"), "{err}");
+        }
+        let err = knowledge()
+            .with_height_variances(&map, &[0.0; 5])
+            .expect_err("refused");
+        assert!(err.to_string().contains("height_variances"), "{err}");
+        let params = TraversabilityParams {
+            height_confidence_sigmas: -1.0,
+            ..Default::default()
+        };
+        assert!(params
+            .validate()
+            .expect_err("refused")
+            .to_string()
+            .contains("height_confidence_sigmas"));
     }
 }

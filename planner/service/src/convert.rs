@@ -116,6 +116,9 @@ pub fn partial_map_to_message(
 ) -> TerrainMap {
     let obstacles = map.obstacles.clone().unwrap_or_default();
     let known = knowledge.map_or_else(Vec::new, |k| k.known().to_vec());
+    let variances = knowledge
+        .and_then(MapKnowledge::height_variances)
+        .map_or_else(Vec::new, <[f64]>::to_vec);
     let int = |n: usize| i32::try_from(n).unwrap_or(i32::MAX);
     TerrainMap {
         header: lcm_types::pfnav::Header {
@@ -135,12 +138,15 @@ pub fn partial_map_to_message(
         num_known_cells: int(known.len()),
         known_mask: known,
         unknown_traversability: knowledge.map_or(0.0, MapKnowledge::unknown_traversability),
+        num_variance_cells: int(variances.len()),
+        height_variances: variances,
     }
 }
 
 /// Turns a decoded `terrain_map_t` into a validated map: sizes, frame, heights, obstacle mask,
-/// known mask (0 or width × height entries) and `unknown_traversability` (0 = default, else
-/// finite in (0, 1]).
+/// known mask (0 or width × height entries), `unknown_traversability` (0 = default, else
+/// finite in (0, 1]) and the height variances (0 or width × height entries, each finite in
+/// 0 ..= 100 m²; a fully known map with variances gets a knowledge of all cells known).
 pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<ReceivedMap, Rejection> {
     check_map_size(msg.width, msg.height, msg.num_cells, max_cells)?;
     check_frame(&msg.header.frame_id, "map").map_err(Rejection::invalid_map)?;
@@ -181,11 +187,27 @@ pub fn map_from_message(msg: &TerrainMap, max_cells: usize) -> Result<ReceivedMa
         obstacles,
     )
     .map_err(|e| Rejection::invalid_map(e.to_string()))?;
-    let knowledge = if known_entries == 0 {
+    let variance_entries = msg.height_variances.len();
+    if variance_entries != 0 && variance_entries != cells {
+        return Err(Rejection::invalid_map(format!(
+            "height_variances has {variance_entries} entries, expected 0 (heights exact) or width x height = {cells}"
+        )));
+    }
+    let knowledge = if known_entries == 0 && variance_entries == 0 {
         None
     } else {
-        let knowledge = MapKnowledge::new(&map, msg.known_mask.clone(), prior)
+        let known = if known_entries == 0 {
+            vec![true; cells]
+        } else {
+            msg.known_mask.clone()
+        };
+        let mut knowledge = MapKnowledge::new(&map, known, prior)
             .map_err(|e| Rejection::invalid_map(e.to_string()))?;
+        if variance_entries != 0 {
+            knowledge = knowledge
+                .with_height_variances(&map, &msg.height_variances)
+                .map_err(|e| Rejection::invalid_map(e.to_string()))?;
+        }
         knowledge.clear_unknown_obstacles(&mut map);
         Some(knowledge)
     };
@@ -382,10 +404,12 @@ impl ValidatedRequest {
     /// The service's cost model with the footprint widened by κ·σ of the start: a path point
     /// then costs the worst p within the robot's reach for every true position within κσ of
     /// the believed one, which holds with probability 1 − exp(−κ²/2) for a Gaussian belief.
+    /// The same κ sets the confidence bounds of a map's heights where it carries variances.
     pub fn traversability(&self, service: &TraversabilityParams) -> TraversabilityParams {
         TraversabilityParams {
             footprint_radius_m: service.footprint_radius_m
                 + self.options.confidence_sigmas * self.start_sigma,
+            height_confidence_sigmas: self.options.confidence_sigmas,
             ..*service
         }
     }
@@ -561,7 +585,14 @@ mod tests {
             footprint_radius_m: 0.25,
             ..TraversabilityParams::default()
         };
-        assert_eq!(v.traversability(&service), service);
+        // No start σ: the footprint as configured; κ also bounds the map's heights.
+        assert_eq!(
+            v.traversability(&service),
+            TraversabilityParams {
+                height_confidence_sigmas: DEFAULT_CONFIDENCE_SIGMAS,
+                ..service
+            }
+        );
         let mut uncertain = request();
         uncertain.start_sigma = 0.1;
         uncertain.options.confidence_sigmas = 3.0;
@@ -697,6 +728,42 @@ mod tests {
             ),
             (
                 Box::new(|r| {
+                    r.inline_map[0].num_variance_cells = 3;
+                    r.inline_map[0].height_variances = vec![0.01; 3];
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "height_variances has 3 entries",
+            ),
+            (
+                Box::new(|r| {
+                    let cells = r.inline_map[0].heights.len();
+                    r.inline_map[0].num_variance_cells = cells as i32;
+                    r.inline_map[0].height_variances = vec![0.01; cells];
+                    r.inline_map[0].height_variances[4] = f64::NAN;
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "height variance of cell",
+            ),
+            (
+                Box::new(|r| {
+                    let cells = r.inline_map[0].heights.len();
+                    r.inline_map[0].num_variance_cells = cells as i32;
+                    r.inline_map[0].height_variances = vec![-1e-3; cells];
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "height variance of cell",
+            ),
+            (
+                Box::new(|r| {
+                    let cells = r.inline_map[0].heights.len();
+                    r.inline_map[0].num_variance_cells = cells as i32;
+                    r.inline_map[0].height_variances = vec![101.0; cells];
+                }),
+                PlanReply::STATUS_INVALID_MAP,
+                "height variance of cell",
+            ),
+            (
+                Box::new(|r| {
                     r.num_inline_maps = 0;
                     r.inline_map.clear();
                     r.map_seq = -1;
@@ -747,5 +814,34 @@ mod tests {
         // No mask: every cell known, whatever the prior field says (0 = default).
         let full = map_from_message(&map_msg(4, 3), 100).expect("valid");
         assert_eq!(full.knowledge, None);
+    }
+
+    #[test]
+    fn height_variances_are_kept_and_round_trip() {
+        let mut msg = map_msg(4, 3);
+        msg.num_known_cells = 12;
+        msg.known_mask = (0..12).map(|i| i != 5).collect();
+        msg.num_variance_cells = 12;
+        msg.height_variances = (0..12).map(|i| 1e-4 * f64::from(i)).collect();
+        let received = map_from_message(&msg, 100).expect("valid");
+        let knowledge = received.knowledge.as_ref().expect("partial");
+        assert_eq!(
+            knowledge.height_variances(),
+            Some(&msg.height_variances[..])
+        );
+        assert_eq!(knowledge.height_sigma(4), 2e-2);
+        // An unknown cell has no height, so no σ either.
+        assert_eq!(knowledge.height_sigma(5), 0.0);
+        let back = partial_map_to_message(&received.map, Some(knowledge), 3);
+        assert_eq!(back.height_variances, msg.height_variances);
+        assert_eq!(map_from_message(&back, 100).expect("valid"), received);
+        // Variances without a mask: every cell known, with its variance.
+        let mut full = map_msg(4, 3);
+        full.num_variance_cells = 12;
+        full.height_variances = vec![4e-4; 12];
+        let received = map_from_message(&full, 100).expect("valid");
+        let knowledge = received.knowledge.as_ref().expect("variances kept");
+        assert_eq!(knowledge.known_count(), 12);
+        assert_eq!(knowledge.height_sigma(7), 2e-2);
     }
 }

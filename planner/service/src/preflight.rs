@@ -155,9 +155,9 @@ mod tests {
         );
         assert_eq!(claim.claimed_cells(), 15);
         // Truncated right after num_cells: still readable; one byte earlier: not.
-        // After num_cells: the heights, num_obstacle_cells, num_known_cells and
-        // unknown_traversability (both masks empty).
-        let header_end = bytes.len() - 15 * 8 - 4 - 4 - 8;
+        // After num_cells: the heights, num_obstacle_cells, num_known_cells,
+        // unknown_traversability and num_variance_cells (masks and variances empty).
+        let header_end = bytes.len() - 15 * 8 - 4 - 4 - 8 - 4;
         assert!(peek_map(&bytes[..header_end]).is_some());
         assert!(peek_map(&bytes[..header_end - 1]).is_none());
     }
