@@ -136,8 +136,19 @@ def test_variance_grows_with_the_pose_and_old_cells_are_forgotten() -> None:
     sweep(terrain, sensor, np.zeros(3), emap)
     known = emap.known.copy()
     before = emap.variances[known].copy()
+    measured = emap.measurement_variances()[known].copy()
     emap.grow(np.array([0.0, 0.0, 0.01]))
     np.testing.assert_allclose(emap.variances[known], before + 0.01)
+    # The drift moves every cell alike: the cells' relative uncertainty stays what was measured.
+    np.testing.assert_allclose(emap.measurement_variances()[known], measured)
+    np.testing.assert_allclose(emap.drift_variances[known], 0.01)
+    # A new look shrinks the drift's share by the update's factor 1 − gain.
+    total = emap.variances.copy()
+    position, quaternion = standing(terrain, 8.0, 8.0)
+    assert emap.fuse(TerrainSensor(terrain, sensor).scan(10.0, position, quaternion), PoseBelief(position, quaternion)).rejected is None
+    updated = known & (emap.variances < total)
+    assert updated.any()
+    np.testing.assert_allclose(emap.drift_variances[updated], 0.01 * emap.variances[updated] / total[updated])
     emap.grow(np.array([0.0, 0.0, 0.05]))
     assert not emap.known.any()
     with pytest.raises(SimulationError, match="finite"):

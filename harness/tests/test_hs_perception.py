@@ -67,6 +67,25 @@ def test_the_step_is_mapped_where_the_robot_believes_it_is() -> None:
     assert first_high == 22
 
 
+def test_height_errors_carry_the_map_back_through_the_estimate_offset() -> None:
+    # A map made on an estimate that is 0.5 m ahead, 0.05 m high and turned by 0.1 rad.
+    scenario = step_scenario()
+    sensed = SensedMap(scenario.terrain, None, PerceptionConfig(sensor=NOISELESS))
+    position, quaternion = trunk(3.0, 4.0)
+    offset = np.array([0.5, 0.0, 0.05, 0.1])
+    _, believed_quaternion = trunk(3.0, 4.0, offset[3])
+    sensed.sense(0.0, position, quaternion, PoseBelief(position + offset[0:3], believed_quaternion))
+    errors, sigmas = sensed.height_errors(position, offset)
+    assert len(errors) == sensed.known.sum() > 50 and np.all(sigmas > 0.0)
+    # Carried back with the offset, the map is the truth to within its own 2σ: exact on the flat
+    # parts, and on the cells across the turned step within the spread of their returns.
+    assert np.mean(np.abs(errors) <= 2.0 * sigmas) > 0.95
+    assert np.median(np.abs(errors)) < 1e-6
+    # Read without the offset, the step sits two cells off and every cell 5 cm high.
+    wrong, _ = sensed.height_errors(position, np.zeros(4))
+    assert np.mean(np.abs(wrong) <= 2.0 * sigmas) < 0.5
+
+
 def test_the_prior_map_starts_the_map_and_a_surprise_is_taken_after_a_few_scans() -> None:
     scenario = step_scenario(prior=True)
     config = PerceptionConfig(sensor=NOISELESS, prior_variance=0.001)
@@ -107,9 +126,29 @@ def test_the_navigator_scans_at_the_start_and_publishes_the_sensed_map() -> None
     variances = client.variances[1]
     sensed = navigator.belief
     assert isinstance(sensed, SensedMap)
-    np.testing.assert_array_equal(variances[client.maps[1][2]], sensed.map.variances[client.maps[1][2]])
+    np.testing.assert_array_equal(variances[client.maps[1][2]], sensed.map.measurement_variances()[client.maps[1][2]])
     assert np.all(variances[~client.maps[1][2]] == 0.0)
     assert np.all(variances[client.maps[1][2]] > 0.0)
+
+
+@pytest.mark.parametrize("belief_planning", [True, False])
+def test_belief_planning_sends_the_position_sigma_and_the_height_variances(belief_planning: bool) -> None:
+    client = ScriptedClient()
+    config = OnlineConfig(perception=PerceptionConfig(sensor=NOISELESS), belief_planning=belief_planning)
+    navigator = OnlineNavigator(client, step_scenario(), config)  # type: ignore[arg-type]
+    navigator.start(2.0, 4.0, 0.0, timeout=1.0, retries=0, trunk_height=0.32)
+    variance = np.array([0.04, 0.09, 0.01])
+    for k in range(1, 60):
+        t = 0.01 * k
+        position, quaternion = trunk(2.0 + 0.5 * t, 4.0)
+        navigator.sense(t, position, quaternion, PoseBelief(position, quaternion))
+        navigator.tick(t, float(position[0]), 4.0, 0.0, variance)
+    _, update, _ = client.requests[-1]
+    if belief_planning:
+        assert update.sigma == pytest.approx(0.3)  # the worse horizontal axis
+        assert client.variances[-1] is not None
+    else:
+        assert update.sigma == 0.0 and client.variances[-1] is None
 
 
 def test_believed_trunk_pose_applies_the_estimate_offset() -> None:

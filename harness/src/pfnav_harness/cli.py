@@ -134,6 +134,11 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--terrain-sensor-seed", type=int, default=0, help="online: seed of the terrain sensor's noise, dropouts and outliers (default 0)")
     p.add_argument(
+        "--no-belief-planning",
+        action="store_true",
+        help="online: plan as if the map and the position were exact (no start sigma, no height variances; for comparison)",
+    )
+    p.add_argument(
         "--unknown-traversability",
         type=float,
         default=PLANNER_DEFAULT,
@@ -282,6 +287,7 @@ def _online_config(args: argparse.Namespace) -> OnlineConfig:
         apply_delay=args.replan_budget,
         options=_request_options(args),
         bad_updates=tuple(k.strip() for k in args.bad_map_updates.split(",") if k.strip()),
+        belief_planning=not args.no_belief_planning,
     )
     try:
         config.validate()

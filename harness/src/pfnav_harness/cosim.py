@@ -35,6 +35,7 @@ from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
 from .online import OnlineNavigator
+from .perception import SensedMap
 from .planner_client import Plan
 from .pushes import PushSchedule
 from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, X, Y
@@ -683,6 +684,10 @@ class CoSimulation:
             log.update(loop.estimator.log(n))
         if online is not None:
             log.update(replan_log(online))
+            if isinstance(online.belief, SensedMap) and n > 0:
+                errors, sigmas = online.belief.height_errors(loop.log_state[n - 1, 0:3], loop.belief_offset)
+                log["map_height_error"] = errors
+                log["map_height_sigma"] = sigmas
         return RunResult(self.scenario.name, self.plan.method, log, loop.timing, stop_reason)
 
     def _fallen(self, state: NDArray[np.float64]) -> bool:

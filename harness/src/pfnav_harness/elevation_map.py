@@ -22,7 +22,11 @@ Per cell: height h and variance σ² (NaN and inf while unknown).
   or the pose drifted) is taken after a few scans instead of never.
 - `grow` adds the increase of the estimator's position variance since the last call: vertical,
   plus horizontal times the squared local slope. A cell whose variance passes `max_variance` is
-  unknown again.
+  unknown again. That part (`drift_variances`, carried through each update by its Kalman factor
+  1 − gain) is a displacement common to neighbouring cells: it leaves slopes and steps alone.
+  `measurement_variances` (the rest) is what sets the uncertainty of the map's relative
+  geometry, the planner's confidence bounds; the position's own σ reaches the planner as the
+  footprint margin.
 - `lower`/`upper` are the confidence bounds h ∓ k·σ (k = `confidence_sigmas`).
 
 Bad input never changes the map: a scan with a non-finite pose or covariance, or captured before
@@ -152,12 +156,19 @@ class ElevationMap:
         self.sensor = sensor
         self.heights = np.full(self.shape, np.nan)
         self.variances = np.full(self.shape, np.inf)
+        # The part of `variances` that `grow` added (0 where unknown).
+        self.drift_variances = np.zeros(self.shape)
         self.last_capture_time = -math.inf
         self.totals: dict[str, int] = {}
 
     @property
     def known(self) -> NDArray[np.bool_]:
         return np.isfinite(self.heights)
+
+    def measurement_variances(self) -> FloatArray:
+        """`variances` less the pose drift's share: the uncertainty of a cell relative to its
+        neighbours (inf where unknown)."""
+        return np.maximum(self.variances - self.drift_variances, self.config.min_variance)
 
     def lower(self) -> FloatArray:
         """Lower confidence bound h − k σ (NaN where unknown)."""
@@ -278,6 +289,9 @@ class ElevationMap:
         new_v = np.where(unknown, measured_variance, (1.0 - gain) * known_v)
         h[cells[accept]] = new_h[accept]
         v[cells[accept]] = np.maximum(new_v[accept], c.min_variance)
+        drift = self.drift_variances.reshape(-1)
+        # An unknown cell starts without drift; a known one keeps the share the update leaves.
+        drift[cells[accept]] = np.where(unknown, 0.0, (1.0 - gain) * drift[cells])[accept]
         v[cells[gated]] = prior_v[gated] + c.rejection_inflation
         self._forget(cells[gated])
         self._count(report, GATED, int(gated.sum()))
@@ -298,7 +312,9 @@ class ElevationMap:
         gx = np.nan_to_num(gx, nan=0.0)
         gy = np.nan_to_num(gy, nan=0.0)
         known = self.known
-        self.variances[known] += increase[2] + gx[known] ** 2 * increase[0] + gy[known] ** 2 * increase[1]
+        added = increase[2] + gx[known] ** 2 * increase[0] + gy[known] ** 2 * increase[1]
+        self.variances[known] += added
+        self.drift_variances[known] += added
         self._forget(np.flatnonzero((self.variances > self.config.max_variance) & known))
 
     def _forget(self, cells: NDArray[np.int64]) -> None:
@@ -308,3 +324,4 @@ class ElevationMap:
         if gone.size:
             self.heights.reshape(-1)[gone] = np.nan
             v[gone] = np.inf
+            self.drift_variances.reshape(-1)[gone] = 0.0

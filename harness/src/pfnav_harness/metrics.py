@@ -355,6 +355,10 @@ class OnlineMetrics:
     max_deviation: float
     known_fraction: float
     pushes: int
+    # A sensed map's known cells at the end of the run: how many lie on the true map, and the
+    # share whose height error (after the estimate's offset) is within twice the map's own σ.
+    map_cells: int = 0
+    map_within_2sigma: float | None = None
 
     @property
     def cost_ratio(self) -> float:
@@ -398,6 +402,11 @@ def compute_online_metrics(log: dict[str, Any], replans: Any, field: Traversabil
         active = np.any(log["push_force"] != 0.0, axis=1)
         pushes = int(np.count_nonzero(active[1:] & ~active[:-1]) + int(active[0])) if len(active) else 0
     known = log.get("known_final")
+    height_error = log.get("map_height_error")
+    map_cells, within = 0, None
+    if height_error is not None and len(height_error):
+        map_cells = len(height_error)
+        within = float(np.mean(np.abs(height_error) <= 2.0 * np.asarray(log["map_height_sigma"])))
     return OnlineMetrics(
         map_updates=int(summary["map_updates"]),
         replans_in_use=int(summary["replans_in_use"]),
@@ -412,4 +421,6 @@ def compute_online_metrics(log: dict[str, Any], replans: Any, field: Traversabil
         max_deviation=float(np.max(deviation)) if len(deviation) else 0.0,
         known_fraction=float(np.mean(known)) if known is not None else 1.0,
         pushes=pushes,
+        map_cells=map_cells,
+        map_within_2sigma=within,
     )

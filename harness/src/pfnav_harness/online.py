@@ -54,6 +54,9 @@ class OnlineConfig:
     options: RequestOptions = field(default_factory=RequestOptions)
     # Bad updates sent instead of the regular ones, in this order, from the second update on.
     bad_updates: tuple[str, ...] = ()
+    # Plan on the belief: send the estimator's position σ and the map's height variances, so the
+    # planner keeps a margin for both. False plans as if both were exact (for comparison).
+    belief_planning: bool = True
 
     def validate(self) -> None:
         self.sensor.validate()
@@ -190,7 +193,8 @@ class OnlineNavigator:
             goal = self.scenario.goal
             # Inside the goal region there is nothing left to plan.
             if math.hypot(x - goal.center[0], y - goal.center[1]) > goal.radius:
-                self._send_update(t, x, y, yaw, horizontal_sigma(position_variance))
+                sigma = horizontal_sigma(position_variance) if self.config.belief_planning else 0.0
+                self._send_update(t, x, y, yaw, sigma)
         return answer_now
 
     def _collect(self, pending: Replan) -> PlanAnswer | None:
@@ -214,7 +218,8 @@ class OnlineNavigator:
 
     def _publish_belief(self) -> int:
         b = self.belief
-        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.unknown_traversability, variances=b.height_variances())
+        variances = b.height_variances() if self.config.belief_planning else None
+        return self.client.publish_map(b.terrain(), known=b.known_mask(), unknown_traversability=b.unknown_traversability, variances=variances)
 
     def _send_update(self, t: float, x: float, y: float, yaw: float, sigma: float) -> None:
         changed = self._observe(x, y)

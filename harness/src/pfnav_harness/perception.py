@@ -106,12 +106,39 @@ class SensedMap:
         return None if bool(known.all()) else known.copy()
 
     def height_variances(self) -> FloatArray:
-        """Each cell's height variance for the planner (m²; 0 where unknown, ignored there)."""
-        return np.where(self.map.known, self.map.variances, 0.0)
+        """Each cell's height variance for the planner, m² (0 where unknown, ignored there): the
+        measurement's share, which sets the map's slopes and steps. The drift's share moves
+        neighbouring cells together; the planner covers it with the footprint margin of the
+        position's σ (see `elevation_map`)."""
+        return np.where(self.map.known, self.map.measurement_variances(), 0.0)
 
     @property
     def known_fraction(self) -> float:
         return float(self.map.known.mean())
+
+    def height_errors(self, true_position: FloatArray, offset: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Each known cell's mapped height minus the true height at the same place, and the
+        map's σ of that height: the honesty check of the map's variance.
+
+        The map lives in the estimator's frame. `offset` (x, y, z, yaw: estimate − truth) and the
+        robot's true position now give the rigid motion between the two frames; a cell centre of
+        the map is carried back into the true frame with it, and the offset's z is removed from
+        its height. The map's variances have grown with the estimate's drift since each cell was
+        seen, so the offset of now is the one they answer for.
+        """
+        known = self.map.known
+        xs, ys = self.map.cell_centres()
+        bx, by = np.meshgrid(xs, ys)
+        bx, by = bx[known], by[known]
+        px, py = float(true_position[0]), float(true_position[1])
+        # Believed = R(δψ)(true − p) + p + offset: invert for the true place of a believed point.
+        c, s = math.cos(float(offset[3])), math.sin(float(offset[3]))
+        dx, dy = bx - px - float(offset[0]), by - py - float(offset[1])
+        tx, ty = px + c * dx + s * dy, py - s * dx + c * dy
+        (x0, y0), (x1, y1) = self.truth.bounds()
+        inside = (tx >= x0) & (tx < x1) & (ty >= y0) & (ty < y1)
+        errors = self.map.heights[known][inside] - float(offset[2]) - self.truth.height(tx[inside], ty[inside])
+        return errors, np.sqrt(self.map.variances[known][inside])
 
     @property
     def unknown_traversability(self) -> float:

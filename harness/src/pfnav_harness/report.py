@@ -273,6 +273,13 @@ def plot_replans(scenario: Scenario, run: RunRecord, path: Path) -> None:
     plt.close(fig)
 
 
+def _map_honesty(o: OnlineMetrics) -> str:
+    """Share of a sensed map's cells within 2σ of the truth ('–' for the ideal sensor)."""
+    if o.map_within_2sigma is None:
+        return "–"
+    return f"{o.map_within_2sigma * 100:.0f} % of {o.map_cells}"
+
+
 def online_section(scenarios: dict[str, Scenario], runs: dict[str, list[RunRecord]], out_dir: Path) -> list[str]:
     """The report's online-navigation table and replan plots (empty when no run was online)."""
     online_runs = [(name, rec) for name, records in runs.items() for rec in records if rec.online is not None]
@@ -287,8 +294,8 @@ def online_section(scenarios: dict[str, Scenario], runs: dict[str, list[RunRecor
         "(wall clock); the simulation puts each answer in use after the stated budget of simulated time.",
         "",
         "| scenario | run | goal | fell | updates [Hz] | replans used | latency p50 / p99 / max [ms] | budget [ms] | ∫p ds walked | "
-        "full-knowledge ∫p ds | ratio | max deviation [m] | pushes | known at end | rejected updates |",
-        "|" + "---|" * 15,
+        "full-knowledge ∫p ds | ratio | max deviation [m] | pushes | known at end | map heights within 2σ | rejected updates |",
+        "|" + "---|" * 16,
     ]
     for name, rec in online_runs:
         o = rec.online
@@ -302,7 +309,7 @@ def online_section(scenarios: dict[str, Scenario], runs: dict[str, list[RunRecor
             f"| {name} | {_label(m.method)} | {'yes' if m.goal_reached else 'no'} | {'yes' if m.fell else 'no'} | "
             f"{o.map_updates} ({o.update_rate:.1f}) | {o.replans_in_use} | {ms(o.latency_p50)} / {ms(o.latency_p99)} / {ms(o.latency_max)} | "
             f"{o.latency_budget * 1000:.0f} | {_fmt(o.executed_cost, 2)} | {_fmt(o.full_knowledge_cost, 2)} | {_fmt(o.cost_ratio, 2)} | "
-            f"{_fmt(o.max_deviation, 2)} | {o.pushes} | {o.known_fraction * 100:.0f} % | {'; '.join(o.rejected) or '–'} |"
+            f"{_fmt(o.max_deviation, 2)} | {o.pushes} | {o.known_fraction * 100:.0f} % | {_map_honesty(o)} | {'; '.join(o.rejected) or '–'} |"
         )
     lines.append("")
     for name, rec in online_runs:
