@@ -458,9 +458,9 @@ controller_config! {
             "Gyro bias random-walk density of the orientation filter";
         /// Standard deviation of the accelerometer as a gravity-direction reference, m/s² (sensor
         /// noise plus the trunk's own accelerations while walking). Large on purpose: the trot's
-        /// accelerations are several m/s² and the samples the norm gate lets through are not
-        /// zero-mean, so the tilt correction must average over minutes, not seconds (with the
-        /// default gyro noise its time constant is about 100 s at 1 kHz; see docs/estimation.md).
+        /// accelerations are several m/s² and average out only over many gait cycles, so the tilt
+        /// correction must average over minutes, not seconds (with the default gyro noise its time
+        /// constant is about 100 s at 1 kHz; see docs/estimation.md).
         est_acc_tilt_noise: f64 = 10.0,
             fmi "est.accTiltNoise", range limits::EST_ACC_TILT_NOISE, unit "m/s2",
             "Accelerometer noise as a gravity-direction (tilt) reference, walking accelerations included";
@@ -483,13 +483,14 @@ controller_config! {
         est_foot_drift: f64 = 0.02,
             fmi "est.footDrift", range limits::EST_FOOT_DRIFT, unit "m/sqrt(s)",
             "Process noise density of a stance foot's world position (rolling foot sphere, slip)";
-        /// Horizontal position random walk per distance walked, m/√m: legged odometry drifts
-        /// with the distance (slip, kinematic errors) by amounts the leg measurements cannot see,
-        /// so the whole robot (trunk and feet together) is let wander by this much. It changes
-        /// the reported position variance and the weight of position fixes, not the estimate.
+        /// Position random walk per distance walked (each axis, height included), m/√m: legged
+        /// odometry drifts with the distance (slip, kinematic errors, a residual tilt) by amounts
+        /// the leg measurements cannot see, so the whole robot (trunk and feet together) is let
+        /// wander by this much. It changes the reported position variance and the weight of
+        /// position fixes, not the estimate.
         est_odometry_drift: f64 = 0.03,
             fmi "est.odometryDrift", range limits::EST_ODOMETRY_DRIFT, unit "m/sqrt(m)",
-            "Horizontal position random walk per distance walked (the reported position variance grows with the distance)";
+            "Position random walk per distance walked, each axis (the reported position variance grows with the distance)";
         /// Standard deviation of an absolute position fix, m.
         est_fix_noise: f64 = 0.02,
             fmi "est.fixNoise", range limits::EST_FIX_NOISE, unit "m",

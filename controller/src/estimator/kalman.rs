@@ -132,8 +132,8 @@ impl LegKalman {
     /// Prediction over `dt` with world acceleration `acceleration` (m/s²): p += v·dt + a·dt²/2,
     /// v += a·dt, feet constant. `acc_density` (m/s²/√Hz) is the white acceleration noise, whose
     /// exact discretisation gives the position/velocity process noise; `foot_density[leg]`
-    /// (m/√s) the random walk of each foot; `translation_variance` (m²) that of the whole robot
-    /// horizontally (trunk and feet moved together: invisible to the leg measurements, so the
+    /// (m/√s) the random walk of each foot; `translation_variance` (m², per axis) that of the
+    /// whole robot (trunk and feet moved together: invisible to the leg measurements, so the
     /// estimate is unchanged and only fixes can take that variance back).
     pub fn predict(
         &mut self,
@@ -172,7 +172,7 @@ impl LegKalman {
             }
         }
         let bodies = || std::iter::once(POSITION).chain((0..NUM_LEGS).map(foot));
-        for i in 0..2 {
+        for i in 0..3 {
             for a in bodies() {
                 for b in bodies() {
                     self.p[(a + i, b + i)] += translation_variance;

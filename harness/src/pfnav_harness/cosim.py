@@ -688,6 +688,10 @@ class CoSimulation:
                 errors, sigmas = online.belief.height_errors(loop.log_state[n - 1, 0:3], loop.belief_offset)
                 log["map_height_error"] = errors
                 log["map_height_sigma"] = sigmas
+                # The sensed map at the end, in the estimator's frame (NaN/inf where unknown).
+                log["map_heights_final"] = online.belief.map.heights.copy()
+                log["map_variances_final"] = online.belief.map.variances.copy()
+                log["map_measurement_variances_final"] = online.belief.map.measurement_variances()
         return RunResult(self.scenario.name, self.plan.method, log, loop.timing, stop_reason)
 
     def _fallen(self, state: NDArray[np.float64]) -> bool:
