@@ -9,6 +9,7 @@ import pytest
 
 from pfnav_harness.elevation_map import (
     BAD_COVARIANCE,
+    BAD_LABELS,
     BAD_POSE,
     FUSED,
     GATED,
@@ -173,6 +174,8 @@ def test_bad_input_is_counted_or_refused_and_changes_nothing() -> None:
     bad_cov = PoseBelief(position, quaternion, position_covariance=np.diag([1.0, -1.0, 1.0]))
     assert emap.fuse(scan, bad_cov).rejected == BAD_COVARIANCE
     assert emap.fuse(SensorScan(0.1, scan.points, scan.ranges, 0), PoseBelief(position, quaternion)).rejected == STALE
+    short_labels = SensorScan(5.5, scan.points, scan.ranges, 0, hazard=np.zeros(3, dtype=bool))
+    assert emap.fuse(short_labels, PoseBelief(position, quaternion)).rejected == BAD_LABELS
     unchanged()
 
     hostile = np.array([[np.inf, 0.0, 0.0], [1e9, 0.0, 0.0], [50.0, 0.0, -5.0], [np.nan, np.nan, np.nan]])

@@ -51,6 +51,8 @@ class ScriptedClient:
     requests: list[tuple[int, StartPose, int]] = field(default_factory=list)
     # The height variances sent with each map of `maps` (None: exact heights).
     variances: list[Any] = field(default_factory=list)
+    # The options of each request of `requests`.
+    options: list[Any] = field(default_factory=list)
     seq: int = 100
 
     def publish_map(self, terrain: Terrain, known: Any = None, unknown_traversability: float = 0.0, variances: Any = None) -> int:
@@ -69,6 +71,7 @@ class ScriptedClient:
     def send_request(self, pose: StartPose, goal: GoalRegion, method: str, map_seq: int, options: RequestOptions | None = None) -> int:
         request_id = len(self.requests) + 1
         self.requests.append((request_id, pose, map_seq))
+        self.options.append(options)
         return request_id
 
     def await_answer(self, request_id: int, timeout: float) -> PlanAnswer | None:

@@ -13,6 +13,7 @@ from pfnav_harness.elevation_map import PoseBelief
 from pfnav_harness.errors import SimulationError
 from pfnav_harness.online import OnlineConfig, OnlineNavigator
 from pfnav_harness.perception import PerceptionConfig, SensedMap
+from pfnav_harness.planner_client import start_density_belief
 from pfnav_harness.scenario import GoalRegion, Scenario, Terrain
 from pfnav_harness.terrain_sensor import TerrainSensorConfig
 from pfnav_harness.world import quaternion_to_rpy
@@ -65,6 +66,36 @@ def test_the_step_is_mapped_where_the_robot_believes_it_is() -> None:
     # The step (true x = 5 m, column 20) appears 0.5 m (two cells) further on.
     first_high = seen[column[seen] > 0.15][0]
     assert first_high == 22
+
+
+def test_hazard_labels_flag_a_band_without_geometry_and_a_lidar_does_not() -> None:
+    heights = np.zeros((32, 48))
+    obstacles = np.zeros((32, 48), dtype=bool)
+    obstacles[:, 20:24] = True  # flat, flagged (water): x = 5 … 6 m
+    terrain = Terrain((0.0, 0.0), RES, heights, obstacles)
+    position, quaternion = trunk(3.5, 4.0)
+
+    def sensed_after(sensor: TerrainSensorConfig) -> SensedMap:
+        sensed = SensedMap(terrain, None, PerceptionConfig(sensor=sensor))
+        for k in range(10):
+            sensed.sense(0.2 * k, position, quaternion, PoseBelief(position, quaternion))
+        return sensed
+
+    camera = sensed_after(TerrainSensorConfig(seed=5))
+    flagged = camera.terrain().obstacles
+    assert flagged is not None
+    known = camera.known
+    assert (known & obstacles).sum() > 20, "the band is in view"
+    # Every band cell seen a few times is flagged; label errors (5 %) flag almost nothing else.
+    # Range noise carries labelled returns into the next cell along the ray, so the band's
+    # far edge may grow by a cell (conservative); beyond that nothing is flagged.
+    assert np.mean(flagged[known & obstacles]) > 0.9
+    near_band = np.zeros_like(obstacles)
+    near_band[:, 19:25] = True
+    assert np.mean(flagged[known & ~near_band]) < 0.01
+    # A lidar measures geometry only.
+    lidar = sensed_after(TerrainSensorConfig.lidar(seed=5))
+    assert lidar.terrain().obstacles is None
 
 
 def test_height_errors_carry_the_map_back_through_the_estimate_offset() -> None:
@@ -147,8 +178,10 @@ def test_belief_planning_sends_the_position_sigma_and_the_height_variances(belie
     if belief_planning:
         assert update.sigma == pytest.approx(0.3)  # the worse horizontal axis
         assert client.variances[-1] is not None
+        assert client.options[-1].start_density == start_density_belief()
     else:
         assert update.sigma == 0.0 and client.variances[-1] is None
+        assert client.options[-1].start_density == 0  # the service's default
 
 
 def test_believed_trunk_pose_applies_the_estimate_offset() -> None:

@@ -114,6 +114,29 @@ def test_dropouts_and_outliers_at_their_rates_and_seeded() -> None:
     assert not np.array_equal(np.nan_to_num(other.ranges), np.nan_to_num(scans_a[0].ranges))
 
 
+def test_camera_labels_hazards_at_their_error_rate_and_leaves_the_ranges_alone() -> None:
+    # A hazard band without geometry (water, mud) across the flat ground at x = 5 … 6 m.
+    obstacles = np.zeros((64, 64), dtype=bool)
+    obstacles[:, 20:24] = True
+    terrain = Terrain((0.0, 0.0), 0.25, np.zeros((64, 64)), obstacles)
+    base = np.array([4.0, 8.0, 0.6])
+    config = TerrainSensorConfig(seed=3, label_error=0.1)
+    sensor = TerrainSensor(terrain, config)
+    scans = [sensor.scan(0.2 * k, base, LEVEL) for k in range(5)]
+    hits = [np.isfinite(s.ranges) & ~s.injected_outliers for s in scans]
+    truth = [terrain.obstacles_at(*to_world(sensor, s.points[h], base)[:, :2].T) for s, h in zip(scans, hits, strict=True)]
+    labels = [s.hazard[h] for s, h in zip(scans, hits, strict=True) if s.hazard is not None]
+    assert len(labels) == 5
+    truth_all, labels_all = np.concatenate(truth), np.concatenate(labels)
+    assert truth_all.sum() > 100, "the band is in view"
+    assert 0.08 < np.mean(truth_all != labels_all) < 0.12
+    # The label draws come after the range draws: the ranges are those of a sensor without labels.
+    unlabelled = TerrainSensor(terrain, TerrainSensorConfig(seed=3, label_error=0.5)).scan(0.0, base, LEVEL)
+    assert unlabelled.hazard is None
+    np.testing.assert_array_equal(np.nan_to_num(unlabelled.ranges), np.nan_to_num(scans[0].ranges))
+    assert TerrainSensor(terrain, TerrainSensorConfig.lidar()).scan(0.0, base, LEVEL).hazard is None
+
+
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [
@@ -125,6 +148,8 @@ def test_dropouts_and_outliers_at_their_rates_and_seeded() -> None:
         ({"columns": 4096, "rows": 4096}, "rays per scan"),
         ({"mount_xyz": (0.0, math.inf, 0.0)}, "mount_xyz"),
         ({"seed": -1}, "seed"),
+        ({"label_error": 0.6}, "label_error"),
+        ({"label_error": math.nan}, "label_error"),
     ],
 )
 def test_bad_configurations_are_refused_with_the_reason(overrides: dict[str, object], message: str) -> None:

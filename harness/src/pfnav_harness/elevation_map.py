@@ -28,6 +28,11 @@ Per cell: height h and variance σ² (NaN and inf while unknown).
   geometry, the planner's confidence bounds; the position's own σ reaches the planner as the
   footprint margin.
 - `lower`/`upper` are the confidence bounds h ∓ k·σ (k = `confidence_sigmas`).
+- Hazard labels (a sensor with labels, `TerrainSensorConfig.label_error` e): each cell counts net
+  hazard votes, +1 per return labelled hazard and −1 per return labelled ground (the cell's
+  screened returns, for a measurement that is fused), which is its log-odds of being a hazard in
+  steps of log((1 − e)/e); the count is held within ±`hazard_votes_limit` so that a changed label
+  can still turn. A known cell is a hazard (`hazards`) from `hazard_votes` net votes on.
 
 Bad input never changes the map: a scan with a non-finite pose or covariance, or captured before
 the last fused one, is rejected whole with a reason; non-finite returns, returns beyond
@@ -61,6 +66,7 @@ BAD_POSE = "pose not finite or not a rotation"
 BAD_COVARIANCE = "covariance not finite, not symmetric or negative"
 STALE = "captured before the last fused scan"
 BAD_SHAPE = "points are not an (n, 3) array"
+BAD_LABELS = "hazard labels are not one per point"
 
 # 1.4826 · MAD estimates a Gaussian's standard deviation.
 _MAD_TO_SIGMA = 1.4826
@@ -102,6 +108,9 @@ class ElevationMapConfig:
     confidence_sigmas: float = 2.0
     # m: returns farther than this from the sensor are not physical (hostile or corrupt data).
     max_point_range: float = 100.0
+    # Net hazard-labelled returns that make a cell a hazard, and the most the evidence holds.
+    hazard_votes: float = 2.0
+    hazard_votes_limit: float = 6.0
 
     def validate(self) -> None:
         checks = {
@@ -111,6 +120,8 @@ class ElevationMapConfig:
             "min_variance": 0.0 < self.min_variance < self.max_variance,
             "confidence_sigmas": self.confidence_sigmas >= 0.0,
             "max_point_range": self.max_point_range > 0.0,
+            "hazard_votes": self.hazard_votes > 0.0,
+            "hazard_votes_limit": self.hazard_votes_limit >= self.hazard_votes,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -158,12 +169,19 @@ class ElevationMap:
         self.variances = np.full(self.shape, np.inf)
         # The part of `variances` that `grow` added (0 where unknown).
         self.drift_variances = np.zeros(self.shape)
+        # Evidence that a cell is a hazard, in label votes (0: none either way).
+        self.hazard_votes = np.zeros(self.shape)
         self.last_capture_time = -math.inf
         self.totals: dict[str, int] = {}
 
     @property
     def known(self) -> NDArray[np.bool_]:
         return np.isfinite(self.heights)
+
+    @property
+    def hazards(self) -> NDArray[np.bool_]:
+        """Known cells whose labels say hazard (`ElevationMapConfig.hazard_votes` net votes)."""
+        return self.known & (self.hazard_votes >= self.config.hazard_votes)
 
     def measurement_variances(self) -> FloatArray:
         """`variances` less the pose drift's share: the uncertainty of a cell relative to its
@@ -202,6 +220,9 @@ class ElevationMap:
         points = np.asarray(scan.points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3:
             return self._reject(report, BAD_SHAPE)
+        labels = None if scan.hazard is None or not self.sensor.labels else np.asarray(scan.hazard, dtype=bool)
+        if labels is not None and labels.shape != (len(points),):
+            return self._reject(report, BAD_LABELS)
         problem = pose.problem()
         if problem is not None:
             return self._reject(report, problem)
@@ -217,6 +238,8 @@ class ElevationMap:
         in_range = ranges <= c.max_point_range
         self._count(report, OUT_OF_RANGE, int((~in_range).sum()))
         points, ranges = points[in_range], ranges[in_range]
+        if labels is not None:
+            labels = labels[finite][in_range]
         if points.size == 0:
             return report
 
@@ -233,6 +256,8 @@ class ElevationMap:
         if not inside.any():
             return report
         world, lever, ranges, ix, iy = world[inside], lever[inside], ranges[inside], ix[inside], iy[inside]
+        if labels is not None:
+            labels = labels[inside]
 
         # Height variance of each return: range noise along the ray's vertical component, plus
         # roll/pitch/yaw uncertainty along the lever arm.
@@ -247,6 +272,8 @@ class ElevationMap:
         # Screen each cell's returns against its median (robust scale: MAD, at least the returns' own σ).
         order = np.lexsort((z, cell))
         cell, z, variance = cell[order], z[order], variance[order]
+        if labels is not None:
+            labels = labels[order]
         starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])
         counts = np.diff(np.r_[starts, len(cell)])
         group = np.repeat(np.arange(len(starts)), counts)
@@ -259,6 +286,8 @@ class ElevationMap:
         keep = deviation <= c.mahalanobis_gate * scale
         self._count(report, SCAN_OUTLIER, int((~keep).sum()))
         cell, z, variance, group = cell[keep], z[keep], variance[keep], group[keep]
+        if labels is not None:
+            labels = labels[keep]
 
         # Inverse-variance mean per cell, its variance plus the spread of the cell's returns.
         n_groups = len(starts)
@@ -292,6 +321,12 @@ class ElevationMap:
         drift = self.drift_variances.reshape(-1)
         # An unknown cell starts without drift; a known one keeps the share the update leaves.
         drift[cells[accept]] = np.where(unknown, 0.0, (1.0 - gain) * drift[cells])[accept]
+        if labels is not None:
+            # Net hazard votes of each cell's screened returns, for the measurements fused.
+            net = (2.0 * np.bincount(group, labels.astype(np.float64), n_groups) - np.bincount(group, None, n_groups))[used]
+            votes = self.hazard_votes.reshape(-1)
+            limit = c.hazard_votes_limit
+            votes[cells[accept]] = np.clip(np.where(unknown, 0.0, votes[cells])[accept] + net[accept], -limit, limit)
         v[cells[gated]] = prior_v[gated] + c.rejection_inflation
         self._forget(cells[gated])
         self._count(report, GATED, int(gated.sum()))
@@ -325,3 +360,4 @@ class ElevationMap:
             self.heights.reshape(-1)[gone] = np.nan
             v[gone] = np.inf
             self.drift_variances.reshape(-1)[gone] = 0.0
+            self.hazard_votes.reshape(-1)[gone] = 0.0

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,7 +24,7 @@ from .elevation_map import PoseBelief
 from .errors import PlannerError, SimulationError
 from .feedback_field import FeedbackField
 from .perception import PerceptionConfig, SensedMap
-from .planner_client import PlanAnswer, PlannerClient, RequestOptions, StartPose, terrain_map_message
+from .planner_client import PlanAnswer, PlannerClient, RequestOptions, StartPose, start_density_belief, terrain_map_message
 from .scenario import Scenario
 from .sensing import BeliefMap, SensorConfig
 
@@ -117,6 +117,10 @@ class OnlineNavigator:
         self.client = client
         self.scenario = scenario
         self.config = config
+        # Planning on the belief starts the P-F density from it too (unless a density is asked for).
+        self.options = config.options
+        if config.belief_planning and config.options.start_density == 0:
+            self.options = replace(config.options, start_density=start_density_belief())
         self.belief: BeliefMap | SensedMap
         if config.perception is None:
             self.belief = BeliefMap(scenario.terrain, scenario.prior, config.sensor)
@@ -166,7 +170,7 @@ class OnlineNavigator:
             self.scenario.goal,
             self.config.method,
             seq,
-            self.config.options,
+            self.options,
             timeout=timeout,
             retries=retries,
             context=f"'{self.scenario.name}' (start)",
@@ -230,7 +234,7 @@ class OnlineNavigator:
         else:
             seq = self._publish_belief()
         published = time.time()
-        request_id = self.client.send_request(StartPose(x, y, yaw, sigma), self.scenario.goal, self.config.method, seq, self.config.options)
+        request_id = self.client.send_request(StartPose(x, y, yaw, sigma), self.scenario.goal, self.config.method, seq, self.options)
         replan = Replan(t, seq, request_id, changed, kind=kind, _published_wall=published)
         self.replans.append(replan)
         self._pending = replan

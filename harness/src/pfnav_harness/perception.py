@@ -90,12 +90,15 @@ class SensedMap:
         return changed
 
     def terrain(self) -> Terrain:
-        """The believed terrain: known heights, unknown cells at 0 (their mask goes with them).
+        """The believed terrain: known heights, unknown cells at 0 (their mask goes with them),
+        and the cells a labelling sensor calls hazards as obstacles.
 
         Heights are clipped at 0, the datum of the planner's cost h/h_max (which refuses a map
         with a negative cell): range noise puts returns from the lowest ground a little below it.
         """
-        return Terrain(self.truth.origin, self.truth.resolution, np.clip(np.nan_to_num(self.map.heights, nan=0.0), 0.0, None), None)
+        hazards = self.map.hazards
+        heights = np.clip(np.nan_to_num(self.map.heights, nan=0.0), 0.0, None)
+        return Terrain(self.truth.origin, self.truth.resolution, heights, hazards if hazards.any() else None)
 
     @property
     def known(self) -> NDArray[np.bool_]:

@@ -37,6 +37,11 @@ METHODS = ("pf", "astar", "dijkstra")
 ROBOT_FOOTPRINT_RADIUS = 0.25
 
 
+def start_density_belief() -> int:
+    """`plan_options_t.START_DENSITY_BELIEF`: the P-F start density is the robot's position belief."""
+    return int(_import_types().plan_options_t.START_DENSITY_BELIEF)
+
+
 def _import_types() -> Any:
     """The lcm-gen generated package `pfnav` (build/lcm_python, put on sys.path by setup.sh's .pth)."""
     try:
@@ -115,6 +120,8 @@ class RequestOptions:
     max_solve_time: float = 0.0
     # κ of the margin for the start's uncertainty (0: the service's default, 2).
     confidence_sigmas: float = 0.0
+    # P-F start density: one of plan_options_t.START_DENSITY_* (0: the service's default).
+    start_density: int = 0
 
 
 @dataclass
@@ -429,6 +436,7 @@ class PlannerClient:
         req.options.sample_period = options.sample_period
         req.options.max_solve_time = options.max_solve_time
         req.options.confidence_sigmas = options.confidence_sigmas
+        req.options.start_density = options.start_density
         req.start_sigma = pose.sigma
         self.lc.publish(self.prefix + PLANNER.plan_request, req.encode())
         return request_id

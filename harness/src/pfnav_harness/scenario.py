@@ -216,6 +216,20 @@ class Terrain:
             return False
         return bool(self.obstacles[iy, ix])
 
+    def obstacles_at(self, x: FloatArray, y: FloatArray) -> NDArray[np.bool_]:
+        """`is_obstacle` at many points (False off the map and without a mask)."""
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        if self.obstacles is None:
+            return np.zeros(x.shape, dtype=bool)
+        ny, nx = self.shape
+        with np.errstate(invalid="ignore"):
+            fx = np.floor((x - self.origin[0]) / self.resolution)
+            fy = np.floor((y - self.origin[1]) / self.resolution)
+        inside = np.isfinite(fx) & np.isfinite(fy) & (fx >= 0) & (fx < nx) & (fy >= 0) & (fy < ny)
+        ix = np.where(inside, fx, 0).astype(np.int64)
+        iy = np.where(inside, fy, 0).astype(np.int64)
+        return inside & self.obstacles[iy, ix]
+
 
 @dataclass
 class Scenario:

@@ -19,6 +19,12 @@ probability `outlier` it gives a spurious range uniform in [`min_range`, `max_ra
 multipath). Ranges outside [`min_range`, `max_range`] are not returned. All draws come from a
 generator seeded by (`seed`, scan index), so the same seed gives the same scans.
 
+Hazard labels (`label_error` < 0.5, the depth camera's default 0.05): an RGB-D camera with a
+segmentation network labels each pixel, so each return carries whether it hit a hazard, the
+scenario's obstacle mask at the hit point (water, mud, a no-go area: what has no geometry to
+measure), flipped with probability `label_error`; a spurious return gets a coin-flip label. A
+lidar (`label_error` = 0.5) carries no labels: its hazards are geometry only.
+
 A scan is delivered like a driver delivers it: points in the sensor frame (x along the optical
 axis, y left, z up), NaN rows where a ray returned nothing, and the capture time. The sensor's
 pose on the trunk (`mount_xyz`, the tilt) is the calibration the mapping uses to bring points
@@ -72,6 +78,13 @@ class TerrainSensorConfig:
     seed: int = 0
     # Ray-marching step, m; 0: a quarter of the terrain resolution.
     step: float = 0.0
+    # Probability that a return's hazard label is wrong; 0.5: the sensor has no labels.
+    label_error: float = 0.05
+
+    @property
+    def labels(self) -> bool:
+        """Whether the returns carry hazard labels."""
+        return self.label_error < 0.5
 
     @staticmethod
     def lidar(**overrides: object) -> TerrainSensorConfig:
@@ -87,6 +100,7 @@ class TerrainSensorConfig:
             "rate_hz": 10.0,
             "sigma0": 0.02,
             "sigma_r2": 0.0,
+            "label_error": 0.5,
         }
         values.update(overrides)
         return TerrainSensorConfig(**values)  # type: ignore[arg-type]
@@ -128,6 +142,8 @@ class TerrainSensorConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 <= value < 1.0):
                 raise bad(f"{name} probability must lie in [0, 1), got {value}")
+        if not (math.isfinite(self.label_error) and 0.0 <= self.label_error <= 0.5):
+            raise bad(f"label_error must lie in [0, 0.5] (0.5: no labels), got {self.label_error}")
         if not (math.isfinite(self.step) and 0.0 <= self.step <= 1.0):
             raise bad(f"step must lie in [0, 1] m (0: a quarter of the terrain resolution), got {self.step}")
         if not (isinstance(self.seed, int) and 0 <= self.seed < 2**63):
@@ -172,6 +188,8 @@ class SensorScan:
     # Ground truth of the simulation, never read by the map: spurious returns and dropped rays.
     injected_outliers: NDArray[np.bool_] = field(repr=False, default_factory=lambda: np.zeros(0, dtype=bool))
     dropped: NDArray[np.bool_] = field(repr=False, default_factory=lambda: np.zeros(0, dtype=bool))
+    # (rays,) hazard label of each return (meaningless where there is none); None: no labels.
+    hazard: NDArray[np.bool_] | None = None
 
     @property
     def returns(self) -> int:
@@ -297,6 +315,14 @@ class TerrainSensor:
         measured = np.where(outlier, spurious, measured)
         valid = np.isfinite(measured) & (measured >= c.min_range) & (measured <= c.max_range) & ~dropped
         ranges = np.where(valid, measured, np.nan)
+        hazard = None
+        if c.labels:
+            # Drawn after the range draws, so labels leave a seed's ranges as they were.
+            flip = rng.random(n) < c.label_error
+            coin = rng.random(n) < 0.5
+            hit = origin + (self.directions @ sensor_rotation.T) * np.where(np.isfinite(true_range), true_range, 0.0)[:, None]
+            truth = self.terrain.obstacles_at(hit[:, 0], hit[:, 1]) & np.isfinite(true_range)
+            hazard = np.where(outlier, coin, truth ^ flip)
         scan = SensorScan(
             capture_time=float(t),
             points=self.directions * ranges[:, None],
@@ -304,6 +330,7 @@ class TerrainSensor:
             index=self._index,
             injected_outliers=outlier & valid,
             dropped=dropped,
+            hazard=hazard,
         )
         self._index += 1
         return scan

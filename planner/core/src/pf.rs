@@ -28,7 +28,7 @@ use crate::map::Point;
 const COST_QUADRATURE_PER_AXIS: usize = 4;
 
 /// Initial density h₀ of the LP.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum StartDensity {
     /// All mass in the start's basis function: the flow is one optimal tube from the start.
     PointMass,
@@ -36,6 +36,12 @@ pub enum StartDensity {
     /// feedback everywhere (robust to disturbances), at the price of a larger optimal flow.
     #[default]
     UniformFree,
+    /// The robot's position belief: a Gaussian of standard deviation `sigma_m` (metres) about
+    /// the start, over the free functions that can reach the goal (the belief's mass elsewhere
+    /// is left out and the rest renormalised). The LP's objective is then the expected cost from
+    /// where the robot may truly be; σ = 0 (or a belief narrower than one function) is the
+    /// point mass.
+    Belief { sigma_m: f64 },
 }
 
 /// Options of one P-F solve.
@@ -344,10 +350,33 @@ pub fn prepare(
         });
     }
     let mut t = vec![0.0; n];
+    let point_mass = |t: &mut Vec<f64>| {
+        if !target[start_fn] {
+            t[start_fn] = 1.0 / gens.mass[start_fn];
+        }
+    };
     match density {
-        StartDensity::PointMass => {
-            if !target[start_fn] {
-                t[start_fn] = 1.0 / gens.mass[start_fn];
+        StartDensity::PointMass => point_mass(&mut t),
+        StartDensity::Belief { sigma_m } => {
+            let weight = |i: usize| {
+                let d = dist(basis.center(i), start);
+                (-0.5 * (d / sigma_m).powi(2)).exp()
+            };
+            let free = |i: usize| reach[i] && !target[i];
+            let total: f64 = if sigma_m > 0.0 && sigma_m.is_finite() {
+                (0..n)
+                    .filter(|&i| free(i))
+                    .map(|i| weight(i) * gens.mass[i])
+                    .sum()
+            } else {
+                0.0
+            };
+            if total > 0.0 && total.is_finite() && !target[start_fn] {
+                for i in (0..n).filter(|&i| free(i)) {
+                    t[i] = weight(i) / total;
+                }
+            } else {
+                point_mass(&mut t);
             }
         }
         StartDensity::UniformFree => {

@@ -325,9 +325,11 @@ pub fn resolve_options(
         PlanOptions::START_DENSITY_DEFAULT => StartDensity::default(),
         PlanOptions::START_DENSITY_POINT => StartDensity::PointMass,
         PlanOptions::START_DENSITY_UNIFORM => StartDensity::UniformFree,
+        // σ comes with the request (`validate_request` fills it in).
+        PlanOptions::START_DENSITY_BELIEF => StartDensity::Belief { sigma_m: 0.0 },
         other => {
             return Err(Rejection::invalid_request(format!(
-                "unknown options.start_density {other} (0 default, 1 point, 2 uniform)"
+                "unknown options.start_density {other} (0 default, 1 point, 2 uniform, 3 belief)"
             )))
         }
     };
@@ -488,7 +490,10 @@ pub fn validate_request(
             )))
         }
     };
-    let options = resolve_options(&msg.options, &map.map, defaults)?;
+    let mut options = resolve_options(&msg.options, &map.map, defaults)?;
+    if let StartDensity::Belief { sigma_m } = &mut options.start_density {
+        *sigma_m = msg.start_sigma;
+    }
     // Every path from start to goal is at least the straight line minus the goal radius long: a
     // reference sampled that finely would exceed the sample cap whatever the planner finds, so
     // the request is refused before any work.
@@ -598,6 +603,13 @@ mod tests {
         uncertain.options.confidence_sigmas = 3.0;
         let v = validate_request(&uncertain, &NoMaps, 100, &OptionDefaults::default()).unwrap();
         assert!((v.traversability(&service).footprint_radius_m - 0.55).abs() < 1e-12);
+        // The belief density takes the request's σ.
+        uncertain.options.start_density = PlanOptions::START_DENSITY_BELIEF;
+        let v = validate_request(&uncertain, &NoMaps, 100, &OptionDefaults::default()).unwrap();
+        assert_eq!(
+            v.options.start_density,
+            StartDensity::Belief { sigma_m: 0.1 }
+        );
     }
 
     #[test]

@@ -328,3 +328,83 @@ fn a_passed_deadline_stops_each_phase_with_a_time_limit_error() {
     // Without a limit the same problems solve.
     assert!(lp::solve(&problem, &settings(LpSolver::Exact)).is_ok());
 }
+
+/// A Gaussian belief about the start: the density is normalised over the free functions that
+/// reach the goal and falls off with the distance from the believed start; the optimum is the
+/// belief's expected cost-to-go (exact and Clarabel agree); a vanishing σ is the point mass.
+#[test]
+fn a_belief_start_costs_the_expected_cost_to_go() {
+    let mut rng = ChaCha8Rng::seed_from_u64(20261128);
+    let mut compared = 0;
+    for _ in 0..12 {
+        let grid = random_grid(&mut rng);
+        let start = random_free_point(&mut rng, &grid);
+        let goal = GoalRegion {
+            center: random_free_point(&mut rng, &grid),
+            radius: grid.cell_size,
+        };
+        let gens = PfGenerators::build(&grid, &BasisKind::Indicator, 8).expect("generators");
+        let sigma_m = 2.0 * grid.cell_size;
+        let belief = StartDensity::Belief { sigma_m };
+        let Ok(prepared) = pf::prepare(&gens, &grid, start, &goal, belief) else {
+            continue;
+        };
+        let problem = prepared.problem(&gens, 1.0);
+        let exact = lp::solve(&problem, &settings(LpSolver::Exact)).expect("exact");
+        if exact.report.status == LpStatus::Trivial {
+            continue;
+        }
+        let basis = &gens.generators().basis;
+        let mass: f64 = (0..prepared.start.len())
+            .map(|i| prepared.start[i] * gens.mass_integrals()[i])
+            .sum();
+        assert!((mass - 1.0).abs() < 1e-12, "belief mass {mass}");
+        let weighted: Vec<usize> = (0..prepared.start.len())
+            .filter(|&i| prepared.start[i] > 0.0)
+            .collect();
+        assert!(
+            weighted.len() > 1,
+            "a belief spreads over several functions"
+        );
+        // Nearer functions carry more of the belief (equal masses on an indicator grid).
+        let distance = |i: usize| {
+            let c = basis.center(i);
+            (c[0] - start[0]).hypot(c[1] - start[1])
+        };
+        for pair in weighted.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            if distance(a) + 1e-9 < distance(b)
+                && gens.mass_integrals()[a] == gens.mass_integrals()[b]
+            {
+                assert!(prepared.start[a] >= prepared.start[b]);
+            }
+        }
+        // Strong duality: the optimum is the belief-weighted cost-to-go Σ h₀ᵢ Vᵢ.
+        let expected: f64 = weighted
+            .iter()
+            .map(|&i| prepared.start[i] * exact.potential[i])
+            .sum();
+        let objective = exact.report.objective;
+        assert!(
+            (objective - expected).abs() <= 1e-9 * objective.max(1.0),
+            "{objective} vs expected cost-to-go {expected}"
+        );
+        let clarabel = lp::solve(&problem, &settings(LpSolver::Clarabel)).expect("clarabel");
+        assert_certified("clarabel", &clarabel);
+        assert!((clarabel.report.objective - objective).abs() <= TOLERANCE * objective);
+        // σ → 0 is the point mass.
+        let narrow = pf::prepare(
+            &gens,
+            &grid,
+            start,
+            &goal,
+            StartDensity::Belief { sigma_m: 0.0 },
+        )
+        .expect("narrow");
+        let point =
+            pf::prepare(&gens, &grid, start, &goal, StartDensity::PointMass).expect("point");
+        assert_eq!(narrow.start, point.start);
+        compared += 1;
+    }
+    assert!(compared >= 5, "only {compared} reachable cases");
+}
