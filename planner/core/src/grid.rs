@@ -228,6 +228,36 @@ impl PlanningGrid {
         (ix < self.width && iy < self.height).then_some((ix, iy))
     }
 
+    /// `p` itself when its cell is free, else the centre of the nearest free cell whose centre
+    /// lies within `max_distance` of `p` (ties: the lower row-major index), else `None`; `None`
+    /// also off the grid. Bounded: it looks at the cells within `max_distance` only.
+    pub fn nearest_free_point(&self, p: Point, max_distance: f64) -> Option<Point> {
+        let (sx, sy) = self.cell_of(p)?;
+        if !self.blocked[self.index(sx, sy)] {
+            return Some(p);
+        }
+        if !(max_distance.is_finite() && max_distance > 0.0) {
+            return None;
+        }
+        let reach = (max_distance / self.cell_size).ceil() as usize + 1;
+        let (x0, x1) = (sx.saturating_sub(reach), (sx + reach).min(self.width - 1));
+        let (y0, y1) = (sy.saturating_sub(reach), (sy + reach).min(self.height - 1));
+        let mut best: Option<(f64, Point)> = None;
+        for iy in y0..=y1 {
+            for ix in x0..=x1 {
+                if self.blocked[self.index(ix, iy)] {
+                    continue;
+                }
+                let c = self.cell_center(ix, iy);
+                let d = (c[0] - p[0]).hypot(c[1] - p[1]);
+                if d <= max_distance && best.map_or(true, |(bd, _)| d < bd) {
+                    best = Some((d, c));
+                }
+            }
+        }
+        best.map(|(_, c)| c)
+    }
+
     /// Whether `p` lies inside the grid's rectangle.
     pub fn contains(&self, p: Point) -> bool {
         self.cell_of(p).is_some()
@@ -500,5 +530,25 @@ mod tests {
                 .is_err()
         );
         assert!(PlanningGrid::from_parts([0.0, 0.0], 1.0, 0, 2, vec![], vec![]).is_err());
+    }
+
+    #[test]
+    fn a_start_on_a_blocked_cell_moves_to_the_nearest_free_one_within_reach() {
+        // 6 × 4 unit cells; a block of columns 2 … 4 on rows 0 … 2.
+        let blocked: Vec<bool> = (0..24)
+            .map(|i| (2..=4).contains(&(i % 6)) && i / 6 <= 2)
+            .collect();
+        let grid =
+            PlanningGrid::from_parts([0.0, 0.0], 1.0, 6, 4, vec![0.5; 24], blocked).expect("grid");
+        // Free: unchanged, whatever the reach.
+        assert_eq!(grid.nearest_free_point([0.3, 0.7], 0.0), Some([0.3, 0.7]));
+        // On the block's left edge: the free cell to its left (1 m off), not the one above (2.3 m).
+        assert_eq!(grid.nearest_free_point([2.2, 0.5], 1.5), Some([1.5, 0.5]));
+        // Deep inside: nothing within reach, or the nearest free centre when the reach allows.
+        assert_eq!(grid.nearest_free_point([3.5, 0.5], 1.0), None);
+        assert_eq!(grid.nearest_free_point([3.5, 2.4], 3.0), Some([3.5, 3.5]));
+        // Off the grid or no reach: none.
+        assert_eq!(grid.nearest_free_point([-1.0, 0.5], 5.0), None);
+        assert_eq!(grid.nearest_free_point([3.5, 0.5], f64::NAN), None);
     }
 }

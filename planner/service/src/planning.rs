@@ -20,7 +20,7 @@ use pf_planner::pf::PfGenerators;
 use pf_planner::plan::{Plan, PlannerOptions, PreparedMap};
 use pf_planner::traversability::{block_steep_cells, TraversabilityField, TraversabilityParams};
 
-use tracing::warn;
+use tracing::{info, warn};
 
 use crate::cache::BuildCache;
 use crate::convert::{Rejection, ResolvedOptions, ValidatedRequest};
@@ -252,6 +252,17 @@ pub fn plan(
     let field =
         TraversabilityField::from_partial_map(map, request.map.knowledge.as_ref(), traversability)?;
     let grid = PlanningGrid::from_field(map, &field, options.grid_size)?;
+    // A robot believed on a blocked cell (it slipped onto a flank, or the margin grew round it)
+    // is led off by the shortest way: the plan starts at the nearest free cell within its reach
+    // (footprint and margin, plus a cell's diagonal); farther in, the start stays refused.
+    let reach = traversability.footprint_radius_m + grid.cell_size * std::f64::consts::SQRT_2;
+    let start = match grid.nearest_free_point(request.start, reach) {
+        Some(free) if free != request.start => {
+            info!(request_id = request.request_id, from = ?request.start, to = ?free, "start moved off a blocked cell");
+            free
+        }
+        _ => request.start,
+    };
     let prepared = PreparedMap {
         map,
         field: &field,
@@ -262,7 +273,7 @@ pub fn plan(
         generators.map(|g| (g, hit))
     };
     let plan = prepared.plan(
-        request.start,
+        start,
         request.start_yaw,
         &request.goal,
         request.method,
@@ -531,5 +542,53 @@ mod tests {
         let outcome = plan_on(sensed).expect("the noise is no wall");
         let last = outcome.samples.last().expect("a trajectory");
         assert!((last.x - 3.5).hypot(last.y - 1.0) <= 0.3 + 1e-9);
+    }
+
+    /// A start on the wall's edge (a robot that slipped onto it) gets a plan from the nearest
+    /// free cell; a start deep inside the wall is still refused.
+    #[test]
+    fn a_start_on_a_blocked_cell_is_led_off_it() {
+        let map = gap_map();
+        let plan_from = |x: f64| {
+            let request = PlanRequest {
+                request_id: 1,
+                num_inline_maps: 1,
+                inline_map: vec![partial_map_to_message(&map, None, 1)],
+                start_x: x,
+                start_y: 1.0,
+                goal_x: 7.0,
+                goal_y: 1.0,
+                goal_radius: 0.3,
+                method: PlanRequest::METHOD_PF,
+                ..PlanRequest::default()
+            };
+            let validated =
+                validate_request(&request, &NoMaps, 1 << 20, &OptionDefaults::default())
+                    .expect("valid request");
+            let service = TraversabilityParams {
+                footprint_radius_m: FOOTPRINT,
+                ..TraversabilityParams::default()
+            };
+            plan(&validated, &GeneratorCache::new(1), &service)
+        };
+        // The wall spans x = 4 … 4.25 m: 4.02 m is on its edge, a cell off the free side.
+        let outcome = plan_from(4.02).expect("led off the wall");
+        let first = outcome.samples.first().expect("a trajectory");
+        assert!(
+            first.x < 4.0 && (first.x - 4.02).abs() < FOOTPRINT + 0.1,
+            "starts at {}",
+            first.x
+        );
+        let last = outcome.samples.last().expect("a trajectory");
+        assert!(
+            (last.x - 7.0).hypot(last.y - 1.0) <= 0.35,
+            "ends at ({}, {})",
+            last.x,
+            last.y
+        );
+        // A wall 0.25 m thick has no cell deeper than 0.125 m from free ground: use a start
+        // that is off the map's free cells by more than the reach instead (none).
+        let refused = plan_from(-1.0).expect_err("off the map");
+        assert!(refused.reason.contains("off the map"), "{}", refused.reason);
     }
 }
