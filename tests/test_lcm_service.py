@@ -416,8 +416,8 @@ def test_logged_session_replays_into_a_fresh_service(tmp_path: Path) -> None:
             request(2, plan_request_t.METHOD_ASTAR, (0.4, 3.6), (3.5, 0.5), map_seq=4),
             request(3, plan_request_t.METHOD_PF, (0.4, 0.4), (3.5, 1.0), map_seq=4),
             request(
-                4, plan_request_t.METHOD_DIJKSTRA, (1.6, 1.0), (3.5, 3.5), map_seq=4
-            ),  # in the wall
+                4, plan_request_t.METHOD_DIJKSTRA, (-1.0, 1.0), (3.5, 3.5), map_seq=4
+            ),  # off the map
             request(
                 5,
                 plan_request_t.METHOD_DIJKSTRA,

@@ -147,11 +147,16 @@ fn every_invalid_request_is_answered_with_a_status_and_a_reason() {
     let mut nan = good(31);
     nan.inline_map[0].heights[17] = f64::NAN;
     cases.push((nan, 31, PlanReply::STATUS_INVALID_MAP, "not finite"));
+    // A start 1 m inside a 2 m square block: beyond the reach within which a start on a
+    // blocked cell is led off it (footprint and margin plus a cell).
+    let block: Vec<(usize, usize)> = (4..12)
+        .flat_map(|ix| (4..12).map(move |iy| (ix, iy)))
+        .collect();
     let obstacle_start = inline_request(
         32,
         PlanRequest::METHOD_DIJKSTRA,
-        &walled,
-        [2.1, 1.0],
+        &flat_map(16, &block),
+        [2.0, 2.0],
         [0.5, 0.5],
     );
     cases.push((
