@@ -179,24 +179,21 @@ def terrain_map_message(
     else:
         msg.num_obstacle_cells = 0
         msg.obstacle_mask = []
-    if known is None:
-        msg.num_known_cells = 0
-        msg.known_mask = []
-    else:
-        if known.shape != terrain.shape:
-            raise PlannerError(f"known-cell mask shape {known.shape} differs from the map's {terrain.shape}")
-        msg.num_known_cells = nx * ny
-        msg.known_mask = [bool(v) for v in known.ravel()]
+    msg.known_mask = [bool(v) for v in _per_cell(known, terrain, "known-cell mask")]
+    msg.num_known_cells = len(msg.known_mask)
     msg.unknown_traversability = float(unknown_traversability)
-    if variances is None:
-        msg.num_variance_cells = 0
-        msg.height_variances = []
-    else:
-        if variances.shape != terrain.shape:
-            raise PlannerError(f"height variances of shape {variances.shape} differ from the map's {terrain.shape}")
-        msg.num_variance_cells = nx * ny
-        msg.height_variances = variances.ravel().tolist()
+    msg.height_variances = [float(v) for v in _per_cell(variances, terrain, "height variances")]
+    msg.num_variance_cells = len(msg.height_variances)
     return msg
+
+
+def _per_cell(values: NDArray[np.generic] | None, terrain: Terrain, what: str) -> NDArray[np.generic]:
+    """An optional per-cell array of the map, row-major (empty when absent: the wire's "none")."""
+    if values is None:
+        return np.zeros(0)
+    if values.shape != terrain.shape:
+        raise PlannerError(f"{what} of shape {values.shape} differs from the map's {terrain.shape}")
+    return values.ravel()
 
 
 def plan_from_reply(reply: Any) -> Plan:
