@@ -79,6 +79,26 @@ def test_short_kalman_run(
     )
 
 
+def test_the_estimator_is_told_the_fix_noise(
+    plan_for: Callable[[str, str], Plan],
+    paper_scenarios: dict[str, Scenario],
+    fmu_file: Path,
+    robot: RobotDescription,
+    tmp_path: Path,
+) -> None:
+    # GNSS-class fixes, 0.5 m per axis at 2 Hz: the estimate weighs them as such, so after a few
+    # seconds its σ is still the leg odometry's (≈ 0.04 m), not that of fixes believed to 2 cm
+    # (≈ 0.014 m), and it does not jump with each fix.
+    sensors = BodySensorConfig(seed=1, fix_rate=2.0, fix_noise=0.5)
+    config = CoSimConfig(stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS, estimator="kalman", body_sensors=sensors)
+    outcome = simulate(paper_scenarios["mountain_pass"], plan_for("mountain_pass", "astar"), fmu_file, robot, tmp_path, config, show_progress=False)
+    assert not outcome.metrics.fell, outcome.metrics.fall_reason
+    e = outcome.estimation
+    assert e is not None and e.fixes >= 6
+    assert e.position_sigma_final > 0.03, e.position_sigma_final
+    assert e.position_error_final <= 2.0 * e.position_sigma_final
+
+
 def test_kalman_mode_is_refused_for_an_fmu_without_the_estimator(
     fmu_model_description: Any, fmu_file: Path
 ) -> None:

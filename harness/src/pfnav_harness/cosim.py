@@ -711,6 +711,10 @@ class EstimatorInTheLoop:
         self.config = config
         self.world = world
         self.io = io = fmu.enable_estimation(config.estimator)
+        if config.body_sensors.fix_rate > 0.0:
+            # The estimator is told the fix receiver's noise, as a user sets it from its datasheet
+            # (left at its default it would trust 0.5 m fixes to 2 cm and jump with each of them).
+            fmu.set_parameters({fr.FIX_NOISE_PARAMETER: max(config.body_sensors.fix_noise, 1e-4)})
         # The sensors write their IMU and fix readings straight into the FMU's input buffers.
         readings = BodyReadings(gyro=io.gyro, acc=io.acc, fix_pos=io.fix_pos)
         self.sensors = BodySensors(config.body_sensors, config.comm_step, readings)

@@ -121,6 +121,8 @@ EST_ATT_VAR = tuple(f"est.attVar[{i}]" for i in range(1, 4))
 ESTIMATION_REAL_OUTPUTS = EST_POS + EST_VEL + EST_RPY + EST_POS_VAR + EST_ATT_VAR
 EST_STATUS = "est.status"
 ESTIMATOR_PARAMETER = "estimator"
+# The estimator's model of a position fix's noise, m (per axis).
+FIX_NOISE_PARAMETER = "est.fixNoise"
 # Estimator modes by item name; the codes are read from the parameter's enumeration type.
 ESTIMATOR_MODES = ("groundTruth", "kalman")
 # What a run's controller works on unless told otherwise (CLI, sweeps, CoSimConfig): its own
