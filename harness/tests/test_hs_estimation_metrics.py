@@ -157,6 +157,9 @@ class EstimatingStandIn(PdStandIn):
         self.estimation = fr.EstimationIo.detached()
         return self.estimation
 
+    def set_parameters(self, values: dict[str, float]) -> None:
+        self.parameters = {**getattr(self, "parameters", {}), **values}
+
     def do_step(self, time: float, step: float) -> None:
         super().do_step(time, step)
         io = self.estimation
@@ -184,6 +187,8 @@ def test_kalman_mode_feeds_sensor_readings_and_logs_the_estimate(ramp_scenario: 
         result = sim.run()
     log = result.log
     assert stand_in.estimator_mode == "kalman"
+    # The estimator is told the fix receiver's noise.
+    assert stand_in.parameters == {fr.FIX_NOISE_PARAMETER: 0.01}
     assert len(stand_in.received) == len(log["t"]) // 2
     # Standing on a ramp of slope 0.2: the accelerometer reads about g, mostly along body z.
     acc = np.array([r[1] for r in stand_in.received[-200:]])

@@ -53,6 +53,9 @@ class StatefulStandIn:
         self.estimation = fr.EstimationIo.detached()
         return self.estimation
 
+    def set_parameters(self, values: dict[str, float]) -> None:
+        self.parameters = {**getattr(self, "parameters", {}), **values}
+
     def initialize(self, start_time: float = 0.0) -> None:
         self.initialized = True
 
