@@ -150,11 +150,10 @@ def summary_rows(results: dict[Job, dict[str, Any]]) -> list[str]:
         p99 = [m["online"]["latency_p99"] for m in ok.values() if m["online"].get("latency_p99") is not None]
         refused = sum(len(m["online"]["rejected"]) for m in ok.values())
         errors = len(runs) - len(ok)
+        p99_text = f"{max(p99) * 1e3:.0f}" if p99 else "–"
         rows.append(
             f"| {setting.name} | {len(runs)}{f' ({errors} failed to run)' if errors else ''} | {goal} | {fell} | {ratios} | "
-            f"{sum(judged)} of {len(judged)} | {map_text} | {max(p99) * 1e3:.0f} | {refused} |"
-            if p99
-            else f"| {setting.name} | {len(runs)} | {goal} | {fell} | {ratios} | {sum(judged)} of {len(judged)} | {map_text} | – | {refused} |"
+            f"{sum(judged)} of {len(judged)} | {map_text} | {p99_text} | {refused} |"
         )
     return rows
 
