@@ -110,6 +110,29 @@ impl LegKalman {
         self.x.fixed_rows::<3>(VELOCITY).into_owned()
     }
 
+    /// Trunk velocity covariance, (m/s)².
+    pub fn velocity_covariance(&self) -> Matrix3<f64> {
+        self.p.fixed_view::<3, 3>(VELOCITY, VELOCITY).into_owned()
+    }
+
+    /// Squared Mahalanobis distance of a trunk-velocity measurement `velocity` (m/s, world
+    /// frame) with per-axis noise variance `variance` from the predicted velocity, the state
+    /// propagated over `dt` with `acceleration` first (`None` when the innovation covariance is
+    /// singular or not finite).
+    pub fn velocity_distance2(
+        &self,
+        velocity: &Vector3<f64>,
+        variance: f64,
+        acceleration: &Vector3<f64>,
+        dt: f64,
+    ) -> Option<f64> {
+        let innovation = velocity - (self.velocity() + acceleration * dt);
+        let s = self.velocity_covariance() + Matrix3::identity() * variance;
+        s.try_inverse()
+            .map(|inverse| innovation.dot(&(inverse * innovation)))
+            .filter(|d2| d2.is_finite())
+    }
+
     /// Foot position of `leg`, world frame, m.
     pub fn foot(&self, leg: usize) -> Vector3<f64> {
         self.x.fixed_rows::<3>(foot(leg)).into_owned()

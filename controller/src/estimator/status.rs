@@ -21,11 +21,14 @@ pub enum StatusFlag {
     CovarianceReset = 32,
     /// No foot in stance: the velocity is integrated from the accelerometer alone.
     NoStance = 64,
+    /// A stance foot's velocity disagreed with the prediction while another stance foot
+    /// agreed (a slipping foot): that foot was treated as swinging for the tick.
+    FootSlip = 128,
 }
 
 impl StatusFlag {
     /// Every flag with its name and description, in bit order.
-    pub const ALL: [(StatusFlag, &'static str, &'static str); 7] = [
+    pub const ALL: [(StatusFlag, &'static str, &'static str); 8] = [
         (
             StatusFlag::GyroInvalid,
             "gyroInvalid",
@@ -60,6 +63,11 @@ impl StatusFlag {
             StatusFlag::NoStance,
             "noStance",
             "no foot in stance (velocity from the accelerometer alone)",
+        ),
+        (
+            StatusFlag::FootSlip,
+            "footSlip",
+            "a stance foot's velocity beyond the slip gate (treated as swinging)",
         ),
     ];
 

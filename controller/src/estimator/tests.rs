@@ -472,6 +472,42 @@ fn swing_feet_do_not_pull_the_estimate() {
     );
 }
 
+/// A stance foot sliding down and away (a foot on a flank) while the robot stands: the other
+/// three feet agree with the prediction, so the sliding one is gated out as slipping and the
+/// trunk estimate stays put instead of moving up and towards the flank.
+#[test]
+fn a_slipping_foot_does_not_drag_the_estimate() {
+    let model = model();
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    let truth = Truth::standing(&model);
+    // A slip is quick: 0.8 m/s for 0.2 s.
+    let slide = Vector3::new(-0.75, 0.0, -0.25);
+    let (mut worst, mut status) = (0.0_f64, 0);
+    for k in 0..1500 {
+        let t = k as f64 * DT;
+        let mut moving = truth;
+        if (0.5..0.7).contains(&t) {
+            moving.feet[0] += slide * (t - 0.5);
+            moving.feet_velocity[0] = slide;
+        } else if t >= 0.7 {
+            moving.feet[0] += slide * 0.2;
+        }
+        let (state, imu) = moving.measure(&model);
+        let estimate = estimator.update(&model, &state, &sensors(imu), &ALL_STANCE, DT);
+        worst = worst.max((estimate.position - truth.position).norm());
+        status |= estimator.report().status;
+    }
+    // The foot slid 0.16 m; trusted, it moved the estimate by 5 cm.
+    assert!(
+        worst < 0.01,
+        "a slipping foot moved the estimate by {worst} m"
+    );
+    assert!(
+        status & StatusFlag::FootSlip.bit() != 0,
+        "status {status:#x}"
+    );
+}
+
 /// Readings of a robot standing still for `ticks` ticks with `corrupt` applied to the sensors of
 /// tick k; the worst status seen and whether every estimate was finite.
 fn standing_with(ticks: usize, corrupt: impl Fn(usize, &mut SensorReadings)) -> (u32, bool) {
