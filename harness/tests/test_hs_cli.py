@@ -164,3 +164,17 @@ def test_traversability_fields_reach_the_started_service(fake_tools: dict[str, s
     assert_clean_failure(proc, 4, "published no status")
     argv = recorded.read_text().splitlines()
     assert '--traversability={"height_weight": 2.0}' in argv, argv
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (("run", "--scenario", "ramp", "--online"), {"slope_fit_radius_m": 0.25}),
+        (("run", "--scenario", "ramp", "--online", "--traversability", "slope_fit_radius_m=0"), {"slope_fit_radius_m": 0.0}),
+        (("run", "--scenario", "ramp"), {}),
+    ],
+)
+def test_online_runs_fit_the_slope_unless_told_otherwise(args: tuple[str, ...], expected: dict[str, float]) -> None:
+    from pfnav_harness import cli
+
+    assert cli._service_traversability(cli.build_parser().parse_args(args)) == expected

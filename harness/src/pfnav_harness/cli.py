@@ -39,6 +39,10 @@ SHORT_DURATION = 8.0
 # stands and trots on ≤ 20° (issue 19's slope work targets 30°); a ridge flank of 45° and more
 # is not walkable however cheap the cost model makes it.
 ONLINE_MAX_SLOPE_DEG = 30.0
+# Online runs take each cell's slope from a plane fitted over this radius (weighted by the sensed
+# heights' inverse variances) unless --traversability slope_fit_radius_m=… says otherwise: central
+# differences let one outlier height block its four neighbours, and a robot detoured around them.
+ONLINE_SLOPE_FIT_RADIUS_M = 0.25
 
 
 def in_private_network_namespace() -> bool:
@@ -310,7 +314,7 @@ def _client(args: argparse.Namespace, out: Path, prefix: str | None = None, log_
         startup_timeout=args.service_timeout,
         footprint_radius=args.footprint_radius,
         max_slope_deg=_max_slope_deg(args),
-        traversability=_traversability_overrides(args),
+        traversability=_service_traversability(args),
     )
     if args.connect:
         client.wait_for_service(timeout=args.service_timeout)
@@ -333,6 +337,14 @@ def _traversability_overrides(args: argparse.Namespace) -> dict[str, float]:
         if name in ("footprint_radius_m", "max_slope_deg"):
             raise HarnessError(f"--traversability {name}: use --{name.removesuffix('_m').replace('_', '-')} for it")
         overrides[name] = value
+    return overrides
+
+
+def _service_traversability(args: argparse.Namespace) -> dict[str, float]:
+    """The overrides a started service plans with: --traversability, and online the slope fit."""
+    overrides = _traversability_overrides(args)
+    if args.online:
+        overrides.setdefault("slope_fit_radius_m", ONLINE_SLOPE_FIT_RADIUS_M)
     return overrides
 
 
@@ -547,7 +559,7 @@ def execute(args: argparse.Namespace) -> int:
             if scenario.traversability and unknown:
                 known = ", ".join(sorted(scenario.traversability))
                 raise HarnessError(f"--traversability: no field {', '.join(unknown)} in the planner's model ({known})")
-            scenario.traversability.update(overrides)
+            scenario.traversability.update(_service_traversability(args))
             scenario.traversability["footprint_radius_m"] = args.footprint_radius
             max_slope = _max_slope_deg(args)
             if max_slope is not None:

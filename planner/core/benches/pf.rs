@@ -24,7 +24,7 @@ use pf_planner::map::MapKnowledge;
 use pf_planner::pf::{self, prepare, PfGenerators, PfOptions, StartDensity};
 use pf_planner::plan::{Method, PlannerOptions, PreparedMap};
 use pf_planner::scenarios;
-use pf_planner::traversability::TraversabilityField;
+use pf_planner::traversability::{block_steep_cells, TraversabilityField, TraversabilityParams};
 
 const U_MAX: f64 = 1.0;
 
@@ -278,7 +278,46 @@ fn replan_rows(c: &mut Criterion, rec: &Recorder, scenario: &MapScenario) -> Vec
             black_box(plan);
         },
     );
+    // The sensed map's cost model (walkable-slope limit, κ = 2) with the slope from central
+    // differences and from the plane fitted over 0.25 m, side by side.
+    let variances: Vec<f64> = (0..map.len()).map(|i| 1e-4 * (1 + i % 7) as f64).collect();
+    let sensed = knowledge
+        .with_height_variances(map, &variances)
+        .expect("variances");
+    let mut cost_model = |radius: f64| {
+        let params = TraversabilityParams {
+            max_slope_deg: Some(30.0),
+            height_confidence_sigmas: 2.0,
+            slope_fit_radius_m: radius,
+            ..scenario.traversability
+        };
+        rec.measure(
+            c,
+            &format!("sensed 128² cost model, slope fit radius {radius} m"),
+            || {
+                let blocked = block_steep_cells(map, Some(&sensed), &params);
+                black_box(
+                    TraversabilityField::from_partial_map(&blocked, Some(&sensed), &params)
+                        .expect("field"),
+                );
+            },
+        )
+    };
+    let central = cost_model(0.0);
+    let fitted = cost_model(0.25);
     vec![
+        Row {
+            case: "sensed 128² cost model (slope limit, κ = 2): central differences".into(),
+            pipeline: Some(central),
+            target: "–",
+            ..Row::default()
+        },
+        Row {
+            case: "sensed 128² cost model: plane fit over 0.25 m (inverse-variance weights)".into(),
+            pipeline: Some(fitted),
+            target: "≤ 10 ms",
+            ..Row::default()
+        },
         Row {
             case: "replan 128², revealed map: PreparedMap::plan incl. feedback field (cached generators)".into(),
             pipeline: Some(revealed_plan),

@@ -39,6 +39,14 @@
 //! exactly the steep cells, whose returns spread and whose measurements disagree most (a sensed
 //! C ridge lost the tip of its flank that way, and the robot was sent up it). Without variances,
 //! or with κ = 0, every bound is the mapped value itself (the model above, bit for bit).
+//!
+//! **Fitted slope** (`slope_fit_radius_m` r ≥ one cell; default 0 = central differences): the
+//! slope of a known cell is that of the plane fitted by least squares to the known heights within
+//! r, each weighted by its inverse variance (floored at 1 mm²), and its σ comes from the fit's
+//! covariance. A single wrong height that the map itself holds uncertain then tilts nothing,
+//! where central differences made its four neighbours steep (and, with the walkable-slope limit,
+//! obstacles a robot detoured around); a flank measured alike throughout keeps its slope. Cells
+//! whose known neighbours are fewer than three or collinear fall back to central differences.
 
 use std::borrow::Cow;
 
@@ -74,10 +82,18 @@ pub struct TraversabilityParams {
     /// κ of the heights' confidence bounds (module docs); 0 prices the mapped heights themselves.
     /// Acts only on maps whose knowledge carries height variances.
     pub height_confidence_sigmas: f64,
+    /// Radius, metres, of the plane fitted to the known heights around each cell for its slope
+    /// (weighted by the heights' inverse variances; module docs). 0 (default) or a radius under
+    /// one cell: central differences.
+    pub slope_fit_radius_m: f64,
 }
 
 /// Largest footprint radius in cells; bounds the filter's cost (cells × (2R + 1)).
 pub const MAX_FOOTPRINT_CELLS: usize = 64;
+/// Largest slope-fit radius in cells; bounds the fit's cost (cells × (2R + 1)²).
+pub const MAX_SLOPE_FIT_CELLS: usize = 8;
+/// Variance floor of a height in the slope fit, m² (1 mm): exact heights weigh alike.
+const MIN_FIT_VARIANCE: f64 = 1e-6;
 
 impl Default for TraversabilityParams {
     fn default() -> Self {
@@ -92,6 +108,7 @@ impl Default for TraversabilityParams {
             footprint_radius_m: 0.0,
             max_slope_deg: None,
             height_confidence_sigmas: 0.0,
+            slope_fit_radius_m: 0.0,
         }
     }
 }
@@ -150,6 +167,12 @@ impl TraversabilityParams {
                     "must be finite and >= 0, got {}",
                     self.height_confidence_sigmas
                 ),
+            );
+        }
+        if !(self.slope_fit_radius_m.is_finite() && self.slope_fit_radius_m >= 0.0) {
+            return bad(
+                "traversability.slope_fit_radius_m",
+                format!("must be finite and >= 0, got {}", self.slope_fit_radius_m),
             );
         }
         if let Some(limit) = self.max_slope_deg {
@@ -233,6 +256,7 @@ impl TraversabilityField {
             .fold(0.0_f64, f64::max);
         let h_max = params.h_max.unwrap_or(observed_max);
         let weight_sum = params.height_weight + params.slope_weight + params.roughness_weight;
+        let fit = PlaneFitWindow::new(params.slope_fit_radius_m, map.resolution)?;
         let mut values = Vec::with_capacity(map.len());
         for iy in 0..map.height {
             for ix in 0..map.width {
@@ -254,7 +278,7 @@ impl TraversabilityField {
                     0.0
                 };
                 let slope_term = if params.slope_weight > 0.0 {
-                    (gradient_over(map, knowledge, ix, iy)
+                    (gradient_at(map, knowledge, fit.as_ref(), ix, iy)
                         .slope_deg(params.height_confidence_sigmas)
                         / params.slope_ref_deg)
                         .min(1.0)
@@ -436,11 +460,16 @@ pub fn block_steep_cells<'a>(
         return Cow::Borrowed(map);
     };
     let is_known = |i: usize| knowledge.map_or(true, |k| k.is_known(i));
+    // An invalid radius is reported by the traversability field built from the same params.
+    let fit = PlaneFitWindow::new(params.slope_fit_radius_m, map.resolution)
+        .ok()
+        .flatten();
     let steep: Vec<usize> = (0..map.len())
         .filter(|&i| {
             is_known(i)
                 && !map.obstacles.as_ref().is_some_and(|mask| mask[i])
-                && gradient_over(map, knowledge, i % map.width, i / map.width).slope_deg(0.0)
+                && gradient_at(map, knowledge, fit.as_ref(), i % map.width, i / map.width)
+                    .slope_deg(0.0)
                     > limit
         })
         .collect();
@@ -481,6 +510,121 @@ impl Gradient {
             .atan()
             .to_degrees()
     }
+}
+
+/// The cell offsets within a slope-fit radius.
+struct PlaneFitWindow {
+    offsets: Vec<(isize, isize)>,
+    resolution: f64,
+}
+
+impl PlaneFitWindow {
+    /// `None` for a radius under one cell (central differences); an error beyond
+    /// [`MAX_SLOPE_FIT_CELLS`].
+    fn new(radius_m: f64, resolution: f64) -> Result<Option<Self>, PlanError> {
+        let radius_cells = radius_m / resolution;
+        if radius_cells > MAX_SLOPE_FIT_CELLS as f64 {
+            return Err(PlanError::InvalidOption {
+                name: "traversability.slope_fit_radius_m",
+                reason: format!(
+                    "{radius_m} m is {radius_cells:.0} cells of {resolution} m; at most \
+                     {MAX_SLOPE_FIT_CELLS} cells are supported"
+                ),
+            });
+        }
+        if radius_cells < 1.0 {
+            return Ok(None);
+        }
+        let reach = radius_cells.floor() as isize;
+        let offsets = (-reach..=reach)
+            .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
+            .filter(|&(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius_cells * radius_cells + 1e-9)
+            .collect();
+        Ok(Some(Self {
+            offsets,
+            resolution,
+        }))
+    }
+}
+
+/// [`Gradient`] of the plane fitted over `fit`'s window when given and determined, else from
+/// central differences.
+fn gradient_at(
+    map: &GridMap,
+    knowledge: Option<&MapKnowledge>,
+    fit: Option<&PlaneFitWindow>,
+    ix: usize,
+    iy: usize,
+) -> Gradient {
+    fit.and_then(|window| fitted_gradient(map, knowledge, window, ix, iy))
+        .unwrap_or_else(|| gradient_over(map, knowledge, ix, iy))
+}
+
+/// The plane z = c + gx·x + gy·y fitted by weighted least squares to the known heights within
+/// the window around a cell, each weighted by its inverse variance (floored at
+/// [`MIN_FIT_VARIANCE`]); the gradient's σ from the fit's covariance. A lone wrong height among
+/// well-measured neighbours carries its own large variance and tilts the plane little; a
+/// flank seen at a grazing angle, uncertain throughout, keeps its slope. `None` when fewer than
+/// three known cells or only collinear ones are in the window.
+fn fitted_gradient(
+    map: &GridMap,
+    knowledge: Option<&MapKnowledge>,
+    window: &PlaneFitWindow,
+    ix: usize,
+    iy: usize,
+) -> Option<Gradient> {
+    let mut normal = nalgebra::Matrix3::<f64>::zeros();
+    let mut rhs = nalgebra::Vector3::<f64>::zeros();
+    let mut count = 0;
+    for &(dx, dy) in &window.offsets {
+        let (Some(x), Some(y)) = (ix.checked_add_signed(dx), iy.checked_add_signed(dy)) else {
+            continue;
+        };
+        if x >= map.width || y >= map.height {
+            continue;
+        }
+        let index = map.index(x, y);
+        if !knowledge.map_or(true, |k| k.is_known(index)) {
+            continue;
+        }
+        let variance = knowledge
+            .map_or(0.0, |k| k.height_sigma(index).powi(2))
+            .max(MIN_FIT_VARIANCE);
+        let row = nalgebra::Vector3::new(
+            1.0,
+            dx as f64 * window.resolution,
+            dy as f64 * window.resolution,
+        );
+        normal += row * row.transpose() / variance;
+        rhs += row * (map.heights[index] / variance);
+        count += 1;
+    }
+    // The cells' spread in x and y about their weighted mean (the Schur complement of the
+    // normal matrix): collinear cells determine no plane.
+    let spread =
+        |r: usize, c: usize| normal[(r, c)] - normal[(r, 0)] * normal[(0, c)] / normal[(0, 0)];
+    let (sxx, syy, sxy) = (spread(1, 1), spread(2, 2), spread(1, 2));
+    if count < 3 || sxx * syy - sxy * sxy <= 1e-9 * (sxx + syy).powi(2) {
+        return None;
+    }
+    let factor = normal.cholesky()?;
+    let plane = factor.solve(&rhs);
+    let covariance = factor.inverse();
+    let gradient = Gradient {
+        dx: plane[1],
+        dy: plane[2],
+        sigma_dx: covariance[(1, 1)].max(0.0).sqrt(),
+        sigma_dy: covariance[(2, 2)].max(0.0).sqrt(),
+    };
+    [
+        gradient.dx,
+        gradient.dy,
+        gradient.sigma_dx,
+        gradient.sigma_dy,
+    ]
+    .iter()
+    .all(|v| v.is_finite())
+    .then_some(gradient)
 }
 
 /// [`Gradient`] from known cells only (`knowledge`: `None` = all known, no variances): an
@@ -872,6 +1016,78 @@ mod tests {
             "{exact} cells blocked on the mapped heights"
         );
         assert_eq!(blocked_count(&map, &knowledge, 2.0), exact);
+    }
+
+    fn blocked_with(map: &GridMap, knowledge: &MapKnowledge, fit_radius: f64) -> Vec<bool> {
+        let params = TraversabilityParams {
+            max_slope_deg: Some(30.0),
+            slope_fit_radius_m: fit_radius,
+            ..Default::default()
+        };
+        block_steep_cells(map, Some(knowledge), &params)
+            .obstacles
+            .clone()
+            .unwrap_or_else(|| vec![false; map.len()])
+    }
+
+    #[test]
+    fn the_fitted_plane_of_a_ramp_has_the_ramp_slope() {
+        let map = ramp(0.5);
+        let knowledge = MapKnowledge::new(&map, vec![true; map.len()], 0.5).expect("knowledge");
+        let window = PlaneFitWindow::new(2.0 * map.resolution, map.resolution)
+            .expect("radius")
+            .expect("two cells");
+        let want = 0.5 / map.resolution;
+        for iy in 0..map.height {
+            for ix in 0..map.width {
+                let g = fitted_gradient(&map, Some(&knowledge), &window, ix, iy).expect("plane");
+                assert!(
+                    (g.dx - want).abs() < 1e-9 && g.dy.abs() < 1e-9,
+                    "{g:?} at {ix},{iy}"
+                );
+            }
+        }
+        // Known cells in one row only: no plane, central differences instead.
+        let mut row_only = vec![false; map.len()];
+        row_only[..map.width].fill(true);
+        let knowledge = MapKnowledge::new(&map, row_only, 0.5).expect("knowledge");
+        assert!(fitted_gradient(&map, Some(&knowledge), &window, 2, 0).is_none());
+        assert!(PlaneFitWindow::new(0.1, map.resolution)
+            .expect("small")
+            .is_none());
+        assert!(PlaneFitWindow::new(100.0, map.resolution).is_err());
+    }
+
+    #[test]
+    fn a_lone_uncertain_outlier_blocks_nothing_with_the_fitted_slope() {
+        // Flat ground measured to 1 cm, one cell 0.3 m too high with the variance the map gave
+        // it (σ 0.4 m): central differences block its four neighbours, the weighted plane fit
+        // nothing. A 60° flank measured to 15 cm everywhere stays blocked either way.
+        let (w, h) = (9, 9);
+        let mut heights = vec![0.2; w * h];
+        let mut variances = vec![0.01 * 0.01; w * h];
+        heights[4 * w + 4] = 0.5;
+        variances[4 * w + 4] = 0.4 * 0.4;
+        let map = GridMap::new([0.0, 0.0], 0.125, w, h, heights, None).expect("map");
+        let knowledge = MapKnowledge::new(&map, vec![true; w * h], 0.5)
+            .and_then(|k| k.with_height_variances(&map, &variances))
+            .expect("knowledge");
+        let count = |mask: Vec<bool>| mask.iter().filter(|&&b| b).count();
+        assert_eq!(count(blocked_with(&map, &knowledge, 0.0)), 4);
+        assert_eq!(count(blocked_with(&map, &knowledge, 0.25)), 0);
+
+        let rise = 0.125 * 60f64.to_radians().tan();
+        let row: Vec<f64> = (0..12)
+            .map(|i| 1.0 + rise * (i as f64 - 6.0).max(0.0))
+            .collect();
+        let (flank, uncertain) = measured(&row, 0.15 * 0.15);
+        let fitted = blocked_with(&flank, &uncertain, 0.25);
+        // Every row: the flank cells beyond the foot (x ≥ 7) are blocked.
+        for iy in 0..flank.height {
+            for ix in 7..flank.width {
+                assert!(fitted[flank.index(ix, iy)], "({ix}, {iy}) open");
+            }
+        }
     }
 
     #[test]

@@ -52,7 +52,8 @@ struct Args {
     max_solve_time: f64,
     /// The traversability (cost) model as JSON, fields as in the planner's
     /// `TraversabilityParams` (height_weight, slope_weight, roughness_weight, slope_ref_deg,
-    /// roughness_ref_m, p_floor, h_max, footprint_radius_m, max_slope_deg); fields left out keep
+    /// roughness_ref_m, p_floor, h_max, footprint_radius_m, max_slope_deg,
+    /// height_confidence_sigmas, slope_fit_radius_m); fields left out keep
     /// their defaults (the paper's p = h/h_max), unknown fields are refused.
     #[arg(long)]
     traversability: Option<String>,
