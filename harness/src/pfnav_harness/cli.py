@@ -132,9 +132,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--terrain-sensor",
         choices=("ideal", "depth_camera", "lidar"),
-        default="ideal",
-        help="online: the ideal disc (true cells around the believed position), or a ray-cast depth camera or lidar "
-        "with noise, fused into an elevation map at the estimated pose (default ideal)",
+        default="depth_camera",
+        help="online: a ray-cast depth camera or lidar with noise, fused into an elevation map at the estimated pose, "
+        "or the ideal disc (true cells around the believed position; for comparison) (default depth_camera)",
     )
     p.add_argument("--terrain-sensor-seed", type=int, default=0, help="online: seed of the terrain sensor's noise, dropouts and outliers (default 0)")
     p.add_argument(

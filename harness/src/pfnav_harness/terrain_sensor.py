@@ -232,6 +232,9 @@ def ray_cast(terrain: Terrain, origin: FloatArray, directions: FloatArray, max_r
     # marching in chunks stops them early.
     active = np.arange(len(directions))
     top = float(terrain.heights.max())
+    # The brackets of the rays that crossed, refined together at the end: one bisection over
+    # every hit instead of one per chunk (the bisection was half the cost of a scan).
+    crossed: list[tuple[NDArray[np.intp], FloatArray, FloatArray]] = []
     for chunk_start in range(0, len(samples), _SAMPLES_PER_CHUNK):
         if active.size == 0:
             break
@@ -251,8 +254,11 @@ def ray_cast(terrain: Terrain, origin: FloatArray, directions: FloatArray, max_r
         hit_rays = active[hit]
         at_start = k == 0
         out[hit_rays[at_start]] = 0.0
-        _refine(terrain, origin, directions, hit_rays[~at_start], samples[k[~at_start] - 1], samples[k[~at_start]], out)
+        crossed.append((hit_rays[~at_start], samples[k[~at_start] - 1], samples[k[~at_start]]))
         active = active[~hit & ~lost]
+    if crossed:
+        rays, above, below = (np.concatenate(parts) for parts in zip(*crossed))
+        _refine(terrain, origin, directions, rays, above, below, out)
     return out
 
 

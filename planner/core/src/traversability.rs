@@ -988,39 +988,11 @@ mod tests {
         (map, knowledge)
     }
 
-    fn blocked_count(map: &GridMap, knowledge: &MapKnowledge, kappa: f64) -> usize {
+    /// The cells the 30° walkable-slope limit blocks with confidence κ and slope-fit radius.
+    fn blocked(map: &GridMap, knowledge: &MapKnowledge, kappa: f64, fit_radius: f64) -> Vec<bool> {
         let params = TraversabilityParams {
             max_slope_deg: Some(30.0),
             height_confidence_sigmas: kappa,
-            ..Default::default()
-        };
-        block_steep_cells(map, Some(knowledge), &params)
-            .obstacles
-            .as_ref()
-            .map_or(0, |mask| mask.iter().filter(|&&b| b).count())
-    }
-
-    #[test]
-    fn an_uncertain_flank_stays_blocked() {
-        // A 60° flank (rise 0.2165 m per 0.125 m cell) whose cells are uncertain to σ = 15 cm,
-        // as a flank seen at a grazing angle is: its slope's lower bound is flat, its mapped
-        // slope steep. The limit keeps the mapped slope.
-        let rise = 0.125 * 60f64.to_radians().tan();
-        let row: Vec<f64> = (0..12)
-            .map(|i| 1.0 + rise * (i as f64 - 6.0).max(0.0))
-            .collect();
-        let (map, knowledge) = measured(&row, 0.15 * 0.15);
-        let exact = blocked_count(&map, &knowledge, 0.0);
-        assert!(
-            exact >= 3 * 5,
-            "{exact} cells blocked on the mapped heights"
-        );
-        assert_eq!(blocked_count(&map, &knowledge, 2.0), exact);
-    }
-
-    fn blocked_with(map: &GridMap, knowledge: &MapKnowledge, fit_radius: f64) -> Vec<bool> {
-        let params = TraversabilityParams {
-            max_slope_deg: Some(30.0),
             slope_fit_radius_m: fit_radius,
             ..Default::default()
         };
@@ -1028,6 +1000,36 @@ mod tests {
             .obstacles
             .clone()
             .unwrap_or_else(|| vec![false; map.len()])
+    }
+
+    fn blocked_count(map: &GridMap, knowledge: &MapKnowledge, kappa: f64) -> usize {
+        blocked(map, knowledge, kappa, 0.0)
+            .iter()
+            .filter(|&&b| b)
+            .count()
+    }
+
+    /// A row of 12 cells: flat at 1 m, then a 60° flank (rise 0.2165 m per 0.125 m cell) from
+    /// cell 6 on.
+    fn flank_row() -> Vec<f64> {
+        let rise = 0.125 * 60f64.to_radians().tan();
+        (0..12)
+            .map(|i| 1.0 + rise * (i as f64 - 6.0).max(0.0))
+            .collect()
+    }
+
+    #[test]
+    fn an_uncertain_flank_stays_blocked() {
+        // A 60° flank whose cells are uncertain to σ = 15 cm, as a flank seen at a grazing
+        // angle is: its slope's lower bound is flat, its mapped slope steep. The limit keeps the
+        // mapped slope.
+        let (map, knowledge) = measured(&flank_row(), 0.15 * 0.15);
+        let exact = blocked_count(&map, &knowledge, 0.0);
+        assert!(
+            exact >= 3 * 5,
+            "{exact} cells blocked on the mapped heights"
+        );
+        assert_eq!(blocked_count(&map, &knowledge, 2.0), exact);
     }
 
     #[test]
@@ -1073,15 +1075,11 @@ mod tests {
             .and_then(|k| k.with_height_variances(&map, &variances))
             .expect("knowledge");
         let count = |mask: Vec<bool>| mask.iter().filter(|&&b| b).count();
-        assert_eq!(count(blocked_with(&map, &knowledge, 0.0)), 4);
-        assert_eq!(count(blocked_with(&map, &knowledge, 0.25)), 0);
+        assert_eq!(count(blocked(&map, &knowledge, 0.0, 0.0)), 4);
+        assert_eq!(count(blocked(&map, &knowledge, 0.0, 0.25)), 0);
 
-        let rise = 0.125 * 60f64.to_radians().tan();
-        let row: Vec<f64> = (0..12)
-            .map(|i| 1.0 + rise * (i as f64 - 6.0).max(0.0))
-            .collect();
-        let (flank, uncertain) = measured(&row, 0.15 * 0.15);
-        let fitted = blocked_with(&flank, &uncertain, 0.25);
+        let (flank, uncertain) = measured(&flank_row(), 0.15 * 0.15);
+        let fitted = blocked(&flank, &uncertain, 0.0, 0.25);
         // Every row: the flank cells beyond the foot (x ≥ 7) are blocked.
         for iy in 0..flank.height {
             for ix in 7..flank.width {
