@@ -257,7 +257,7 @@ def ray_cast(terrain: Terrain, origin: FloatArray, directions: FloatArray, max_r
         crossed.append((hit_rays[~at_start], samples[k[~at_start] - 1], samples[k[~at_start]]))
         active = active[~hit & ~lost]
     if crossed:
-        rays, above, below = (np.concatenate(parts) for parts in zip(*crossed))
+        rays, above, below = (np.concatenate(parts) for parts in zip(*crossed, strict=True))
         _refine(terrain, origin, directions, rays, above, below, out)
     return out
 
