@@ -170,7 +170,7 @@ class ElevationMap:
         # The part of `variances` that `grow` added (0 where unknown).
         self.drift_variances = np.zeros(self.shape)
         # Evidence that a cell is a hazard, in label votes (0: none either way).
-        self.hazard_votes = np.zeros(self.shape)
+        self.net_hazard_votes = np.zeros(self.shape)
         self.last_capture_time = -math.inf
         self.totals: dict[str, int] = {}
 
@@ -181,7 +181,7 @@ class ElevationMap:
     @property
     def hazards(self) -> NDArray[np.bool_]:
         """Known cells whose labels say hazard (`ElevationMapConfig.hazard_votes` net votes)."""
-        return self.known & (self.hazard_votes >= self.config.hazard_votes)
+        return self.known & (self.net_hazard_votes >= self.config.hazard_votes)
 
     def measurement_variances(self) -> FloatArray:
         """`variances` less the pose drift's share: the uncertainty of a cell relative to its
@@ -324,7 +324,7 @@ class ElevationMap:
         if labels is not None:
             # Net hazard votes of each cell's screened returns, for the measurements fused.
             net = (2.0 * np.bincount(group, labels.astype(np.float64), n_groups) - np.bincount(group, None, n_groups))[used]
-            votes = self.hazard_votes.reshape(-1)
+            votes = self.net_hazard_votes.reshape(-1)
             limit = c.hazard_votes_limit
             votes[cells[accept]] = np.clip(np.where(unknown, 0.0, votes[cells])[accept] + net[accept], -limit, limit)
         v[cells[gated]] = prior_v[gated] + c.rejection_inflation
@@ -360,4 +360,4 @@ class ElevationMap:
             self.heights.reshape(-1)[gone] = np.nan
             v[gone] = np.inf
             self.drift_variances.reshape(-1)[gone] = 0.0
-            self.hazard_votes.reshape(-1)[gone] = 0.0
+            self.net_hazard_votes.reshape(-1)[gone] = 0.0
