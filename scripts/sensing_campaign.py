@@ -18,10 +18,8 @@ each on its own channel prefix:
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import queue
-import subprocess
 import sys
 import threading
 import time
@@ -30,9 +28,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import online_campaign
+
 ROOT = Path(__file__).resolve().parent.parent
-# The pfnav-demo of the venv this script runs in.
-DEMO = Path(sys.executable).parent / "pfnav-demo"
 SCENARIOS = ("mountain_pass", "pits", "c_shape", "surprise")
 # GNSS-class fixes: 1 Hz, 0.5 m standard deviation per axis.
 FIXES = ["--fix-rate", "1", "--fix-noise", "0.5"]
@@ -67,20 +65,8 @@ class Job:
 
 def run(job: Job, out: Path, prefix: str) -> dict[str, Any]:
     """One `pfnav-demo run --online`; its single run's metrics (or the failure)."""
-    folder = job.folder(out)
-    command = [
-        str(DEMO), "run", "--online", "--no-progress", "--out", str(folder), "--scenario", job.scenario,
-        "--terrain-sensor-seed", str(job.seed), "--channel-prefix", prefix, *job.setting.args,
-    ]  # fmt: skip
-    started = time.perf_counter()
-    proc = subprocess.run(command, capture_output=True, text=True, check=False)
-    wall = time.perf_counter() - started
-    if proc.returncode != 0:
-        tail = (proc.stderr or proc.stdout).strip().splitlines()[-1:] or [f"exit code {proc.returncode}"]
-        return {"error": tail[0], "wall": wall}
-    metrics: dict[str, Any] = json.loads((folder / "metrics.json").read_text())["runs"][0]
-    metrics["wall"] = wall
-    return metrics
+    args = ["--online", "--scenario", job.scenario, "--terrain-sensor-seed", str(job.seed), "--channel-prefix", prefix, *job.setting.args]
+    return online_campaign.run(job.folder(out), args)
 
 
 def run_all(jobs: list[Job], out: Path, workers: int, report: Callable[[Job, dict[str, Any], int], None]) -> dict[Job, dict[str, Any]]:
