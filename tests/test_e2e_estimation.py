@@ -22,13 +22,27 @@ from pfnav_harness.body_sensors import BodySensorConfig
 from pfnav_harness.cosim import CoSimConfig
 from pfnav_harness.errors import SimulationError
 from pfnav_harness.estimation_metrics import estimation_errors
-from pfnav_harness.pipeline import simulate
+from pfnav_harness.pipeline import SimOutcome, simulate
 from pfnav_harness.planner_client import Plan
 from pfnav_harness.robot import RobotDescription
 from pfnav_harness.scenario import Scenario
 
 SHORT_SECONDS = 5.0
 STAND_SECONDS = 1.5
+
+
+def _short_kalman_walk(
+    name: str,
+    sensors: BodySensorConfig,
+    plan_for: Callable[[str, str], Plan],
+    paper_scenarios: dict[str, Scenario],
+    fmu_file: Path,
+    robot: RobotDescription,
+    tmp_path: Path,
+) -> SimOutcome:
+    """A few seconds of the A* plan on scenario `name` in kalman mode with `sensors`."""
+    config = CoSimConfig(stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS, estimator="kalman", body_sensors=sensors)
+    return simulate(paper_scenarios[name], plan_for(name, "astar"), fmu_file, robot, tmp_path, config, show_progress=False)
 
 
 @pytest.mark.parametrize("fix_rate", [0.0, 2.0])
@@ -42,21 +56,7 @@ def test_short_kalman_run(
 ) -> None:
     name = "mountain_pass"
     sensors = BodySensorConfig(seed=1, fix_rate=fix_rate, fix_noise=0.02)
-    config = CoSimConfig(
-        stand_time=STAND_SECONDS,
-        max_duration=SHORT_SECONDS,
-        estimator="kalman",
-        body_sensors=sensors,
-    )
-    outcome = simulate(
-        paper_scenarios[name],
-        plan_for(name, "astar"),
-        fmu_file,
-        robot,
-        tmp_path,
-        config,
-        show_progress=False,
-    )
+    outcome = _short_kalman_walk(name, sensors, plan_for, paper_scenarios, fmu_file, robot, tmp_path)
     log = outcome.result.log
     m = outcome.metrics
     assert outcome.result.stop_reason == "completed", outcome.result.stop_reason
@@ -90,8 +90,7 @@ def test_the_estimator_is_told_the_fix_noise(
     # seconds its σ is still the leg odometry's (≈ 0.04 m), not that of fixes believed to 2 cm
     # (≈ 0.014 m), and it does not jump with each fix.
     sensors = BodySensorConfig(seed=1, fix_rate=2.0, fix_noise=0.5)
-    config = CoSimConfig(stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS, estimator="kalman", body_sensors=sensors)
-    outcome = simulate(paper_scenarios["mountain_pass"], plan_for("mountain_pass", "astar"), fmu_file, robot, tmp_path, config, show_progress=False)
+    outcome = _short_kalman_walk("mountain_pass", sensors, plan_for, paper_scenarios, fmu_file, robot, tmp_path)
     assert not outcome.metrics.fell, outcome.metrics.fall_reason
     e = outcome.estimation
     assert e is not None and e.fixes >= 6

@@ -46,8 +46,8 @@ pub const TRUST_WINDOW: f64 = 0.2;
 pub const FIX_GATE_CHI2: f64 = 25.0;
 /// Squared Mahalanobis distance of a stance foot's implied trunk velocity from the predicted
 /// velocity beyond which the foot counts as slipping (3 degrees of freedom: P(χ² > 16.3) = 10⁻³
-/// for a consistent filter). A foot sliding down a flank at a few dm/s moved the estimate by
-/// 0.4 m in 4 s of turning in place (c_shape, depth camera) before this gate.
+/// for a consistent filter). Feet sliding down a flank moved the estimate by 0.47 m sideways and
+/// 0.26 m up in 6 s of turning in place (c_shape, depth camera) before this gate.
 pub const SLIP_GATE_CHI2: f64 = 16.27;
 /// Consecutive refused fixes after which the filter trusts the fixes and relocates to them (a
 /// filter whose own position has drifted away would otherwise refuse every fix for good).
@@ -74,6 +74,13 @@ struct LegNoise {
 }
 
 /// The two filters, created at the first tick.
+impl LegNoise {
+    /// Factor on each leg's kinematics noise from its trust (1 trusted … 1 + swing_factor swinging).
+    fn suspicion(&self, trust: [f64; NUM_LEGS]) -> [f64; NUM_LEGS] {
+        trust.map(|t| 1.0 + (1.0 - t) * self.swing_factor)
+    }
+}
+
 #[derive(Clone, Debug, Serialize, Deserialize)]
 struct Filters {
     orientation: OrientationFilter,
@@ -360,7 +367,7 @@ impl StateEstimator {
             dt,
             &mut status,
         );
-        let suspicion = trust.map(|t| 1.0 + (1.0 - t) * noise.swing_factor);
+        let suspicion = noise.suspicion(trust);
         let foot_density = suspicion.map(|k| noise.foot_drift * k.sqrt());
         let walked = filters.kalman.velocity().xy().norm() * dt;
         filters.kalman.predict(
@@ -437,7 +444,7 @@ impl StateEstimator {
         dt: f64,
         status: &mut EstimatorStatus,
     ) -> [f64; NUM_LEGS] {
-        let suspicion = trust.map(|t| 1.0 + (1.0 - t) * self.leg_noise.swing_factor);
+        let suspicion = self.leg_noise.suspicion(trust);
         let passes: [Option<bool>; NUM_LEGS] = std::array::from_fn(|l| {
             leg_velocity[l].map(|v| {
                 let variance = self.leg_noise.leg_velocity_variance * suspicion[l];

@@ -497,7 +497,7 @@ fn a_slipping_foot_does_not_drag_the_estimate() {
         worst = worst.max((estimate.position - truth.position).norm());
         status |= estimator.report().status;
     }
-    // The foot slid 0.16 m; trusted, it moved the estimate by 5 cm.
+    // The foot slid 0.16 m; trusted, it moved the estimate by 4 cm.
     assert!(
         worst < 0.01,
         "a slipping foot moved the estimate by {worst} m"

@@ -553,13 +553,14 @@ def execute(args: argparse.Namespace) -> int:
     if not args.connect:
         # ∫p ds on the field the started service plans with (a running service's is unknown).
         overrides = _traversability_overrides(args)
+        service_overrides = _service_traversability(args)
         for scenario in scenarios.values():
             # A map that declares its model names the fields; the service refuses unknown ones too.
             unknown = sorted(set(overrides) - set(scenario.traversability))
             if scenario.traversability and unknown:
                 known = ", ".join(sorted(scenario.traversability))
                 raise HarnessError(f"--traversability: no field {', '.join(unknown)} in the planner's model ({known})")
-            scenario.traversability.update(_service_traversability(args))
+            scenario.traversability.update(service_overrides)
             scenario.traversability["footprint_radius_m"] = args.footprint_radius
             max_slope = _max_slope_deg(args)
             if max_slope is not None:
