@@ -16,18 +16,20 @@ cd "$ROOT"
 start=$SECONDS
 bash scripts/setup.sh
 target/release/pf-plan demo --out out/planner
-# Steps 2 and 3 run side by side, each in its own private network namespace with half the CPUs
-# (a --jobs among the extra arguments overrides that; the runs' results do not depend on it).
-# More processes than cores makes every run slower than the cores it frees (measured: 545 s
-# for the whole demo at 1 + 1 processes on 2 cores, 556 s at 2 + 2). The longer online step
-# keeps the terminal; the co-simulation step writes out/cosim.log, shown when it ends.
+# Steps 2 and 3 run side by side, each in its own private network namespace (a --jobs among the
+# extra arguments overrides the split below; the runs' results do not depend on it). The online
+# step is the longer one (four runs of 40-70 simulated s against six shorter ones), so it gets
+# every CPU and the co-simulation step half of them: on 2 cores the demo's runs took 161-184 s
+# against 175-229 s at one process each (measured alternately, 2026-11-28); at 2 + 2 the
+# extra process only slowed every run down. The online step keeps the terminal; the
+# co-simulation step writes out/cosim.log, shown when it ends.
 jobs=$(( ($(nproc) + 1) / 2 ))
 mkdir -p out
 bash scripts/netns.sh .venv/bin/pfnav-demo demo --out out --jobs "$jobs" --no-progress "$@" \
     > out/cosim.log 2>&1 &
 cosim=$!
 trap 'kill "$cosim" 2>/dev/null || true' EXIT
-bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online --jobs "$jobs" \
+bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online --jobs "$(nproc)" \
     --scenario mountain_pass --scenario pits --scenario c_shape --scenario surprise "$@"
 cosim_status=0
 wait "$cosim" || cosim_status=$?
