@@ -102,6 +102,15 @@ def test_variances_are_honest_with_sensor_noise_and_outliers() -> None:
     assert emap.totals.get(NO_RETURN, 0) > 0
 
 
+def returns_below_the_sensor(sensor: TerrainSensorConfig, pose: PoseBelief, t: float, heights: list[float]) -> SensorScan:
+    """A scan whose returns lie straight below the sensor at `heights` (all in one cell)."""
+    world = np.array([[pose.position[0] + sensor.mount_xyz[0], pose.position[1], z] for z in heights])
+    lever = world - pose.position
+    # The sensor frame is pitched down: rotate back.
+    points = (lever - np.array(sensor.mount_xyz)) @ sensor.rotation_on_trunk()
+    return SensorScan(t, points, np.linalg.norm(points, axis=1), 0)
+
+
 def test_an_outlier_against_a_known_cell_is_gated_and_a_lasting_change_is_taken() -> None:
     terrain = Terrain((0.0, 0.0), 0.25, np.zeros((16, 16)))
     sensor = TerrainSensorConfig(**NOISELESS)
@@ -109,11 +118,7 @@ def test_an_outlier_against_a_known_cell_is_gated_and_a_lasting_change_is_taken(
     pose = PoseBelief(np.array([2.0, 2.0, 0.32]), LEVEL)
 
     def one_point(t: float, z: float) -> SensorScan:
-        # A return straight below the sensor (the sensor frame is pitched 30° down: rotate back).
-        world = np.array([2.0 + sensor.mount_xyz[0], 2.0, z])
-        lever = world - pose.position
-        point = (lever - np.array(sensor.mount_xyz)) @ sensor.rotation_on_trunk()
-        return SensorScan(t, point[None, :], np.array([np.linalg.norm(point)]), 0)
+        return returns_below_the_sensor(sensor, pose, t, [z])
 
     for k in range(5):
         assert emap.fuse(one_point(0.1 * k, 0.0), pose).counts.get(FUSED) == 1
@@ -130,12 +135,46 @@ def test_an_outlier_against_a_known_cell_is_gated_and_a_lasting_change_is_taken(
         assert t < 3.0, "a lasting change was never taken"
 
 
+def test_a_lone_return_is_unconfirmed_until_the_next_look_and_cannot_outvote_it() -> None:
+    # A spurious range lands far below the ground in a cell nothing else has seen yet (as behind
+    # the flank of a ridge). Taken at its own small variance it would gate every true return after it.
+    terrain = Terrain((0.0, 0.0), 0.25, np.zeros((16, 16)))
+    sensor = TerrainSensorConfig(**NOISELESS)
+    emap = new_map(terrain, sensor)
+    pose = PoseBelief(np.array([2.0, 2.0, 0.32]), LEVEL)
+    i, j = int(2.0 / 0.25), int((2.0 + sensor.mount_xyz[0]) / 0.25)
+    assert emap.fuse(returns_below_the_sensor(sensor, pose, 0.0, [-0.8]), pose).counts.get(FUSED) == 1
+    assert emap.known[i, j] and not emap.confirmed[i, j]
+    assert emap.variances[i, j] >= ElevationMapConfig().unconfirmed_variance
+    # The next look outweighs it (gain ≈ 1) and confirms the cell.
+    assert emap.fuse(returns_below_the_sensor(sensor, pose, 0.2, [0.0]), pose).counts.get(FUSED) == 1
+    assert abs(emap.heights[i, j]) < 1e-4 and emap.confirmed[i, j]
+    assert emap.variances[i, j] < 1e-4
+    # Confirmed, the cell gates a lone outlier as any known cell does.
+    assert emap.fuse(returns_below_the_sensor(sensor, pose, 0.6, [-0.8]), pose).counts.get(GATED) == 1
+    assert abs(emap.heights[i, j]) < 1e-4
+    # A lone return so far off that even its widened variance gates the next look is replaced
+    # by it (no claim to outvote it), which the look after that confirms.
+    replaced = new_map(terrain, sensor)
+    replaced.fuse(returns_below_the_sensor(sensor, pose, 0.0, [-3.0]), pose)
+    assert replaced.fuse(returns_below_the_sensor(sensor, pose, 0.2, [0.0]), pose).counts.get(FUSED) == 1
+    assert abs(replaced.heights[i, j]) < 1e-9 and not replaced.confirmed[i, j]
+    replaced.fuse(returns_below_the_sensor(sensor, pose, 0.4, [0.0]), pose)
+    assert abs(replaced.heights[i, j]) < 1e-9 and replaced.confirmed[i, j]
+    # Three returns in one scan back a new cell at once, at their own variance.
+    fresh = new_map(terrain, sensor)
+    assert fresh.fuse(returns_below_the_sensor(sensor, pose, 0.0, [0.0, 0.0, 0.0]), pose).counts.get(FUSED) == 1
+    assert fresh.confirmed[i, j] and fresh.variances[i, j] < 1e-4
+
+
 def test_variance_grows_with_the_pose_and_old_cells_are_forgotten() -> None:
     terrain = rough(3)
     sensor = TerrainSensorConfig(**NOISELESS)
     emap = new_map(terrain, sensor, ElevationMapConfig(max_variance=0.05))
     sweep(terrain, sensor, np.zeros(3), emap)
-    known = emap.known.copy()
+    # Unconfirmed cells sit at max_variance here (0.05 < unconfirmed_variance): any growth forgets them.
+    known = emap.confirmed.copy()
+    assert known.sum() > 0.5 * emap.known.sum()
     before = emap.variances[known].copy()
     measured = emap.measurement_variances()[known].copy()
     emap.grow(np.array([0.0, 0.0, 0.01]))

@@ -16,6 +16,13 @@ Per cell: height h and variance σ² (NaN and inf while unknown).
   more than `gate` robust standard deviations away is a "scan outlier"), then averaged with
   inverse-variance weights; the cell's measurement variance is that of the weighted mean plus the
   spread of the returns in the cell (a slope seen from one side).
+- A cell's first measurement is *unconfirmed* unless at least `confirm_returns` screened returns
+  back it: a lone return may be a spurious range (a flying pixel, a multipath echo) placed
+  anywhere along its ray, often far below the ground behind a flank, and nothing in its scan can
+  tell. An unconfirmed cell is known, with variance at least `unconfirmed_variance`, so it tilts
+  a fitted slope little and costs the planner its upper bound. The next measurement that agrees
+  with it (within the gate) confirms it; one that does not replaces it, still unconfirmed: a
+  single return has no claim to outvote the next.
 - A 1-D Kalman update fuses the measurement into the cell, unless the Mahalanobis distance
   |z − h| / √(σ² + σ_m²) exceeds `gate`: then the measurement is rejected ("gated") and the
   cell's variance grows by `rejection_inflation`, so a lasting disagreement (the ground changed,
@@ -111,6 +118,10 @@ class ElevationMapConfig:
     # Net hazard-labelled returns that make a cell a hazard, and the most the evidence holds.
     hazard_votes: float = 2.0
     hazard_votes_limit: float = 6.0
+    # Screened returns of one scan that make a new cell's measurement confirmed at once.
+    confirm_returns: int = 3
+    # m²: the least variance of an unconfirmed cell (σ 0.5 m; at most `max_variance`).
+    unconfirmed_variance: float = 0.25
 
     def validate(self) -> None:
         checks = {
@@ -122,6 +133,8 @@ class ElevationMapConfig:
             "max_point_range": self.max_point_range > 0.0,
             "hazard_votes": self.hazard_votes > 0.0,
             "hazard_votes_limit": self.hazard_votes_limit >= self.hazard_votes,
+            "confirm_returns": self.confirm_returns >= 1,
+            "unconfirmed_variance": self.unconfirmed_variance >= self.min_variance,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
@@ -171,6 +184,8 @@ class ElevationMap:
         self.drift_variances = np.zeros(self.shape)
         # Evidence that a cell is a hazard, in label votes (0: none either way).
         self.net_hazard_votes = np.zeros(self.shape)
+        # Known cells whose height more than one return has backed (module text).
+        self.confirmed = np.zeros(self.shape, dtype=bool)
         self.last_capture_time = -math.inf
         self.totals: dict[str, int] = {}
 
@@ -299,34 +314,45 @@ class ElevationMap:
         spread = np.bincount(group, weight * (z - mean[group]) ** 2, n_groups) / w_sum_safe
         measured = mean[used]
         measured_variance = 1.0 / w_sum[used] + spread[used]
+        support = np.bincount(group, None, n_groups)[used]
         cells = np.zeros(n_groups, dtype=np.int64)
         cells[group] = cell
         cells = cells[used]
 
         h = self.heights.reshape(-1)
         v = self.variances.reshape(-1)
+        confirmed = self.confirmed.reshape(-1)
         prior_h, prior_v = h[cells], v[cells]
         unknown = ~np.isfinite(prior_h)
         # Unknown cells take the measurement as it is (gain 1); placeholders keep the arithmetic finite.
         known_h = np.where(unknown, measured, prior_h)
         known_v = np.where(unknown, 1.0, prior_v)
         distance = np.abs(measured - known_h) / np.sqrt(known_v + measured_variance)
-        gated = ~unknown & (distance > c.mahalanobis_gate)
+        disagrees = ~unknown & (distance > c.mahalanobis_gate)
+        # An unconfirmed cell's disagreeing measurement replaces it (module text).
+        replaced = disagrees & ~confirmed[cells]
+        gated = disagrees & ~replaced
+        fresh = unknown | replaced
         accept = ~gated
-        gain = np.where(unknown, 1.0, known_v / (known_v + measured_variance))
-        new_h = known_h + gain * (measured - known_h)
-        new_v = np.where(unknown, measured_variance, (1.0 - gain) * known_v)
+        gain = np.where(fresh, 1.0, known_v / (known_v + measured_variance))
+        new_h = np.where(fresh, measured, known_h + gain * (measured - known_h))
+        new_v = np.where(fresh, measured_variance, (1.0 - gain) * known_v)
+        backed = support >= c.confirm_returns
+        # A fresh cell without the returns to back it stays unconfirmed; a known one that agreed is confirmed.
+        new_confirmed = np.where(fresh, backed, True)
+        new_v = np.where(new_confirmed, new_v, np.maximum(new_v, min(c.unconfirmed_variance, c.max_variance)))
         h[cells[accept]] = new_h[accept]
         v[cells[accept]] = np.maximum(new_v[accept], c.min_variance)
+        confirmed[cells[accept]] = new_confirmed[accept]
         drift = self.drift_variances.reshape(-1)
         # An unknown cell starts without drift; a known one keeps the share the update leaves.
-        drift[cells[accept]] = np.where(unknown, 0.0, (1.0 - gain) * drift[cells])[accept]
+        drift[cells[accept]] = np.where(fresh, 0.0, (1.0 - gain) * drift[cells])[accept]
         if labels is not None:
             # Net hazard votes of each cell's screened returns, for the measurements fused.
             net = (2.0 * np.bincount(group, labels.astype(np.float64), n_groups) - np.bincount(group, None, n_groups))[used]
             votes = self.net_hazard_votes.reshape(-1)
             limit = c.hazard_votes_limit
-            votes[cells[accept]] = np.clip(np.where(unknown, 0.0, votes[cells])[accept] + net[accept], -limit, limit)
+            votes[cells[accept]] = np.clip(np.where(fresh, 0.0, votes[cells])[accept] + net[accept], -limit, limit)
         v[cells[gated]] = prior_v[gated] + c.rejection_inflation
         self._forget(cells[gated])
         self._count(report, GATED, int(gated.sum()))
@@ -361,3 +387,4 @@ class ElevationMap:
             v[gone] = np.inf
             self.drift_variances.reshape(-1)[gone] = 0.0
             self.net_hazard_votes.reshape(-1)[gone] = 0.0
+            self.confirmed.reshape(-1)[gone] = False

@@ -60,6 +60,8 @@ class SensedMap:
             check_prior_covers(prior, truth)
             self.map.heights[:] = prior.heights
             self.map.variances[:] = config.prior_variance
+            # A given map is no lone return: its cells are confirmed (ElevationMap's module text).
+            self.map.confirmed[:] = True
         self._next_scan = -math.inf
         self._last_position_variance = np.zeros(3)
         self.reports: list[FuseReport] = []
