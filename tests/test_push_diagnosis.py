@@ -1,0 +1,73 @@
+"""scripts/push_diagnosis.py: the figures of one pushed run, from a log built to known values."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+import push_diagnosis
+
+DT = 0.001
+
+
+def pushed_log(n: int = 3000, push_at: int = 1000) -> dict[str, np.ndarray]:
+    t = np.arange(n) * DT
+    push = np.zeros((n, 3))
+    push[push_at : push_at + 200, 1] = 120.0
+    velocity = np.zeros((n, 3))
+    velocity[:, 0] = 0.4
+    # The push adds 1.5 m/s sideways, ramping over its 0.2 s.
+    velocity[push_at:, 1] = np.minimum(np.arange(n - push_at) * DT / 0.2, 1.0) * 1.5
+    quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    roll = math.radians(50.0)
+    quat[-1] = [math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0]
+    tau = np.zeros((n, 12))
+    # Joint 3 at its limit on the first 100 ticks after the push.
+    tau[push_at : push_at + 100, 3] = -10.0
+    scheduled = np.ones((n, 4), dtype=np.int8)
+    actual = np.ones((n, 4), dtype=np.int8)
+    # One of four feet off the ground in the second quarter of the window.
+    actual[push_at + 500 : push_at + 1000, 0] = 0
+    return {
+        "t": t,
+        "physics_dt": np.array(DT),
+        "push_force": push,
+        "base_vel": velocity,
+        "base_quat": quat,
+        "tau": tau,
+        "contact_scheduled": scheduled,
+        "contact_actual": actual,
+        "est_vel": velocity + np.array([0.0, 0.2, 0.0]),
+    }
+
+
+def test_a_fall_is_taken_apart_from_the_push_to_the_fall() -> None:
+    log = pushed_log()
+    row = push_diagnosis.diagnose(log, "fell at t=3.00 s", np.full(12, 10.0), 0.28)
+    assert row["fell"]
+    assert row["fall_after"] == pytest.approx(2.0)
+    assert row["dv"] == pytest.approx(1.5)
+    assert row["capture_step"] == pytest.approx(1.5 * math.sqrt(0.28 / 9.81))
+    # 100 of the 2000 window ticks have a joint at its limit; 500 of 8000 stance foot ticks lack contact.
+    assert row["saturated"] == pytest.approx(100 / 2000)
+    assert row["missed"] == pytest.approx(500 / 8000)
+    assert row["tripped"] == 0.0
+    assert row["estimate_error"] == pytest.approx(0.2)
+    assert row["roll"] == pytest.approx(50.0)
+
+
+def test_without_a_fall_the_window_is_two_seconds_and_a_run_without_a_push_is_refused() -> (
+    None
+):
+    log = pushed_log()
+    row = push_diagnosis.diagnose(log, "completed", np.full(12, 10.0), 0.28)
+    assert not row["fell"] and math.isnan(row["fall_after"])
+    assert row["saturated"] == pytest.approx(100 / 2000)
+    log["push_force"][:] = 0.0
+    with pytest.raises(ValueError, match="no push"):
+        push_diagnosis.diagnose(log, "completed", np.full(12, 10.0), 0.28)
