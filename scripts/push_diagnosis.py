@@ -46,19 +46,34 @@ GRAVITY = 9.81
 
 @dataclass(frozen=True)
 class Variant:
-    """What the controller runs on, and a Raibert foothold gain (None: the FMU's own)."""
+    """What the controller runs on, and FMU parameters other than the FMU's own (name, value)."""
 
     estimator: str
-    raibert_gain: float | None = None
+    parameters: tuple[tuple[str, float], ...] = ()
 
     @property
     def label(self) -> str:
-        gain = (
-            ""
-            if self.raibert_gain is None
-            else f", Raibert gain {self.raibert_gain:g} s"
+        if (
+            len(self.parameters) == 1
+            and self.parameters[0][0] == RAIBERT_GAIN_PARAMETER
+        ):
+            return f"{self.estimator}, Raibert gain {self.parameters[0][1]:g} s"
+        return ", ".join(
+            [self.estimator, *(f"{name} {value:g}" for name, value in self.parameters)]
         )
-        return f"{self.estimator}{gain}"
+
+
+def parse_variant(text: str) -> Variant:
+    """A kalman variant from 'NAME=VALUE[,NAME=VALUE…]' (FMU parameter names, e.g. gait.period=0.2)."""
+    parameters = []
+    for item in text.split(","):
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise ValueError(
+                f"--variant: expected NAME=VALUE[,NAME=VALUE…], got {text!r}"
+            )
+        parameters.append((name.strip(), float(value)))
+    return Variant("kalman", tuple(parameters))
 
 
 @dataclass(frozen=True)
@@ -99,8 +114,8 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
     with CoSimulation(
         shared.scenario, shared.plan, shared.fmu, shared.robot, shared.cache, config
     ) as sim:
-        if task.variant.raibert_gain is not None:
-            sim.fmu.set_parameters({RAIBERT_GAIN_PARAMETER: task.variant.raibert_gain})
+        if task.variant.parameters:
+            sim.fmu.set_parameters(dict(task.variant.parameters))
         result = sim.run()
         limits = np.asarray(sim.world.effort_limits, dtype=np.float64)
         mass = float(sim.world.mass)
@@ -312,6 +327,13 @@ def main() -> int:
         default="",
         help="extra kalman variants with this Raibert foothold gain, s (comma-separated)",
     )
+    parser.add_argument(
+        "--variant",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE[,NAME=VALUE…]",
+        help="an extra kalman variant with these FMU parameters, e.g. gait.period=0.2 (repeatable)",
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument(
         "--figure",
@@ -323,6 +345,7 @@ def main() -> int:
     args = parser.parse_args()
 
     from pfnav_harness import paths, results_page
+    from pfnav_harness.fmu_runner import read_contract
     from pfnav_harness.pipeline import export_scenario
     from pfnav_harness.planner_client import DEFAULT_LCM_URL, plan_scenario
     from pfnav_harness.robot_fmu import robot_and_fmu
@@ -336,9 +359,19 @@ def main() -> int:
     walk_times = [float(t) for t in args.walk_times.split(",")]
     variants = [Variant(e) for e in args.estimators.split(",") if e]
     variants += [
-        Variant("kalman", float(g)) for g in args.raibert_gains.split(",") if g
+        Variant("kalman", ((RAIBERT_GAIN_PARAMETER, float(g)),))
+        for g in args.raibert_gains.split(",")
+        if g
     ]
+    try:
+        variants += [parse_variant(text) for text in args.variant]
+    except ValueError as err:
+        parser.error(str(err))
     robot, fmu = robot_and_fmu(None, out / "cache")
+    known = read_contract(fmu).parameters
+    unknown = sorted({name for v in variants for name, _ in v.parameters} - set(known))
+    if unknown:
+        parser.error(f"the FMU has no parameter {', '.join(unknown)}")
     scenario = export_scenario(paths.pf_plan_path(), "mountain_pass", out / "scenarios")
     plan = plan_scenario(
         scenario, ["pf"], DEFAULT_LCM_URL, service_binary=paths.planner_service_path()

@@ -71,3 +71,18 @@ def test_without_a_fall_the_window_is_two_seconds_and_a_run_without_a_push_is_re
     log["push_force"][:] = 0.0
     with pytest.raises(ValueError, match="no push"):
         push_diagnosis.diagnose(log, "completed", np.full(12, 10.0), 0.28)
+
+
+def test_a_variant_names_fmu_parameters_and_labels_the_raibert_gain_as_before() -> None:
+    variant = push_diagnosis.parse_variant("gait.period=0.2, gait.raibertGain=0.1")
+    assert variant == push_diagnosis.Variant(
+        "kalman", (("gait.period", 0.2), ("gait.raibertGain", 0.1))
+    )
+    assert variant.label == "kalman, gait.period 0.2, gait.raibertGain 0.1"
+    gain = push_diagnosis.Variant(
+        "kalman", ((push_diagnosis.RAIBERT_GAIN_PARAMETER, 0.15),)
+    )
+    assert gain.label == "kalman, Raibert gain 0.15 s"
+    for bad in ("gait.period", "=0.2", "gait.period=fast"):
+        with pytest.raises(ValueError):
+            push_diagnosis.parse_variant(bad)
