@@ -73,7 +73,6 @@ struct LegNoise {
     rolling_radius: f64,
 }
 
-/// The two filters, created at the first tick.
 impl LegNoise {
     /// Factor on each leg's kinematics noise from its trust (1 trusted … 1 + swing_factor swinging).
     fn suspicion(&self, trust: [f64; NUM_LEGS]) -> [f64; NUM_LEGS] {
@@ -81,6 +80,7 @@ impl LegNoise {
     }
 }
 
+/// The two filters, created at the first tick.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 struct Filters {
     orientation: OrientationFilter,

@@ -314,7 +314,8 @@ class ElevationMap:
         spread = np.bincount(group, weight * (z - mean[group]) ** 2, n_groups) / w_sum_safe
         measured = mean[used]
         measured_variance = 1.0 / w_sum[used] + spread[used]
-        support = np.bincount(group, None, n_groups)[used]
+        returns_per_group = np.bincount(group, None, n_groups)
+        support = returns_per_group[used]
         cells = np.zeros(n_groups, dtype=np.int64)
         cells[group] = cell
         cells = cells[used]
@@ -349,7 +350,7 @@ class ElevationMap:
         drift[cells[accept]] = np.where(fresh, 0.0, (1.0 - gain) * drift[cells])[accept]
         if labels is not None:
             # Net hazard votes of each cell's screened returns, for the measurements fused.
-            net = (2.0 * np.bincount(group, labels.astype(np.float64), n_groups) - np.bincount(group, None, n_groups))[used]
+            net = (2.0 * np.bincount(group, labels.astype(np.float64), n_groups) - returns_per_group)[used]
             votes = self.net_hazard_votes.reshape(-1)
             limit = c.hazard_votes_limit
             votes[cells[accept]] = np.clip(np.where(fresh, 0.0, votes[cells])[accept] + net[accept], -limit, limit)

@@ -377,7 +377,7 @@ class QuadrupedWorld:
         self.world.setTimeStep(time_step)
         self.world.setGravity(np.array([0.0, 0.0, -9.81]))
         self.world.setCollisionDetector(dart.collision.OdeCollisionDetector())
-        # DART's resting-body deactivation (on by default since 6.16) is meant for passive bodies:
+        # DART's resting-body deactivation (on by default in dartpy 6.20) is meant for passive bodies:
         # a robot held by its controller is never left alone, and the speed checks it makes on
         # every body in every step were ~7 % of world.step (the runs are the same bit for bit).
         deactivation = self.world.getDeactivationOptions()
