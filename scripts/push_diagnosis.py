@@ -107,7 +107,7 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
         heading_relative=True,
     )
     config = CoSimConfig(
-        max_duration=1.5 + task.walk_time + AFTER_PUSH,
+        max_duration=CoSimConfig().stand_time + task.walk_time + AFTER_PUSH,
         pushes=PushSchedule([push]),
         estimator=task.variant.estimator,
     )
@@ -118,7 +118,6 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
             sim.fmu.set_parameters(dict(task.variant.parameters))
         result = sim.run()
         limits = np.asarray(sim.world.effort_limits, dtype=np.float64)
-        mass = float(sim.world.mass)
     row = diagnose(
         result.log, result.stop_reason, limits, float(shared.robot.stand_height)
     )
@@ -127,8 +126,6 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
         magnitude=task.magnitude,
         direction=task.direction,
         walk_time=task.walk_time,
-        impulse=task.magnitude * PUSH_DURATION,
-        push_dv=task.magnitude * PUSH_DURATION / mass,
     )
     return row
 
@@ -140,7 +137,8 @@ def diagnose(
     stand_height: float,
 ) -> dict[str, Any]:
     """The figures of one pushed run (module text); `stand_height` (m) sets the capture step's √(h/g)."""
-    t = log["t"]
+    from pfnav_harness.world import quaternion_to_rpy
+
     dt = float(log["physics_dt"])
     pushed = np.flatnonzero(np.any(log["push_force"] != 0.0, axis=1))
     if pushed.size == 0:
@@ -151,7 +149,8 @@ def diagnose(
         round(float(stop_reason.split("t=")[1].split(" ")[0]) / dt) if fell else None
     )
     k1 = min(
-        len(t), k_fall if k_fall is not None else k0 + round(WINDOW_WITHOUT_FALL / dt)
+        len(log["t"]),
+        k_fall if k_fall is not None else k0 + round(WINDOW_WITHOUT_FALL / dt),
     )
     window = slice(k0, max(k1, k0 + 1))
     velocity = log["base_vel"][:, :2]
@@ -172,9 +171,9 @@ def diagnose(
                 )
             )
         )
-    w, x, y, z = log["base_quat"][window.stop - 1]
-    roll = math.degrees(math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y)))
-    pitch = math.degrees(math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x)))))
+    roll, pitch, _ = (
+        math.degrees(a) for a in quaternion_to_rpy(log["base_quat"][window.stop - 1])
+    )
     return {
         "fell": fell,
         "fall_after": (k_fall - k0) * dt if k_fall is not None else math.nan,
@@ -187,15 +186,6 @@ def diagnose(
         "roll": roll,
         "pitch": pitch,
     }
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    if n == 0:
-        return math.nan, math.nan
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def fmt(value: float, digits: int = 2) -> str:
@@ -219,6 +209,8 @@ def tables(
     magnitudes: list[float],
     directions: list[str],
 ) -> str:
+    from pfnav_harness.sweep.stats import wilson_interval
+
     out: list[str] = []
     out.append("## Fall rate by impulse\n")
     out.append(
@@ -231,7 +223,7 @@ def tables(
         mine = [r for r in rows if r["variant"] == v.label]
         cells = falls_per_level(mine, "magnitude", magnitudes)
         k = sum(r["fell"] for r in mine)
-        lo, hi = wilson(k, len(mine))
+        lo, hi = wilson_interval(k, len(mine))
         out.append(
             f"| {v.label} | "
             + " | ".join(cells)
