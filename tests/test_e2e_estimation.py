@@ -31,32 +31,45 @@ SHORT_SECONDS = 5.0
 STAND_SECONDS = 1.5
 
 
-def _short_kalman_walk(
-    name: str,
-    sensors: BodySensorConfig,
+@pytest.fixture
+def short_kalman_walk(
     plan_for: Callable[[str, str], Plan],
     paper_scenarios: dict[str, Scenario],
     fmu_file: Path,
     robot: RobotDescription,
     tmp_path: Path,
-) -> SimOutcome:
-    """A few seconds of the A* plan on scenario `name` in kalman mode with `sensors`."""
-    config = CoSimConfig(stand_time=STAND_SECONDS, max_duration=SHORT_SECONDS, estimator="kalman", body_sensors=sensors)
-    return simulate(paper_scenarios[name], plan_for(name, "astar"), fmu_file, robot, tmp_path, config, show_progress=False)
+) -> Callable[[BodySensorConfig], SimOutcome]:
+    """A few seconds of mountain_pass's A* plan in kalman mode with the given body sensors."""
+
+    def walk(sensors: BodySensorConfig) -> SimOutcome:
+        config = CoSimConfig(
+            stand_time=STAND_SECONDS,
+            max_duration=SHORT_SECONDS,
+            estimator="kalman",
+            body_sensors=sensors,
+        )
+        return simulate(
+            paper_scenarios["mountain_pass"],
+            plan_for("mountain_pass", "astar"),
+            fmu_file,
+            robot,
+            tmp_path,
+            config,
+            show_progress=False,
+        )
+
+    return walk
 
 
 @pytest.mark.parametrize("fix_rate", [0.0, 2.0])
 def test_short_kalman_run(
     fix_rate: float,
-    plan_for: Callable[[str, str], Plan],
-    paper_scenarios: dict[str, Scenario],
+    short_kalman_walk: Callable[[BodySensorConfig], SimOutcome],
     fmu_file: Path,
-    robot: RobotDescription,
-    tmp_path: Path,
 ) -> None:
-    name = "mountain_pass"
-    sensors = BodySensorConfig(seed=1, fix_rate=fix_rate, fix_noise=0.02)
-    outcome = _short_kalman_walk(name, sensors, plan_for, paper_scenarios, fmu_file, robot, tmp_path)
+    outcome = short_kalman_walk(
+        BodySensorConfig(seed=1, fix_rate=fix_rate, fix_noise=0.02)
+    )
     log = outcome.result.log
     m = outcome.metrics
     assert outcome.result.stop_reason == "completed", outcome.result.stop_reason
@@ -80,17 +93,12 @@ def test_short_kalman_run(
 
 
 def test_the_estimator_is_told_the_fix_noise(
-    plan_for: Callable[[str, str], Plan],
-    paper_scenarios: dict[str, Scenario],
-    fmu_file: Path,
-    robot: RobotDescription,
-    tmp_path: Path,
+    short_kalman_walk: Callable[[BodySensorConfig], SimOutcome],
 ) -> None:
     # GNSS-class fixes, 0.5 m per axis at 2 Hz: the estimate weighs them as such, so after a few
     # seconds its σ is still the leg odometry's (≈ 0.04 m), not that of fixes believed to 2 cm
     # (≈ 0.014 m), and it does not jump with each fix.
-    sensors = BodySensorConfig(seed=1, fix_rate=2.0, fix_noise=0.5)
-    outcome = _short_kalman_walk("mountain_pass", sensors, plan_for, paper_scenarios, fmu_file, robot, tmp_path)
+    outcome = short_kalman_walk(BodySensorConfig(seed=1, fix_rate=2.0, fix_noise=0.5))
     assert not outcome.metrics.fell, outcome.metrics.fall_reason
     e = outcome.estimation
     assert e is not None and e.fixes >= 6
