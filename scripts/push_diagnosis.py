@@ -42,6 +42,17 @@ PUSH_DURATION = 0.2
 SATURATION = 0.95
 RAIBERT_GAIN_PARAMETER = "gait.raibertGain"
 GRAVITY = 9.81
+NUMERIC_FIELDS = (
+    "fall_after",
+    "dv",
+    "capture_step",
+    "saturated",
+    "missed",
+    "tripped",
+    "estimate_error",
+    "roll",
+    "pitch",
+)
 
 
 @dataclass(frozen=True)
@@ -141,10 +152,17 @@ def diagnose(
 
     dt = float(log["physics_dt"])
     pushed = np.flatnonzero(np.any(log["push_force"] != 0.0, axis=1))
-    if pushed.size == 0:
-        raise ValueError("the run has no push")
-    k0 = int(pushed[0])
     fell = stop_reason.startswith("fell")
+    if pushed.size == 0:
+        if not fell:
+            raise ValueError("the run has no push")
+        # A variant that cannot walk falls before its push: a fall, with nothing to take apart.
+        return {
+            "fell": True,
+            "before_push": True,
+            **{key: math.nan for key in NUMERIC_FIELDS},
+        }
+    k0 = int(pushed[0])
     k_fall = (
         round(float(stop_reason.split("t=")[1].split(" ")[0]) / dt) if fell else None
     )
@@ -176,6 +194,7 @@ def diagnose(
     )
     return {
         "fell": fell,
+        "before_push": False,
         "fall_after": (k_fall - k0) * dt if k_fall is not None else math.nan,
         "dv": dv,
         "capture_step": dv * math.sqrt(stand_height / GRAVITY),
@@ -247,8 +266,12 @@ def tables(
         rows,
         key=lambda r: (r["variant"], r["magnitude"], r["direction"], r["walk_time"]),
     ):
+        head = f"| {r['variant']} | {r['magnitude']:g} N | {r['direction']} | {r['walk_time']:g} | "
+        if r["before_push"]:
+            out.append(head + "yes, before the push |" + " – |" * 7 + " – / – |")
+            continue
         out.append(
-            f"| {r['variant']} | {r['magnitude']:g} N | {r['direction']} | {r['walk_time']:g} | {'yes' if r['fell'] else 'no'} | "
+            head + f"{'yes' if r['fell'] else 'no'} | "
             f"{fmt(r['fall_after'])} | {r['dv']:.2f} | {r['capture_step']:.2f} | {100 * r['saturated']:.0f} % | {100 * r['missed']:.0f} % | "
             f"{100 * r['tripped']:.0f} % | {fmt(r['estimate_error'])} | {r['roll']:+.0f} / {r['pitch']:+.0f} |"
         )
@@ -283,7 +306,7 @@ def plot(
     for v, marker in zip(variants, "os^vD", strict=False):
         mine = [r for r in rows if r["variant"] == v.label]
         for fell, colour in ((False, "tab:green"), (True, "tab:red")):
-            at = [r for r in mine if r["fell"] == fell]
+            at = [r for r in mine if r["fell"] == fell and not r["before_push"]]
             right.scatter(
                 [r["dv"] for r in at],
                 [100 * r["missed"] for r in at],

@@ -73,6 +73,19 @@ def test_without_a_fall_the_window_is_two_seconds_and_a_run_without_a_push_is_re
         push_diagnosis.diagnose(log, "completed", np.full(12, 10.0), 0.28)
 
 
+def test_a_run_that_falls_before_its_push_counts_as_a_fall_with_nothing_to_take_apart() -> (
+    None
+):
+    log = pushed_log()
+    log["push_force"][:] = 0.0
+    row = push_diagnosis.diagnose(log, "fell at t=0.50 s", np.full(12, 10.0), 0.28)
+    assert row["fell"] and row["before_push"]
+    assert math.isnan(row["dv"]) and math.isnan(row["fall_after"])
+    row.update(variant="kalman", magnitude=90.0, direction="left", walk_time=4.0)
+    text = push_diagnosis.tables([row], [push_diagnosis.Variant("kalman")], [90.0], ["left"])
+    assert "yes, before the push" in text and "1/1" in text
+
+
 def test_a_variant_names_fmu_parameters_and_labels_the_raibert_gain_as_before() -> None:
     variant = push_diagnosis.parse_variant("gait.period=0.2, gait.raibertGain=0.1")
     assert variant == push_diagnosis.Variant(

@@ -72,6 +72,10 @@ pub struct MotionTarget {
     pub yaw: f64,
     /// Velocity xy, world frame, m/s.
     pub velocity: [f64; 2],
+    /// Velocity the footholds' feedback steers the body to, world xy, m/s: `velocity`, except
+    /// while a push is taken out ([`crate::reference_governor`]), when `velocity` starts at the
+    /// pushed body's and this is the given reference's.
+    pub foothold_velocity: [f64; 2],
     /// Yaw rate, rad/s.
     pub yaw_rate: f64,
 }
@@ -186,10 +190,15 @@ impl FootholdPlanner {
         let hip = rot_z(yaw) * self.nominal_feet_body[leg.index()];
         let v = estimate.velocity;
         let v_ref = Vector3::new(target.velocity[0], target.velocity[1], 0.0);
+        let v_steer = Vector3::new(
+            target.foothold_velocity[0],
+            target.foothold_velocity[1],
+            0.0,
+        );
         let base_at_touchdown = estimate.position + v_ref * time_to_touchdown;
         let height = self.body_height(reference);
         let centrifugal = height / (2.0 * GRAVITY);
-        let mut offset = v * (0.5 * stance_time) + (v - v_ref) * self.raibert_gain;
+        let mut offset = v * (0.5 * stance_time) + (v - v_steer) * self.raibert_gain;
         offset.x += centrifugal * v.y * target.yaw_rate;
         offset.y -= centrifugal * v.x * target.yaw_rate;
         offset.x = offset.x.clamp(-MAX_RAIBERT_OFFSET, MAX_RAIBERT_OFFSET);

@@ -48,6 +48,7 @@ pub mod math;
 pub mod model;
 pub mod mpc;
 mod mpc_schedule;
+mod reference_governor;
 pub mod robot_config;
 mod statics;
 mod steep_ground;

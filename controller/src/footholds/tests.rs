@@ -80,3 +80,52 @@ fn pruned_foothold_search_equals_the_exhaustive_search() {
         }
     }
 }
+
+/// While a push is taken out, the governed velocity starts at the body's and the Raibert
+/// feedback would vanish; the footholds steer to `foothold_velocity` (the given reference's)
+/// instead, and step out by the gain times the difference.
+#[test]
+fn footholds_steer_a_pushed_body_to_the_given_velocity() {
+    let config = ControllerConfig::default();
+    let nominal = [
+        Vector3::new(0.18, -0.13, -0.28),
+        Vector3::new(0.18, 0.13, -0.28),
+        Vector3::new(-0.18, -0.13, -0.28),
+        Vector3::new(-0.18, 0.13, -0.28),
+    ];
+    let planner = FootholdPlanner::new(&config, nominal, 0.02);
+    let reference = Reference::default();
+    let estimate = Estimate {
+        rotation: nalgebra::Matrix3::identity(),
+        rpy: Vector3::zeros(),
+        position: Vector3::new(0.0, 0.0, 0.28),
+        velocity: Vector3::new(0.0, 1.0, 0.0),
+        angular_velocity: Vector3::zeros(),
+        q: [[0.0; 3]; NUM_LEGS],
+        dq: [[0.0; 3]; NUM_LEGS],
+        feet_world: nominal,
+        gravity_body: [0.0, 0.0, -1.0],
+    };
+    let pushed = MotionTarget {
+        xy: [0.0; 2],
+        roll: 0.0,
+        yaw: 0.0,
+        velocity: [0.0, 0.65],
+        foothold_velocity: [0.0, 0.65],
+        yaw_rate: 0.0,
+    };
+    let steered = MotionTarget {
+        foothold_velocity: [0.0, 0.0],
+        ..pushed
+    };
+    let (t_td, t_st) = (0.05, 0.15);
+    let leg = Leg::FL;
+    let along = planner.raibert_foothold(&estimate, &reference, &pushed, leg, t_td, t_st);
+    let back = planner.raibert_foothold(&estimate, &reference, &steered, leg, t_td, t_st);
+    let expected = config.raibert_gain * 0.65;
+    assert!(
+        (back.y - along.y - expected).abs() < 1e-12,
+        "{along} {back}"
+    );
+    assert_eq!(back.x, along.x);
+}

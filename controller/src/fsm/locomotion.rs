@@ -12,7 +12,8 @@ use crate::estimate::Estimate;
 use crate::estimator::StancePlan;
 use crate::footholds::{FootholdPlanner, MotionTarget};
 use crate::gait::{swing_trajectory, Gait, LegPhase};
-use crate::steep_ground::{ReferenceGovernor, SteepGround};
+use crate::reference_governor::ReferenceGovernor;
+use crate::steep_ground::SteepGround;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Locomotion {
@@ -75,6 +76,11 @@ impl Locomotion {
             .footholds
             .friction_normal(reference, estimate, contacts);
         let steep = SteepGround::new(&normal, self.mu, self.mu_slope_margin);
+        self.governor.absorb_push(
+            [reference.x, reference.y],
+            [estimate.position.x, estimate.position.y],
+            [estimate.velocity.x, estimate.velocity.y],
+        );
         let (xy, velocity) = self.governor.step(
             [reference.x, reference.y],
             [reference.vx, reference.vy],
@@ -86,6 +92,11 @@ impl Locomotion {
             roll: 0.0,
             yaw: reference.yaw,
             velocity,
+            foothold_velocity: if self.governor.recovering() {
+                [reference.vx, reference.vy]
+            } else {
+                velocity
+            },
             yaw_rate: reference.yaw_rate,
         };
         self.plan_touchdowns(&stages.footholds, estimate, reference, &target);

@@ -31,6 +31,7 @@ impl Stand {
                 roll: 0.0,
                 yaw: 0.0,
                 velocity: [0.0; 2],
+                foothold_velocity: [0.0; 2],
                 yaw_rate: 0.0,
             },
             time: 0.0,
@@ -46,6 +47,7 @@ impl Stand {
             roll: estimate.rpy.x,
             yaw,
             velocity: [0.0; 2],
+            foothold_velocity: [0.0; 2],
             yaw_rate: 0.0,
         };
         self.time = 0.0;

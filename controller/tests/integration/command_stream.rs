@@ -248,9 +248,9 @@ fn scenarios() -> Vec<Scenario> {
 /// yaw alone) and the stand-up's leg IK kept inside the joint limits (docs/slopes.md, 4c); the
 /// same final states as before.
 const EXPECTED: [(&str, u64); 4] = [
-    ("trot_straight_flat", 0xe5f7_01f0_0c6f_2da6),
-    ("trot_curve_ramp_held_input", 0xa047_7288_5d5d_4598),
-    ("trot_height_map_then_fault", 0x2a30_96a1_6fb6_4538),
+    ("trot_straight_flat", 0xe52c_a3ce_e6ce_5808),
+    ("trot_curve_ramp_held_input", 0x56d3_c53e_fd98_9ae6),
+    ("trot_height_map_then_fault", 0x2b24_f4c1_d11a_1465),
     ("walk_sideways_height_map", 0xfbe8_7757_891e_1794),
 ];
 
