@@ -173,3 +173,18 @@ def test_a_store_of_unforked_runs_is_not_continued_with_forks(tmp_path: Path) ->
     with pytest.raises(StoreError, match="resume it with `fork = false`"):
         SweepStore.create(tmp_path / "store", spec)
     assert SweepStore.create(tmp_path / "store", dataclasses.replace(spec, fork=False)).done_ids() == set()
+
+
+def test_the_estimator_can_be_chosen_at_load_time_and_is_checked_like_the_spec_s_own(tmp_path: Path) -> None:
+    spec_file = tmp_path / "pushes.toml"
+    spec_file.write_text('scenario = "mountain_pass"\nduration = 4.0\nseed = 3\nruns = 20\nestimator = "kalman"\n')
+    own = load_spec(spec_file)
+    truth = load_spec(spec_file, "groundTruth")
+    assert (own.estimator, truth.estimator) == ("kalman", "groundTruth")
+    assert dataclasses.replace(truth, estimator="kalman") == own
+    assert truth.hash != own.hash
+    spec_file.write_text(spec_file.read_text() + '[factors]\nsensor_noise_seed = { values = [1, 2] }\n')
+    with pytest.raises(SpecError, match='only acts with `estimator = "kalman"`'):
+        load_spec(spec_file, "groundTruth")
+    with pytest.raises(SpecError, match="`estimator` must be one of"):
+        load_spec(spec_file, "particle")

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from .. import paths
 from ..errors import HarnessError
+from ..fmu_runner import ESTIMATOR_MODES
 from ..planner_client import DEFAULT_LCM_URL, Plan, plan_scenario
 from ..scenario import Scenario
 from .spec import FACTORS, SweepSpec, load_spec
@@ -66,7 +67,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    spec = load_spec(args.spec)
+    spec = load_spec(args.spec, args.estimator)
     store = SweepStore.create(args.out, spec)
     with tempfile.TemporaryDirectory(prefix="pfnav_sweep_plan_") as tmp:
         courses = _courses(spec, store, args, Path(tmp))
@@ -92,7 +93,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     # Taken before the runs: the commit that ran and the load it ran under.
     stamp = collect_stamp() if args.results_page else None
-    spec = load_spec(args.spec)
+    spec = load_spec(args.spec, args.estimator)
     if args.no_fork:
         spec = dataclasses.replace(spec, fork=False)
     store = SweepStore.create(args.out, spec)
@@ -146,6 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--out", type=Path, required=True, help="store folder: rows (Parquet), plans, report")
         p.add_argument("--lcm-url", default=os.environ.get("LCM_DEFAULT_URL", DEFAULT_LCM_URL), help=f"LCM URL of the planner (default {DEFAULT_LCM_URL})")
         p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
+        p.add_argument(
+            "--estimator", choices=ESTIMATOR_MODES, default=None, help="run on this estimator instead of the spec's `estimator` (a store of its own)"
+        )
         if name == "run":
             p.add_argument("--workers", type=int, default=None, help="local Dask worker processes (default: one per core)")
             p.add_argument(

@@ -309,11 +309,15 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator, fork)
 
 
-def load_spec(path: Path) -> SweepSpec:
+def load_spec(path: Path, estimator: str | None = None) -> SweepSpec:
+    """The spec in the TOML file `path`; `estimator` (if given) replaces its `estimator` before the
+    checks, so that one spec measures both estimators (the store hash differs)."""
     try:
         data = tomllib.loads(Path(path).read_text())
     except OSError as err:
         raise SpecError(f"cannot read the sweep spec {path}: {err}") from err
     except tomllib.TOMLDecodeError as err:
         raise SpecError(f"{path}: not valid TOML: {err}") from err
+    if estimator is not None:
+        data["estimator"] = estimator
     return parse_spec(data, Path(path))
