@@ -130,7 +130,7 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
         result = sim.run()
         limits = np.asarray(sim.world.effort_limits, dtype=np.float64)
     row = diagnose(
-        result.log, result.stop_reason, limits, float(shared.robot.stand_height)
+        result.log, result.fall_step, limits, float(shared.robot.stand_height)
     )
     row.update(
         variant=task.variant.label,
@@ -143,16 +143,17 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
 
 def diagnose(
     log: dict[str, Any],
-    stop_reason: str,
+    fall_step: int | None,
     effort_limits: np.ndarray,
     stand_height: float,
 ) -> dict[str, Any]:
-    """The figures of one pushed run (module text); `stand_height` (m) sets the capture step's √(h/g)."""
+    """The figures of one pushed run (module text): `fall_step` is the log row of the fall (None:
+    it stood); `stand_height` (m) sets the capture step's √(h/g)."""
     from pfnav_harness.world import quaternion_to_rpy
 
     dt = float(log["physics_dt"])
     pushed = np.flatnonzero(np.any(log["push_force"] != 0.0, axis=1))
-    fell = stop_reason.startswith("fell")
+    fell = fall_step is not None
     if pushed.size == 0:
         if not fell:
             raise ValueError("the run has no push")
@@ -163,12 +164,9 @@ def diagnose(
             **{key: math.nan for key in NUMERIC_FIELDS},
         }
     k0 = int(pushed[0])
-    k_fall = (
-        round(float(stop_reason.split("t=")[1].split(" ")[0]) / dt) if fell else None
-    )
     k1 = min(
         len(log["t"]),
-        k_fall if k_fall is not None else k0 + round(WINDOW_WITHOUT_FALL / dt),
+        fall_step if fall_step is not None else k0 + round(WINDOW_WITHOUT_FALL / dt),
     )
     window = slice(k0, max(k1, k0 + 1))
     velocity = log["base_vel"][:, :2]
@@ -195,7 +193,7 @@ def diagnose(
     return {
         "fell": fell,
         "before_push": False,
-        "fall_after": (k_fall - k0) * dt if k_fall is not None else math.nan,
+        "fall_after": (fall_step - k0) * dt if fall_step is not None else math.nan,
         "dv": dv,
         "capture_step": dv * math.sqrt(stand_height / GRAVITY),
         "saturated": saturated,

@@ -48,7 +48,7 @@ def pushed_log(n: int = 3000, push_at: int = 1000) -> dict[str, np.ndarray]:
 
 def test_a_fall_is_taken_apart_from_the_push_to_the_fall() -> None:
     log = pushed_log()
-    row = push_diagnosis.diagnose(log, "fell at t=3.00 s", np.full(12, 10.0), 0.28)
+    row = push_diagnosis.diagnose(log, 3000, np.full(12, 10.0), 0.28)
     assert row["fell"]
     assert row["fall_after"] == pytest.approx(2.0)
     assert row["dv"] == pytest.approx(1.5)
@@ -65,12 +65,12 @@ def test_without_a_fall_the_window_is_two_seconds_and_a_run_without_a_push_is_re
     None
 ):
     log = pushed_log()
-    row = push_diagnosis.diagnose(log, "completed", np.full(12, 10.0), 0.28)
+    row = push_diagnosis.diagnose(log, None, np.full(12, 10.0), 0.28)
     assert not row["fell"] and math.isnan(row["fall_after"])
     assert row["saturated"] == pytest.approx(100 / 2000)
     log["push_force"][:] = 0.0
     with pytest.raises(ValueError, match="no push"):
-        push_diagnosis.diagnose(log, "completed", np.full(12, 10.0), 0.28)
+        push_diagnosis.diagnose(log, None, np.full(12, 10.0), 0.28)
 
 
 def test_a_run_that_falls_before_its_push_counts_as_a_fall_with_nothing_to_take_apart() -> (
@@ -78,9 +78,11 @@ def test_a_run_that_falls_before_its_push_counts_as_a_fall_with_nothing_to_take_
 ):
     log = pushed_log()
     log["push_force"][:] = 0.0
-    row = push_diagnosis.diagnose(log, "fell at t=0.50 s", np.full(12, 10.0), 0.28)
+    row = push_diagnosis.diagnose(log, 500, np.full(12, 10.0), 0.28)
     assert row["fell"] and row["before_push"]
     assert math.isnan(row["dv"]) and math.isnan(row["fall_after"])
+    # The same fields as a run taken apart, so every table and plot reads either kind.
+    assert row.keys() == push_diagnosis.diagnose(pushed_log(), 3000, np.full(12, 10.0), 0.28).keys()
     row.update(variant="kalman", magnitude=90.0, direction="left", walk_time=4.0)
     text = push_diagnosis.tables([row], [push_diagnosis.Variant("kalman")], [90.0], ["left"])
     assert "yes, before the push" in text and "1/1" in text

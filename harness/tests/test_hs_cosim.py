@@ -147,6 +147,7 @@ def test_a_collapsing_robot_is_stopped_early_as_a_fall(ramp_scenario: Scenario, 
     # The metrics judge the log by the rule the run stopped on: the same fall time.
     verdict = judge_fall(result.log, ramp_scenario.terrain, config.fall)
     assert verdict.fell and result.stop_reason == f"fell at t={verdict.fall_time:.2f} s"
+    assert result.fall_step is not None and result.log["t"][result.fall_step] == verdict.fall_time
 
 
 def test_bad_configs_are_rejected(ramp_scenario: Scenario, tmp_path: Path) -> None:

@@ -183,6 +183,8 @@ class RunResult:
     log: dict[str, NDArray[np.float64]]
     timing: Timing
     stop_reason: str
+    # Physics step (log row) at which the fall rule fired; None when the robot did not fall.
+    fall_step: int | None = None
 
 
 @dataclass(frozen=True)
@@ -692,7 +694,7 @@ class CoSimulation:
                 log["map_heights_final"] = online.belief.map.heights.copy()
                 log["map_variances_final"] = online.belief.map.variances.copy()
                 log["map_measurement_variances_final"] = online.belief.map.measurement_variances()
-        return RunResult(self.scenario.name, self.plan.method, log, loop.timing, stop_reason)
+        return RunResult(self.scenario.name, self.plan.method, log, loop.timing, stop_reason, loop.fall_step)
 
     def _fallen(self, state: NDArray[np.float64]) -> bool:
         """The height and tilt part of the fall rule (`FallThresholds`) at the state just read."""
