@@ -100,6 +100,12 @@ def test_the_bundled_description_is_the_robots(config_path: Path, robot_fmus: di
         assert float(by_name[f"joint.tau[{i}]"].max) == effort
     assert float(by_name["stand.bodyHeight"].start) == config["stand_height"]
     assert float(by_name["base.pos.z"].start) == config["stand_height"]
+    # Parameter ranges are the robot's (the tuned envelope widened with its size): each start value,
+    # the default scaled to the robot, lies inside its range (HyQ stands 0.6 m high, with stance
+    # gains beyond the 12 kg robot's 1000 N·m/rad).
+    for v in md.modelVariables:
+        if v.causality == "parameter" and v.type == "Real":
+            assert float(v.min) <= float(v.start) <= float(v.max), (v.name, v.min, v.start, v.max)
     with zipfile.ZipFile(fmu) as archive:
         names = set(archive.namelist())
         bundled_config = tomllib.loads(archive.read("resources/robot/robot.toml").decode())

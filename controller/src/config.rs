@@ -203,15 +203,28 @@ pub struct ConfigField {
     pub description: &'static str,
     /// Labels of the elements of an array (empty for scalars).
     pub labels: &'static [&'static str],
+    /// How the default and the range carry over to a robot of another size.
+    pub scaling: Scaling,
     range: fn() -> (f64, f64),
     get: fn(&ControllerConfig, usize) -> FieldValue,
     set: fn(&mut ControllerConfig, usize, FieldValue) -> bool,
 }
 
 impl ConfigField {
-    /// The inclusive range `(min, max)` of every element.
+    /// The inclusive range `(min, max)` of every element, for the tuned robot.
     pub fn range(&self) -> (f64, f64) {
         (self.range)()
+    }
+
+    /// The range for a robot of `scale`: the tuned robot's, widened to hold it scaled by the
+    /// field's factor (never narrowed: what suits the tuned robot stays accepted).
+    pub fn range_for(&self, scale: RobotScale) -> (f64, f64) {
+        let (min, max) = self.range();
+        let factor = scale.factor(self.scaling);
+        if !(factor.is_finite() && factor > 0.0) {
+            return (min, max);
+        }
+        (min.min(min * factor), max.max(max * factor))
     }
 
     /// Element `i` of this field of `config` (`i < len`).
@@ -266,6 +279,56 @@ pub struct ConfigError {
     pub max: f64,
 }
 
+/// How a field's value carries over to a robot of another size (Froude scaling of the tuned
+/// robot): the default tuning of a robot ([`ControllerConfig::for_robot`]) is each default times
+/// this factor, and the accepted range widens by the same factor, so a 90 kg robot's stance
+/// gains are neither refused nor capped at the 12 kg robot's envelope.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scaling {
+    /// Independent of the robot's size (weights of dimensionless errors, counts, angles).
+    Fixed,
+    /// A length: × length ratio.
+    Length,
+    /// A time: × √(length ratio).
+    Time,
+    /// A force: × mass ratio.
+    Force,
+    /// A joint stiffness or damping (torque per angle): × mass ratio × length ratio.
+    Torque,
+    /// The MPC's weight on squared forces: ÷ mass ratio².
+    ForceWeight,
+}
+
+/// A robot's size relative to the one the default tuning was made on
+/// ([`crate::tuning::TUNED_MASS`], [`crate::tuning::TUNED_STAND_HEIGHT`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RobotScale {
+    /// Total mass ÷ the tuned robot's.
+    pub mass: f64,
+    /// Stand height ÷ the tuned robot's.
+    pub length: f64,
+}
+
+impl RobotScale {
+    /// The tuned robot itself.
+    pub const TUNED: RobotScale = RobotScale {
+        mass: 1.0,
+        length: 1.0,
+    };
+
+    /// The factor a value of `scaling` is multiplied by for this robot.
+    pub fn factor(&self, scaling: Scaling) -> f64 {
+        match scaling {
+            Scaling::Fixed => 1.0,
+            Scaling::Length => self.length,
+            Scaling::Time => self.length.sqrt(),
+            Scaling::Force => self.mass,
+            Scaling::Torque => self.mass * self.length,
+            Scaling::ForceWeight => 1.0 / (self.mass * self.mass),
+        }
+    }
+}
+
 /// Declares [`ControllerConfig`]; see the module documentation. Each field reads
 /// `name: type = default, fmi "fmu.name", range RANGE, unit "unit" (or ""), "description"
 /// [, labels LABELS];`.
@@ -277,7 +340,7 @@ macro_rules! controller_config {
                 $(#[$field_meta:meta])*
                 $field:ident: $ty:ty = $default:expr,
                     fmi $fmi:literal, range $range:expr, unit $unit:literal, $description:literal
-                    $(, labels $labels:expr)?;
+                    $(, labels $labels:expr)? $(, scales $scaling:ident)?;
             )*
         }
     ) => {
@@ -310,6 +373,7 @@ macro_rules! controller_config {
                         unit: if $unit.is_empty() { None } else { Some($unit) },
                         description: $description,
                         labels: controller_config!(@labels $($labels)?),
+                        scaling: controller_config!(@scaling $($scaling)?),
                         range: || <$ty as FieldType>::bounds(&$range),
                         get: |config, i| FieldType::element(&config.$field, i),
                         set: |config, i, value| FieldType::set_element(&mut config.$field, i, value),
@@ -320,6 +384,8 @@ macro_rules! controller_config {
     };
     (@labels) => { &[] };
     (@labels $labels:expr) => { $labels };
+    (@scaling) => { Scaling::Fixed };
+    (@scaling $scaling:ident) => { Scaling::$scaling };
 }
 
 /// Labels of the MPC state weights.
@@ -371,11 +437,11 @@ controller_config! {
         /// Gait cycle period, s.
         gait_period: f64 = 0.3,
             fmi "gait.period", range limits::GAIT_PERIOD, unit "s",
-            "Gait cycle period";
+            "Gait cycle period", scales Time;
         /// Swing-foot apex height above the straight line between lift-off and touchdown, m.
         swing_height: f64 = 0.08,
             fmi "gait.swingHeight", range limits::SWING_HEIGHT, unit "m",
-            "Swing-foot apex height";
+            "Swing-foot apex height", scales Length;
         /// Friction coefficient used by the MPC's friction pyramid. Below the ground's μ on purpose
         /// (a safety factor of 0.75 on the μ = 0.8 of issue 19's inclines): planned at the real μ
         /// the forces sit on the cone's edge, stance feet slip (2–18 cm per stance) and 20° down
@@ -386,16 +452,16 @@ controller_config! {
         /// Minimum normal force on a stance foot, N.
         f_min: f64 = 5.0,
             fmi "mpc.fMin", range limits::F_MIN, unit "N",
-            "Minimum normal force on a stance foot";
+            "Minimum normal force on a stance foot", scales Force;
         /// Maximum normal force on a stance foot, N.
         f_max: f64 = 150.0,
             fmi "mpc.fMax", range limits::F_MAX, unit "N",
-            "Maximum normal force on a stance foot";
+            "Maximum normal force on a stance foot", scales Force;
         /// Nominal standing height of the base above the terrain, m (used when the reference
         /// gives ≤ 0).
         body_height: f64 = crate::tuning::TUNED_STAND_HEIGHT,
             fmi "stand.bodyHeight", range limits::BODY_HEIGHT, unit "m",
-            "Nominal standing height above the terrain (used when ref.bodyHeight <= 0)";
+            "Nominal standing height above the terrain (used when ref.bodyHeight <= 0)", scales Length;
         /// MPC state weights: roll, pitch, yaw, x, y, z, ωx, ωy, ωz, vx, vy, vz, gravity state.
         mpc_q: [f64; 13] = [10.0, 10.0, 5.0, 50.0, 50.0, 50.0, 0.05, 0.05, 0.3, 1.0, 1.0, 0.5, 0.0],
             fmi "mpc.q", range limits::MPC_Q, unit "",
@@ -403,23 +469,23 @@ controller_config! {
         /// MPC force weight (same for every force component).
         mpc_r: f64 = 1e-5,
             fmi "mpc.r", range limits::MPC_R, unit "",
-            "MPC force weight";
+            "MPC force weight", scales ForceWeight;
         /// Swing-leg joint stiffness (abduction, hip, knee), N·m/rad.
         kp_swing: [f64; 3] = [60.0, 60.0, 60.0],
             fmi "swing.kp", range limits::JOINT_KP, unit "N.m/rad",
-            "Swing-leg joint stiffness, {}", labels JOINT_LABELS;
+            "Swing-leg joint stiffness, {}", labels JOINT_LABELS, scales Torque;
         /// Swing-leg joint damping (abduction, hip, knee), N·m·s/rad.
         kd_swing: [f64; 3] = [2.0, 2.0, 2.0],
             fmi "swing.kd", range limits::JOINT_KD, unit "N.m.s/rad",
-            "Swing-leg joint damping, {}", labels JOINT_LABELS;
+            "Swing-leg joint damping, {}", labels JOINT_LABELS, scales Torque;
         /// Joint stiffness used by the stand-up interpolation, N·m/rad.
         kp_stand: [f64; 3] = [80.0, 80.0, 80.0],
             fmi "stand.kp", range limits::JOINT_KP, unit "N.m/rad",
-            "Stand-up joint stiffness, {}", labels JOINT_LABELS;
+            "Stand-up joint stiffness, {}", labels JOINT_LABELS, scales Torque;
         /// Joint damping used by the stand-up interpolation, N·m·s/rad.
         kd_stand: [f64; 3] = [3.0, 3.0, 3.0],
             fmi "stand.kd", range limits::JOINT_KD, unit "N.m.s/rad",
-            "Stand-up joint damping, {}", labels JOINT_LABELS;
+            "Stand-up joint damping, {}", labels JOINT_LABELS, scales Torque;
         /// Duration of the stand-up motion, s.
         stand_up_duration: f64 = 1.0,
             fmi "stand.upDuration", range limits::STAND_UP_DURATION, unit "s",
@@ -427,7 +493,7 @@ controller_config! {
         /// Raibert foothold velocity-feedback gain k in p = p_hip + v·T_stance/2 + k (v − v_ref), s.
         raibert_gain: f64 = 0.03,
             fmi "gait.raibertGain", range limits::RAIBERT_GAIN, unit "s",
-            "Raibert foothold velocity-feedback gain";
+            "Raibert foothold velocity-feedback gain", scales Time;
         /// Tilt (angle between body z and world z) above which the FSM enters damping, rad.
         max_tilt: f64 = 0.9,
             fmi "safety.maxTilt", range limits::MAX_TILT, unit "rad",
@@ -439,7 +505,7 @@ controller_config! {
         /// Joint damping of the damping (safe) state, N·m·s/rad.
         damping_kd: f64 = 2.0,
             fmi "safety.dampingKd", range limits::JOINT_KD, unit "N.m.s/rad",
-            "Joint damping of the damping state";
+            "Joint damping of the damping state", scales Torque;
         /// Largest body pitch the terrain-following reference may ask for, rad.
         max_terrain_pitch: f64 = 0.35,
             fmi "terrain.maxPitch", range limits::MAX_TERRAIN_PITCH, unit "rad",
@@ -528,8 +594,14 @@ impl ControllerConfig {
     /// operating envelope of [`crate::limits`]. Non-finite values are refused. The error names
     /// the first offending field and its value.
     pub fn check_ranges(&self) -> Result<(), ConfigError> {
+        self.check_ranges_for(RobotScale::TUNED)
+    }
+
+    /// [`ControllerConfig::check_ranges`] with the ranges of a robot of `scale`
+    /// ([`ConfigField::range_for`]).
+    pub fn check_ranges_for(&self, scale: RobotScale) -> Result<(), ConfigError> {
         for field in Self::FIELDS {
-            let (min, max) = field.range();
+            let (min, max) = field.range_for(scale);
             for i in 0..field.len {
                 let value = field.get(self, i).as_f64();
                 if !(value.is_finite() && min <= value && value <= max) {

@@ -30,7 +30,7 @@ use crate::api::{
     Command, ControllerError, FsmState, HeightMap, Leg, Reference, RobotState, SensorReadings,
     NUM_JOINTS, NUM_LEGS,
 };
-use crate::config::ControllerConfig;
+use crate::config::{ControllerConfig, RobotScale};
 use crate::estimator::StateEstimator;
 use crate::footholds::FootholdPlanner;
 pub use crate::footholds::FOOTHOLD_SEARCH_RADIUS;
@@ -68,7 +68,7 @@ pub struct Controller {
 impl Controller {
     /// Build a controller; fails on an invalid config or when the standing pose is unreachable.
     pub fn new(model: RobotModel, config: ControllerConfig) -> Result<Self, ControllerError> {
-        validate_config(&config)?;
+        validate_config(&config, RobotScale::of(&model))?;
         let stand_joint_positions = model.stand_joint_positions(config.body_height)?;
         let nominal_feet_body =
             Leg::ALL.map(|leg| Vector3::from(model.nominal_foot_position(leg, config.body_height)));

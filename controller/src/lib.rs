@@ -56,7 +56,7 @@ pub mod tuning;
 mod validation;
 
 pub use api::*;
-pub use config::ControllerConfig;
+pub use config::{ControllerConfig, RobotScale, Scaling};
 pub use controller::{Controller, ControllerState};
 pub use estimator::{EstimatorStatus, StatusFlag};
 pub use fsm::FsmTransition;

@@ -4,6 +4,9 @@
 //! with weight × leg length, times with √(length / g)), so that a 2.5 kg Solo-sized robot does not
 //! receive joint gains that saturate its 2.7 N·m motors and a heavier one is not left soft.
 
+use serde::Deserialize;
+
+use crate::config::{FieldValue, RobotScale, Scaling};
 use crate::{ControllerConfig, RobotModel};
 
 /// Mass of the robot the default tuning was made on, kg.
@@ -11,42 +14,89 @@ pub const TUNED_MASS: f64 = 12.0;
 /// Stand height of the robot the default tuning was made on, m.
 pub const TUNED_STAND_HEIGHT: f64 = 0.28;
 
-impl ControllerConfig {
-    /// The default tuning scaled to `model`: body height = the robot config's stand height;
-    /// stance force bounds × mass ratio; MPC force weight ÷ mass ratio² (forces grow with the
-    /// weight, the state errors do not); joint stiffness and damping × mass ratio × length
-    /// ratio; swing height × length ratio; gait period and Raibert gain × √length ratio. For the
-    /// tuned robot itself this is exactly [`ControllerConfig::default`].
-    pub fn for_robot(model: &RobotModel) -> ControllerConfig {
-        scaled_tuning(
-            model.total_mass() / TUNED_MASS,
-            model.stand_height() / TUNED_STAND_HEIGHT,
-            model.stand_height(),
-        )
+impl RobotScale {
+    /// `model`'s size relative to the tuned robot: total mass and stand height ratios.
+    pub fn of(model: &RobotModel) -> RobotScale {
+        RobotScale {
+            mass: model.total_mass() / TUNED_MASS,
+            length: model.stand_height() / TUNED_STAND_HEIGHT,
+        }
     }
 }
 
-/// The default tuning for a robot of `mass` × the tuned mass and `length` × the tuned stand
-/// height, standing `stand_height` high.
-fn scaled_tuning(mass: f64, length: f64, stand_height: f64) -> ControllerConfig {
+impl ControllerConfig {
+    /// The default tuning scaled to `model`: every field declared with a [`Scaling`] is its
+    /// default times the robot's factor (stance force bounds × mass ratio; MPC force weight ÷
+    /// mass ratio², as forces grow with the weight and the state errors do not; joint stiffness
+    /// and damping × mass ratio × length ratio; swing height × length ratio; gait period and
+    /// Raibert gain × √length ratio), and the body height is the robot config's stand height.
+    /// For the tuned robot itself this is exactly [`ControllerConfig::default`].
+    /// A robot config's `[tuning]` table replaces the fields it names (checked when the model
+    /// was built, [`tuned_for_robot`]).
+    pub fn for_robot(model: &RobotModel) -> ControllerConfig {
+        model
+            .configured_tuning()
+            .cloned()
+            .unwrap_or_else(|| scaled_tuning(RobotScale::of(model), model.stand_height()))
+    }
+}
+
+/// The scaled default tuning of a robot of `scale` and `stand_height` with the robot config's
+/// `[tuning]` overrides applied and checked against the robot's ranges. Errors name the key
+/// (`tuning.kp_stand[1] = 1500 is outside [0, 1000]`).
+pub(crate) fn tuned_for_robot(
+    scale: RobotScale,
+    stand_height: f64,
+    overrides: &toml::Table,
+) -> Result<ControllerConfig, String> {
+    let scaled = scaled_tuning(scale, stand_height);
+    if overrides.is_empty() {
+        return Ok(scaled);
+    }
+    let mut table = toml::Table::try_from(&scaled)
+        .map_err(|e| format!("cannot express the tuning as TOML: {e}"))?;
+    for (key, value) in overrides {
+        if ControllerConfig::field(key).is_none() {
+            let known: Vec<&str> = ControllerConfig::FIELDS.iter().map(|f| f.name).collect();
+            return Err(format!(
+                "key `tuning.{key}` is not a controller config field (one of: {})",
+                known.join(", ")
+            ));
+        }
+        table.insert(key.clone(), value.clone());
+    }
+    let config = ControllerConfig::deserialize(toml::Value::Table(table)).map_err(|e| {
+        format!(
+            "table `tuning`: {}",
+            e.to_string().trim_end().replace('\n', " ")
+        )
+    })?;
+    if let Err(e) = config.check_ranges_for(scale) {
+        return Err(format!("key `tuning.{e}`"));
+    }
+    crate::validation::validate_config(&config, scale)
+        .map_err(|e| format!("table `tuning`: {e}"))?;
+    Ok(config)
+}
+
+/// The default tuning for a robot of `scale`, standing `stand_height` high.
+fn scaled_tuning(scale: RobotScale, stand_height: f64) -> ControllerConfig {
     let defaults = ControllerConfig::default();
-    let torque = mass * length;
-    let time = length.sqrt();
-    let scaled = |values: [f64; 3], by: f64| values.map(|v| v * by);
+    let mut config = defaults.clone();
+    for field in ControllerConfig::FIELDS {
+        if field.scaling == Scaling::Fixed {
+            continue;
+        }
+        let factor = scale.factor(field.scaling);
+        for i in 0..field.len {
+            if let FieldValue::Real(value) = field.get(&defaults, i) {
+                field.set(&mut config, i, FieldValue::Real(value * factor));
+            }
+        }
+    }
     ControllerConfig {
         body_height: stand_height,
-        swing_height: defaults.swing_height * length,
-        gait_period: defaults.gait_period * time,
-        raibert_gain: defaults.raibert_gain * time,
-        f_min: defaults.f_min * mass,
-        f_max: defaults.f_max * mass,
-        mpc_r: defaults.mpc_r / (mass * mass),
-        kp_swing: scaled(defaults.kp_swing, torque),
-        kd_swing: scaled(defaults.kd_swing, torque),
-        kp_stand: scaled(defaults.kp_stand, torque),
-        kd_stand: scaled(defaults.kd_stand, torque),
-        damping_kd: defaults.damping_kd * torque,
-        ..defaults
+        ..config
     }
 }
 
@@ -77,17 +127,56 @@ mod tests {
         // A Solo-12-sized robot: 2.5 kg, 0.24 m.
         let (mass, length) = (2.5 / TUNED_MASS, 0.24 / TUNED_STAND_HEIGHT);
         let defaults = ControllerConfig::default();
-        let small = scaled_tuning(mass, length, 0.24);
+        let small = scaled_tuning(RobotScale { mass, length }, 0.24);
         assert!((small.kp_swing[0] - defaults.kp_swing[0] * mass * length).abs() < 1e-12);
         assert!((small.kd_stand[2] - defaults.kd_stand[2] * mass * length).abs() < 1e-12);
         assert!((small.f_max - defaults.f_max * mass).abs() < 1e-12);
         assert!((small.f_min - defaults.f_min * mass).abs() < 1e-12);
         assert!((small.mpc_r - defaults.mpc_r / (mass * mass)).abs() < 1e-18);
         assert!((small.gait_period - defaults.gait_period * length.sqrt()).abs() < 1e-12);
+        assert!((small.raibert_gain - defaults.raibert_gain * length.sqrt()).abs() < 1e-12);
+        assert!((small.swing_height - defaults.swing_height * length).abs() < 1e-12);
+        assert!((small.damping_kd - defaults.damping_kd * mass * length).abs() < 1e-12);
         assert_eq!(small.body_height, 0.24);
         assert_eq!(small.mpc_q, defaults.mpc_q);
         small
             .check_ranges()
             .expect("scaled tuning stays in the envelope");
+    }
+
+    #[test]
+    fn a_heavy_tall_robot_gets_its_scaled_tuning_accepted_by_its_own_ranges() {
+        // A HyQ-sized robot: 87 kg standing 0.6 m (the tuned robot's envelope refuses its stand
+        // height and its stance gains).
+        let scale = RobotScale {
+            mass: 87.0 / TUNED_MASS,
+            length: 0.6 / TUNED_STAND_HEIGHT,
+        };
+        let big = scaled_tuning(scale, 0.6);
+        let err = big
+            .check_ranges()
+            .expect_err("outside the tuned robot's envelope");
+        assert!(
+            ["body_height", "kp_stand[0]", "kp_swing[0]"].contains(&err.field.as_str()),
+            "{err}"
+        );
+        big.check_ranges_for(scale)
+            .expect("the robot's own ranges hold its scaled tuning");
+        // Widened, never narrowed: the tuned robot's values stay accepted, and values beyond
+        // the scaled envelope are still refused.
+        ControllerConfig::default()
+            .check_ranges_for(scale)
+            .expect("defaults in the big robot's ranges");
+        let field = ControllerConfig::field("kp_stand").expect("field");
+        let (_, max) = field.range_for(scale);
+        assert!((max - field.range().1 * scale.mass * scale.length).abs() < 1e-9);
+        let too_stiff = ControllerConfig {
+            kp_stand: [max * 1.01; 3],
+            ..big
+        };
+        assert_eq!(
+            too_stiff.check_ranges_for(scale).unwrap_err().field,
+            "kp_stand[0]"
+        );
     }
 }

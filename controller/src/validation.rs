@@ -2,7 +2,7 @@
 //! `Controller::new`), the measured state and the reference (every tick).
 
 use crate::api::{ControllerError, Reference, RobotState};
-use crate::config::ControllerConfig;
+use crate::config::{ControllerConfig, RobotScale};
 
 /// Accepted norms of the state quaternion (it is normalised; a norm outside this range means a
 /// corrupted input, not rounding).
@@ -19,11 +19,15 @@ fn check_finite(values: &[f64], what: &str) -> Result<(), String> {
     }
 }
 
-/// Checks the configuration against its declared operating envelope (every field's range in
-/// [`crate::config`]) and the one relation between fields that a range cannot state.
-pub fn validate_config(config: &ControllerConfig) -> Result<(), ControllerError> {
+/// Checks the configuration against its declared operating envelope for a robot of `scale`
+/// (every field's range in [`crate::config`], widened with the robot's size) and the one
+/// relation between fields that a range cannot state.
+pub fn validate_config(
+    config: &ControllerConfig,
+    scale: RobotScale,
+) -> Result<(), ControllerError> {
     config
-        .check_ranges()
+        .check_ranges_for(scale)
         .map_err(|e| ControllerError::Config(e.to_string()))?;
     if config.f_min >= config.f_max {
         return Err(ControllerError::Config(format!(

@@ -71,6 +71,15 @@ struct MassProperties {
 }
 
 impl MassProperties {
+    /// The same body expressed in a frame rotated by `rotation` (new = rotation · old).
+    fn rotated(&self, rotation: &Matrix3<f64>) -> MassProperties {
+        MassProperties {
+            mass: self.mass,
+            com: rotation * self.com,
+            inertia_com: rotation * self.inertia_com * rotation.transpose(),
+        }
+    }
+
     /// Merge `other` (expressed in a frame placed at `pose` relative to ours) into `self`.
     fn merge(&mut self, other: &MassProperties, pose: &Transform) {
         let other_com = pose.translation + pose.rotation * other.com;
@@ -95,9 +104,11 @@ impl MassProperties {
 #[derive(Clone, Debug)]
 struct ChainJoint {
     /// Pose of the joint frame (before its rotation) in the previous moving frame (the base for
-    /// the first joint), fixed joints in between included.
+    /// the first joint), fixed joints in between included. Every frame of the chain is parallel
+    /// to the base at q = 0 (the URDF's origin rotations are folded into axes and bodies), so
+    /// the rotation is the identity.
     pre: Transform,
-    /// Unit rotation axis in the joint frame.
+    /// Unit rotation axis in the joint frame (= in the base frame at q = 0).
     axis: Vector3<f64>,
     /// Everything rigidly attached after this joint, in the joint frame.
     body: MassProperties,
@@ -107,9 +118,9 @@ struct ChainJoint {
     velocity: f64,
 }
 
-/// Geometry used by the closed-form IK initial guess, exact for any leg whose joint frames are
-/// unrotated with the abduction axis along ±x and the hip and knee axes along ±y (checked when
-/// the model is built). Lengths are in the leg's sagittal plane.
+/// Geometry used by the closed-form IK initial guess, exact for any leg whose axes, in the base
+/// frame at q = 0, are ±x for the abduction and ±y for the hip and knee (checked when the model
+/// is built; the chain's frames are stored parallel to the base at q = 0). Lengths are in the leg's sagittal plane.
 #[derive(Clone, Copy, Debug)]
 struct LegGeometry {
     abd_origin: Vector3<f64>,
@@ -156,6 +167,9 @@ pub struct RobotModel {
     foot_radius: f64,
     stand_height: f64,
     crouch: Option<[f64; NUM_JOINTS]>,
+    /// The robot config's `[tuning]` applied over the scaled default tuning (checked when
+    /// built); `None` without one.
+    tuning: Option<Box<crate::ControllerConfig>>,
 }
 
 fn to_array3(v: &Vector3<f64>) -> [f64; 3] {
@@ -195,6 +209,12 @@ impl RobotModel {
     /// `legs.*.crouch`), rad, index 3·leg + j; `None` unless every leg gives one.
     pub fn crouch_joint_positions(&self) -> Option<[f64; NUM_JOINTS]> {
         self.crouch
+    }
+
+    /// The controller tuning of the robot config's `[tuning]` table (over the default scaled to
+    /// the robot), if it has one; [`crate::ControllerConfig::for_robot`] reads it.
+    pub fn configured_tuning(&self) -> Option<&crate::ControllerConfig> {
+        self.tuning.as_deref()
     }
 
     /// Effort limits (URDF, or the robot config's overrides), N·m, index 3·leg + j.

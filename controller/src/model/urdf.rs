@@ -91,6 +91,51 @@ fn link_mass_properties(
     })
 }
 
+/// Every link's inertial checked at once, so a URDF with several placeholder inertials is fixed
+/// in one round: the error lists them all and the `massless_links` line that accepts them.
+fn check_all_inertials(
+    robot: &urdf_rs::Robot,
+    tree: &Tree<'_>,
+    config: &RobotConfig,
+) -> Result<(), ModelError> {
+    let mut problems = Vec::new();
+    let mut placeholders = Vec::new();
+    for link in &robot.links {
+        if let Err(e) = tree.mass_properties(link) {
+            let text = match e {
+                ModelError::InvalidValue(text) => text,
+                other => other.to_string(),
+            };
+            // Impossible principal moments are what placeholder inertials look like; a negative
+            // or non-finite value is an error in the file, not something to declare massless.
+            if text.contains("principal moments") {
+                placeholders.push(link.name.as_str());
+            }
+            problems.push(text);
+        }
+    }
+    match (problems.len(), placeholders.len()) {
+        (0, _) => Ok(()),
+        (_, 0) => Err(ModelError::InvalidValue(problems.join("; "))),
+        (_, n) => {
+            let massless: Vec<String> = config
+                .massless_links
+                .iter()
+                .map(String::as_str)
+                .chain(placeholders)
+                .map(|name| format!("\"{name}\""))
+                .collect();
+            Err(ModelError::InvalidValue(format!(
+                "{}; if {} placeholder{}, set `massless_links = [{}]` in the robot config (the links become massless frames)",
+                problems.join("; "),
+                if n == 1 { "it is a" } else { "they are" },
+                if n == 1 { "" } else { "s" },
+                massless.join(", ")
+            )))
+        }
+    }
+}
+
 fn check_inertia(link: &str, inertia: &Matrix3<f64>) -> Result<(), ModelError> {
     let mut moments: Vec<f64> = SymmetricEigen::new(*inertia)
         .eigenvalues
@@ -98,17 +143,15 @@ fn check_inertia(link: &str, inertia: &Matrix3<f64>) -> Result<(), ModelError> {
         .copied()
         .collect();
     moments.sort_by(f64::total_cmp);
-    let hint =
-        "(list the link in `massless_links` of the robot config if its inertial is a placeholder)";
     if moments[0] <= moments[2] * 1e-9 || moments[2] <= 0.0 {
         return Err(ModelError::InvalidValue(format!(
-            "inertia of link `{link}` is not positive definite (principal moments {}) {hint}",
+            "inertia of link `{link}` is not positive definite (principal moments {})",
             format_moments(&moments)
         )));
     }
     if moments[0] + moments[1] < moments[2] * (1.0 - TRIANGLE_TOLERANCE) {
         return Err(ModelError::InvalidValue(format!(
-            "inertia of link `{link}` breaks the triangle inequality (principal moments {}) {hint}",
+            "inertia of link `{link}` breaks the triangle inequality (principal moments {})",
             format_moments(&moments)
         )));
     }
@@ -237,8 +280,13 @@ fn check_origin(joint: &urdf_rs::Joint) -> Result<(), ModelError> {
     )
 }
 
-/// The axis of an actuated joint must be ± `expected` (the closed-form IK's layout); returns the
-/// sign.
+/// How far (rad) an actuated joint's axis, in the base frame at q = 0, may lie from its
+/// canonical direction: URDFs round their `rpy` (1.5708 for π/2 leaves 4e-6), and the closed-form
+/// IK is only the Newton refinement's starting point, so a near-canonical axis solves exactly.
+const AXIS_TOLERANCE: f64 = 1e-3;
+
+/// The axis of an actuated joint, in the base frame at q = 0, must be ± `expected` (the
+/// closed-form IK's layout); returns the sign.
 fn axis_sign(
     joint: &urdf_rs::Joint,
     axis: &Vector3<f64>,
@@ -246,13 +294,16 @@ fn axis_sign(
     role: &str,
 ) -> Result<f64, ModelError> {
     for sign in [1.0, -1.0] {
-        if (axis - expected * sign).norm() < 1e-9 {
+        if (axis - expected * sign).norm() < AXIS_TOLERANCE {
             return Ok(sign);
         }
     }
     Err(ModelError::Structure(format!(
-        "{role} joint `{}` has axis {:?}; it must be ±({}, {}, {}) in an unrotated joint frame",
-        joint.name, joint.axis.xyz, expected.x, expected.y, expected.z
+        "{role} joint `{}` turns about ({:.4}, {:.4}, {:.4}) in the base frame at the zero pose \
+         (its axis {:?} through the rotations of the joint origins above it); the controller \
+         needs the abduction axis along the base's ±x and the hip and knee axes along ±y \
+         (a leg whose axes are tilted out of that layout is not supported)",
+        joint.name, axis.x, axis.y, axis.z, joint.axis.xyz
     )))
 }
 
@@ -322,17 +373,20 @@ fn build_leg(
             moving.len()
         )));
     }
+    // The chain is stored in frames parallel to the base at q = 0: a joint frame rotated by Q
+    // (the product of the origin rotations from the base) turns about Q·axis, and
+    // Q·Rot(axis, q)·Qᵀ = Rot(Q·axis, q), so joint angles, limits and kinematics are the URDF's
+    // while the closed-form IK sees its canonical layout. URDFs with rotated joint origins
+    // (HyQ, ANYmal C) load as published.
     let mut joints = Vec::with_capacity(3);
-    let mut pre = Transform::identity();
-    let mut rotated = None;
+    let mut orientation = Matrix3::identity();
+    let mut translation = Vector3::zeros();
     for joint in &path {
         check_origin(joint)?;
         let origin = Transform::from_pose(&joint.origin);
-        if (origin.rotation - Matrix3::identity()).norm() > 1e-9 && rotated.is_none() {
-            rotated = Some(joint.name.as_str());
-        }
+        translation += orientation * origin.translation;
+        orientation *= origin.rotation;
         if joint.joint_type == urdf_rs::JointType::Fixed {
-            pre = pre.then(&origin);
             continue;
         }
         if joint.joint_type != urdf_rs::JointType::Revolute {
@@ -371,31 +425,31 @@ fn build_leg(
             "velocity",
         )?;
         joints.push(ChainJoint {
-            pre: pre.then(&origin),
-            axis: axis / norm,
-            body: tree.rigid_cluster(&joint.child.link, 0)?,
+            pre: Transform {
+                rotation: Matrix3::identity(),
+                translation,
+            },
+            axis: orientation * axis / norm,
+            body: tree
+                .rigid_cluster(&joint.child.link, 0)?
+                .rotated(&orientation),
             lower: limit.lower,
             upper: limit.upper,
             effort,
             velocity,
         });
-        pre = Transform::identity();
+        translation = Vector3::zeros();
     }
-    let offset = leg_config.foot_offset.unwrap_or([0.0; 3]);
-    let foot = pre.then(&Transform {
+    let offset = Vector3::from(leg_config.foot_offset.unwrap_or([0.0; 3]));
+    let foot = Transform {
         rotation: Matrix3::identity(),
-        translation: Vector3::from(offset),
-    });
+        translation: translation + orientation * offset,
+    };
     let joints: [ChainJoint; 3] = joints
         .try_into()
         .map_err(|_| ModelError::Structure(format!("leg {prefix} does not have 3 joints")))?;
     // The rigid cluster of the knee's child already contains the foot (fixed joints), and the
     // clusters never overlap because each stops at the next moving joint.
-    if let Some(joint) = rotated {
-        return Err(ModelError::Structure(format!(
-            "leg {prefix}: joint `{joint}` has a rotated origin (rpy ≠ 0); the leg's joint frames must be unrotated"
-        )));
-    }
     let axis_signs = [
         axis_sign(
             path_joint(&path, &leg_config.joints[0])?,
@@ -648,6 +702,7 @@ impl RobotModel {
                 root.name
             ))));
         }
+        check_all_inertials(robot, &tree, config).map_err(in_urdf)?;
         let base_body = tree.rigid_cluster(base, 0).map_err(in_urdf)?;
         let mut legs = Vec::with_capacity(4);
         for leg in Leg::ALL {
@@ -688,6 +743,7 @@ impl RobotModel {
             foot_radius,
             stand_height: config.stand_height,
             crouch: None,
+            tuning: None,
         };
         let model = RobotModel {
             crouch: crouch_pose(config, &model.lower_limits(), &model.upper_limits())
@@ -708,6 +764,17 @@ impl RobotModel {
                     config.stand_height
                 ))
             })?;
-        Ok(model)
+        let tuning = if config.tuning.is_empty() {
+            None
+        } else {
+            let tuned = crate::tuning::tuned_for_robot(
+                crate::RobotScale::of(&model),
+                config.stand_height,
+                &config.tuning,
+            )
+            .map_err(in_config)?;
+            Some(Box::new(tuned))
+        };
+        Ok(RobotModel { tuning, ..model })
     }
 }

@@ -128,6 +128,12 @@ pub struct RobotConfig {
     /// Limit overrides.
     #[serde(default)]
     pub limits: LimitOverrides,
+    /// Controller tuning overrides, by the controller config's field names (`kp_stand = [...]`,
+    /// `gait_period = 0.4`): applied over the default tuning scaled to the robot
+    /// ([`crate::ControllerConfig::for_robot`]) and checked against the robot's ranges when the
+    /// model is built.
+    #[serde(default)]
+    pub tuning: toml::Table,
     /// The legs.
     pub legs: LegsConfig,
 }

@@ -174,13 +174,183 @@ fn non_revolute_and_badly_oriented_joints_are_refused() {
     );
     assert_urdf_error(&tiny_config(), &urdf, "`fl_j2` of leg FL must be revolute");
     let urdf = tiny_urdf().replacen(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="0 0 1"/>"#, 1);
-    assert_urdf_error(&tiny_config(), &urdf, "abduction joint `fr_j1` has axis");
+    assert_urdf_error(&tiny_config(), &urdf, "abduction joint `fr_j1` turns about");
+    // A rotated origin that tilts the knee axis out of the sagittal layout: the error says where
+    // the axis ends up, not that rotations are forbidden.
     let urdf = tiny_urdf().replacen(
         r#"<origin xyz="0 0 -0.2" rpy="0 0 0"/>"#,
-        r#"<origin xyz="0 0 -0.2" rpy="0 0.3 0"/>"#,
+        r#"<origin xyz="0 0 -0.2" rpy="0 0 0.3"/>"#,
         1,
     );
-    assert_urdf_error(&tiny_config(), &urdf, "`fr_j3` has a rotated origin");
+    assert_urdf_error(
+        &tiny_config(),
+        &urdf,
+        "knee joint `fr_j3` turns about (-0.2955, 0.9553, 0.0000)",
+    );
+}
+
+/// Orientation (roll, pitch, yaw) of each leg's joint origins j1, j2, j3, toe_fix for
+/// [`rotated_tiny_urdf`]: quarter turns as HyQ and ANYmal C use, and arbitrary angles.
+const ORIGIN_RPY: [[f64; 3]; 4] = [
+    [0.0, std::f64::consts::FRAC_PI_2, std::f64::consts::PI],
+    [std::f64::consts::FRAC_PI_2, 0.0, 0.0],
+    [0.4, -0.7, 1.1],
+    [
+        std::f64::consts::FRAC_PI_2,
+        0.0,
+        -std::f64::consts::FRAC_PI_2,
+    ],
+];
+
+/// Inertial of the three moving links: off-centre, anisotropic, so a frame error shows.
+const LINK_COM: [f64; 3] = [0.01, 0.02, -0.05];
+const LINK_INERTIA: [f64; 3] = [0.001, 0.002, 0.0025];
+
+fn vector(v: &nalgebra::Vector3<f64>) -> String {
+    format!("{} {} {}", v.x, v.y, v.z)
+}
+
+fn rpy(rotation: &nalgebra::Rotation3<f64>) -> String {
+    let (r, p, y) = rotation.euler_angles();
+    format!("{r} {p} {y}")
+}
+
+/// The tiny robot with every leg joint origin rotated by `ORIGIN_RPY` and everything below
+/// re-expressed in the rotated frames (translations, axes, inertials), so the robot is the same
+/// body with other frames; `rotate = false` gives its unrotated twin.
+fn rotated_tiny_urdf(rotate: bool) -> String {
+    use nalgebra::{Rotation3, Vector3};
+    let mut xml = String::from(
+        r#"<robot name="tiny"><link name="body"><inertial><mass value="4.0"/><inertia ixx="0.02" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.05"/></inertial></link>"#,
+    );
+    for (leg, x, y) in LEGS {
+        let side = y.signum() * 0.05;
+        let translations = [
+            Vector3::new(x, y, 0.0),
+            Vector3::new(0.0, side, 0.0),
+            Vector3::new(0.0, 0.0, -0.2),
+            Vector3::new(0.0, 0.0, -0.2),
+        ];
+        let axes = [Vector3::x(), Vector3::y(), Vector3::y()];
+        let parents = [
+            "body",
+            &format!("{leg}_l1"),
+            &format!("{leg}_l2"),
+            &format!("{leg}_l3"),
+        ]
+        .map(str::to_string);
+        let children = [1, 2, 3].map(|i| format!("{leg}_l{i}"));
+        // Orientation of the frame reached so far relative to the body, at q = 0.
+        let mut orientation = Rotation3::identity();
+        for (i, t) in translations.iter().enumerate() {
+            let local = if rotate {
+                let [r, p, y] = ORIGIN_RPY[i];
+                Rotation3::from_euler_angles(r, p, y)
+            } else {
+                Rotation3::identity()
+            };
+            let xyz = orientation.inverse() * t;
+            orientation *= local;
+            let origin = format!(r#"<origin xyz="{}" rpy="{}"/>"#, vector(&xyz), rpy(&local));
+            let parent = &parents[i];
+            if i == 3 {
+                xml.push_str(&format!(
+                    r#"<joint name="{leg}_toe_fix" type="fixed"><parent link="{parent}"/><child link="{leg}_toe"/>{origin}</joint>
+<link name="{leg}_toe"><inertial><mass value="0.05"/><inertia ixx="1e-5" ixy="0" ixz="0" iyy="1e-5" iyz="0" izz="1e-5"/></inertial><collision><geometry><sphere radius="0.02"/></geometry></collision></link>"#
+                ));
+                continue;
+            }
+            let axis = orientation.inverse() * axes[i];
+            let com = orientation.inverse() * Vector3::from(LINK_COM);
+            let [ixx, iyy, izz] = LINK_INERTIA;
+            let child = &children[i];
+            xml.push_str(&format!(
+                r#"<joint name="{leg}_j{n}" type="revolute"><parent link="{parent}"/><child link="{child}"/>{origin}<axis xyz="{axis}"/><limit lower="-2.7" upper="3" effort="20" velocity="20"/></joint>
+<link name="{child}"><inertial><origin xyz="{com}" rpy="{inertial_rpy}"/><mass value="0.5"/><inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/></inertial></link>"#,
+                n = i + 1,
+                axis = vector(&axis),
+                com = vector(&com),
+                inertial_rpy = rpy(&orientation.inverse()),
+            ));
+        }
+    }
+    xml.push_str("\n</robot>\n");
+    xml
+}
+
+#[test]
+fn rotated_joint_origins_give_the_kinematics_and_dynamics_of_the_unrotated_twin() {
+    let rotated = RobotModel::from_config_str(&tiny_config(), &rotated_tiny_urdf(true))
+        .unwrap_or_else(|e| panic!("the rotated robot must load: {e}"));
+    let twin = RobotModel::from_config_str(&tiny_config(), &rotated_tiny_urdf(false))
+        .unwrap_or_else(|e| panic!("the unrotated twin must load: {e}"));
+    let close = |a: &[f64], b: &[f64], tolerance: f64, what: &str| {
+        for (x, y) in a.iter().zip(b) {
+            assert!((x - y).abs() < tolerance, "{what}: {a:?} vs {b:?}");
+        }
+    };
+    close(&[rotated.total_mass()], &[twin.total_mass()], 1e-12, "mass");
+    let stand = rotated.stand_joint_positions(0.3).expect("stand pose");
+    close(
+        &stand,
+        &twin.stand_joint_positions(0.3).expect("twin stand pose"),
+        1e-9,
+        "stand pose",
+    );
+    let gravity = [0.3, -0.2, -9.81];
+    for leg in Leg::ALL {
+        for k in 0..20 {
+            let t = f64::from(k) * 0.37;
+            let q = [
+                0.4 * t.sin(),
+                0.8 + 0.6 * (1.3 * t).cos(),
+                -1.5 + 0.5 * (0.7 * t).sin(),
+            ];
+            let dq = [1.1 * t.cos(), -0.7, 2.0 * t.sin()];
+            let what = format!("{leg:?} at {q:?}");
+            close(
+                &rotated.foot_position_body(leg, q),
+                &twin.foot_position_body(leg, q),
+                1e-12,
+                &format!("foot position, {what}"),
+            );
+            close(
+                rotated.foot_jacobian_body(leg, q).as_flattened(),
+                twin.foot_jacobian_body(leg, q).as_flattened(),
+                1e-12,
+                &format!("Jacobian, {what}"),
+            );
+            close(
+                rotated.leg_mass_matrix(leg, q).as_flattened(),
+                twin.leg_mass_matrix(leg, q).as_flattened(),
+                1e-12,
+                &format!("mass matrix, {what}"),
+            );
+            close(
+                &rotated.leg_bias(leg, q, dq, gravity),
+                &twin.leg_bias(leg, q, dq, gravity),
+                1e-12,
+                &format!("bias torques, {what}"),
+            );
+            let foot = twin.foot_position_body(leg, q);
+            let solved = rotated.inverse_kinematics(leg, foot).expect("IK");
+            close(
+                &rotated.foot_position_body(leg, solved),
+                &foot,
+                1e-9,
+                &format!("IK, {what}"),
+            );
+        }
+    }
+    let (inertia, com) = rotated.composite_inertia(&stand);
+    let (twin_inertia, twin_com) = twin.composite_inertia(&stand);
+    close(
+        inertia.as_flattened(),
+        twin_inertia.as_flattened(),
+        1e-12,
+        "composite inertia",
+    );
+    close(&com, &twin_com, 1e-12, "composite CoM");
 }
 
 #[test]
@@ -224,6 +394,25 @@ fn bad_masses_and_inertias_are_refused() {
             physical,
             "remedy hint: {text}"
         );
+    }
+    // Every placeholder at once, with the config line that accepts them all.
+    let two = tiny_urdf()
+        .replace(
+            inertia,
+            r#"ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.05""#,
+        )
+        .replacen(
+            r#"<inertia ixx="1e-5" ixy="0" ixz="0" iyy="1e-5" iyz="0" izz="1e-5"/>"#,
+            r#"<inertia ixx="1e-6" ixy="1e-6" ixz="1e-6" iyy="1e-6" iyz="1e-6" izz="1e-6"/>"#,
+            1,
+        );
+    let text = load_error(&tiny_config(), &two).0;
+    for needle in [
+        "`body` breaks the triangle inequality",
+        "`fr_toe` is not positive definite",
+        r#"set `massless_links = ["body", "fr_toe"]`"#,
+    ] {
+        assert!(text.contains(needle), "{needle} in {text}");
     }
     // The remedy the message names: a placeholder inertial declared massless is accepted.
     let singular = tiny_urdf().replace(
@@ -490,4 +679,51 @@ fn the_crouch_is_all_four_legs_or_none_and_inside_the_joint_limits() {
         &urdf,
         "expected exactly 3 values",
     );
+}
+
+#[test]
+fn the_tuning_table_overrides_the_scaled_tuning_and_names_its_keys_in_errors() {
+    use quad_controller::{ControllerConfig, RobotScale};
+    let with_tuning = |table: &str| format!("{}\n[tuning]\n{table}\n", tiny_config());
+    let plain = RobotModel::from_config_str(&tiny_config(), &tiny_urdf()).expect("tiny robot");
+    assert!(plain.configured_tuning().is_none());
+    let scaled = ControllerConfig::for_robot(&plain);
+    let model = RobotModel::from_config_str(
+        &with_tuning("kp_stand = [100, 110, 120]\ngait_period = 0.4\ngait = \"Walk\""),
+        &tiny_urdf(),
+    )
+    .expect("tuned robot");
+    let tuned = ControllerConfig::for_robot(&model);
+    assert_eq!(tuned.kp_stand, [100.0, 110.0, 120.0]);
+    assert_eq!(tuned.gait_period, 0.4);
+    assert_ne!(tuned.gait, scaled.gait);
+    // Everything not named keeps the robot's scaled default.
+    assert_eq!(
+        ControllerConfig {
+            kp_stand: scaled.kp_stand,
+            gait_period: scaled.gait_period,
+            gait: scaled.gait,
+            ..tuned
+        },
+        scaled
+    );
+    let scale = RobotScale::of(&plain);
+    let (_, kp_max) = ControllerConfig::field("kp_stand")
+        .expect("field")
+        .range_for(scale);
+    for (table, needle) in [
+        (
+            "kp_stnd = [1, 1, 1]",
+            "key `tuning.kp_stnd` is not a controller config field",
+        ),
+        (
+            &format!("kp_stand = [1, {}, 1]", kp_max * 2.0) as &str,
+            "key `tuning.kp_stand[1] = ",
+        ),
+        ("gait_period = \"slow\"", "table `tuning`"),
+        ("f_min = 200.0\nf_max = 100.0", "f_min must be < f_max"),
+        ("kp_stand = [1, 1]", "table `tuning`"),
+    ] {
+        assert_config_error(&with_tuning(table), &tiny_urdf(), needle);
+    }
 }

@@ -152,9 +152,9 @@ fn stand_pose_puts_the_feet_under_the_hips_at_the_stand_height() {
                 (lateral - model.hip_lateral_offset(leg)).abs() < 1e-3,
                 "{name} {leg:?}: foot {lateral} m beside the abduction joint"
             );
-            // Outward: the foot is on the side of the hip's own half of the body.
+            // Outward, or in the abduction joint's plane (HyQ): never on the other side.
             assert!(
-                lateral * hip[1] > 0.0,
+                lateral * hip[1].signum() > -1e-6,
                 "{name} {leg:?}: foot on the wrong side"
             );
             // Knee on the configured side of the hip–foot line (which is vertical here).
@@ -306,10 +306,8 @@ fn inverse_kinematics_inverts_forward_kinematics() {
 fn controller_stands_still_on_the_rigid_body_simulation() {
     for robot in load_all() {
         let model = robot.model.clone();
-        let config = ControllerConfig {
-            body_height: model.stand_height(),
-            ..ControllerConfig::default()
-        };
+        // The tuning an FMU bundled for the robot ships: the default scaled to its size.
+        let config = ControllerConfig::for_robot(&model);
         let dt = config.control_dt;
         let (mut controller, mut sim) = common::controller_and_standing_sim(model, &config);
         let reference = Reference {

@@ -2,7 +2,7 @@
 //! appending keeps existing references stable while reordering changes the FMU's interface
 //! (and needs a new GUID).
 
-use quad_controller::config::FieldKind;
+use quad_controller::config::{FieldKind, RobotScale};
 use quad_controller::{
     ContactReading, ControllerConfig, HeightMap, Leg, SensorReadings, StatusFlag, HEIGHT_MAP_CELLS,
     HEIGHT_MAP_SIZE, NUM_JOINTS,
@@ -111,9 +111,10 @@ impl TableBuilder {
     }
 
     /// One parameter per element of every field of [`ControllerConfig::FIELDS`], in order.
-    fn parameters(&mut self, config: &ControllerConfig) {
+    /// Ranges are the robot's (`scale`): the tuned envelope widened with its size.
+    fn parameters(&mut self, config: &ControllerConfig, scale: RobotScale) {
         for (field, f) in ControllerConfig::FIELDS.iter().enumerate() {
-            let (min, max) = f.range();
+            let (min, max) = f.range_for(scale);
             let unit = f.unit.map(|name| {
                 Unit::ALL
                     .into_iter()
@@ -496,6 +497,6 @@ pub(super) fn build_table(
 
     // Parameters are all fixed: `Controller` is built from them in fmi2ExitInitializationMode
     // (MPC matrices, standing pose, gait) and offers no way to change them afterwards.
-    t.parameters(config);
+    t.parameters(config, RobotScale::of(model));
     t.rows
 }
