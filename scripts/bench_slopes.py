@@ -119,7 +119,7 @@ def yes_no(flag: bool) -> str:
 def table_rows(outcomes: list[InclineOutcome]) -> list[str]:
     header = (
         "| angle | direction | CoM margin placed (m) | stood up | walked (m) | fell | walk slip (m) | stand-up slip (m) | stand-up slide (m) "
-        "| max pitch err (°) | max roll err (°) | peak τ/limit | saturated | other links on the ground (first, until 0.1 s after a fall) |"
+        "| max pitch err (°) | max roll err (°) | peak τ/limit | saturated | other links on the ground (first, until 0.1 s after a fall) | passed |"
     )
     lines = [header, "|" + "|".join("---" for _ in range(header.count("|") - 1)) + "|"]
     for o in outcomes:
@@ -168,6 +168,7 @@ def table_rows(outcomes: list[InclineOutcome]) -> list[str]:
                     yes_no(o.stood_up),
                     *walk,
                     links,
+                    yes_no(o.passed),
                 ]
             )
             + " |"
@@ -346,7 +347,7 @@ def main() -> int:
         f"- robot: {robot.config_path} (URDF {robot.urdf_path})",
         f"- controller: {fmu} (sha256 {file_digest(fmu)}), parameters changed: {changed}",
         f"- friction μ = {args.friction:g} (feet and ground), walk {args.distance:g} m (horizontal) at {args.speed:g} m/s after the harness's stand-up",
-        f"- passed: {sum(o.passed for o in outcomes)} of {len(outcomes)} (stood up, no fall, ≥ {MIN_WALKED:g} m walked); wall {sum(o.wall_time for o in outcomes):.1f} s",
+        f"- passed: {sum(o.passed for o in outcomes)} of {len(outcomes)} (stood up, no fall, ≥ {MIN_WALKED:g} m walked, only the feet on the ground while walking); wall {sum(o.wall_time for o in outcomes):.1f} s",
         "",
     ]
     text = "\n".join(header + table_rows(outcomes)) + "\n"

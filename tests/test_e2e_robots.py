@@ -2,7 +2,8 @@
 
 A flat 8 m map, the robot placed in its crouch, stand-up (1.5 s), then a straight 1 m trot at the
 planner's nominal speed (`incline.run_incline` at 0°): it stands up, does not fall and walks.
-HyQ (87 kg) and ANYmal C (51 kg) load their URDFs as published, with rotated joint origins.
+HyQ (87 kg) and ANYmal C (51 kg) load their URDFs as published, with rotated joint origins; Go2,
+B1, Laikago and ANYmal B (16–56 kg) have unrotated ones.
 The Go1 and the A1 also walk the incline benchmark's 30° cases (3 m up, down and across, set down
 lying; scripts/bench_slopes.py). The robots come from the PyPI package example-robot-data
 (scripts/requirements-robots.txt).
@@ -44,7 +45,7 @@ def fmu_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("robot_fmus")
 
 
-@pytest.mark.parametrize("name", ["go1", "a1", "solo12", "hyq", "anymal_c"])
+@pytest.mark.parametrize("name", ["go1", "a1", "solo12", "go2", "b1", "laikago", "anymal_b", "anymal_c", "hyq"])
 def test_third_party_robot_stands_up_and_trots(
     name: str, fmu_file: Path, fmu_cache: Path, tmp_path: Path
 ) -> None:

@@ -213,3 +213,44 @@ def test_bad_robot_descriptions_name_the_item_and_the_file(
         assert needle in done.stderr, (needle, done.stderr)
     assert "panicked" not in done.stderr
     assert not out.exists() and not out.with_suffix(".fmu.partial").exists()
+
+
+def pf_robot(*args: str) -> subprocess.CompletedProcess[str]:
+    path = Path(os.environ.get("PFNAV_PF_ROBOT", REPO / "target" / "release" / "pf-robot"))
+    if not path.is_file():
+        pytest.fail(f"{path} is missing: build it with `cargo build --release -p fmu-tools`", pytrace=False)
+    return subprocess.run(
+        [str(path), *args],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PFNAV_PACKAGE_PATH": PACKAGE_ROOTS},
+    )
+
+
+@pytest.mark.parametrize("config_path", THIRD_PARTY, ids=lambda p: p.stem)
+def test_pf_robot_check_passes_every_shipped_config(config_path: Path) -> None:
+    done = pf_robot("check", str(config_path))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "no problems" in done.stdout
+
+
+def test_pf_robot_check_lists_every_fault_with_its_fix(tmp_path: Path) -> None:
+    """Two faults of different kinds in one run (a placeholder inertial declared nowhere, a wrong knee
+    branch), each with the line that fixes it; the stand height proposed from the SRDF."""
+    config = broken_copy(tmp_path, "config", 'massless_links = ["base"]', "")
+    text = config.read_text().replace('knee_points = "backward"', 'knee_points = "forward"', 1)
+    config.write_text(text)
+    done = pf_robot("check", str(config))
+    assert done.returncode == 1, done.stdout + done.stderr
+    for needle in [
+        "2 problem(s)",
+        '`massless_links`',
+        'fix: massless_links = ["base"]',
+        "`legs.FR.knee_points`",
+        'fix: knee_points = "backward"',
+        "stand_height = 0.27",
+    ]:
+        assert needle in done.stdout, (needle, done.stdout)
+    assert "panicked" not in done.stderr

@@ -23,6 +23,7 @@ from pfnav_harness.incline import (
     NOMINAL_SPEED,
     WALK_DISTANCE,
     InclineOutcome,
+    contacts_between,
     incline_scenario,
     incline_terrain,
     lying_pose,
@@ -115,6 +116,16 @@ def test_a_run_passes_only_standing_without_a_fall_and_walking_far_enough() -> N
     assert not dataclasses.replace(outcome, walked=MIN_WALKED - 0.01).passed
     assert not dataclasses.replace(outcome, fell=True).passed
     assert not dataclasses.replace(outcome, stood_up=False).passed
+    # A thigh on the ground while walking is no pass; while set down lying before the stand-up it is.
+    assert not dataclasses.replace(outcome, walk_contacts={"FR_thigh": 2.4}).passed
+    assert dataclasses.replace(outcome, non_foot_contacts={"FR_thigh": 0.1}).passed
+
+
+def test_walk_contacts_are_the_first_touches_between_the_walk_start_and_a_fall() -> None:
+    touches = {"trunk": [0.2, 0.3], "FR_calf": [0.5, 2.5, 2.6], "RL_thigh": [4.0]}
+    assert contacts_between(touches, 2.0, None) == {"FR_calf": 2.5, "RL_thigh": 4.0}
+    assert contacts_between(touches, 2.0, 3.0) == {"FR_calf": 2.5}
+    assert contacts_between(touches, 5.0, None) == {}
 
 
 def test_a_rolling_foot_does_not_slip_and_a_sliding_one_does() -> None:
@@ -181,6 +192,8 @@ def walk_the_slope(angle: float, direction: str, fmu: Path, tmp_path: Path, max_
     assert outcome.walked >= MIN_WALKED, summary
     # The feet hold: a stance foot that slides by centimetres is a robot about to slip away.
     assert outcome.max_stance_slip < max_slip, summary
+    assert not outcome.walk_contacts, f"{summary}; links on the ground while walking: {outcome.walk_contacts}"
+    assert outcome.passed, summary
     return outcome.non_foot_contacts
 
 

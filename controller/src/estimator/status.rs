@@ -24,11 +24,15 @@ pub enum StatusFlag {
     /// A stance foot's velocity disagreed with the prediction while another stance foot
     /// agreed (a slipping foot): that foot was treated as swinging for the tick.
     FootSlip = 128,
+    /// The slip gate has been dropping stance feet on more than
+    /// [`super::DOUBTFUL_SLIP_SHARE`] of the ticks of the last second or so: feet slip or
+    /// contacts are misjudged, and the position estimate (its height first) may drift.
+    OdometryDoubtful = 256,
 }
 
 impl StatusFlag {
     /// Every flag with its name and description, in bit order.
-    pub const ALL: [(StatusFlag, &'static str, &'static str); 8] = [
+    pub const ALL: [(StatusFlag, &'static str, &'static str); 9] = [
         (
             StatusFlag::GyroInvalid,
             "gyroInvalid",
@@ -68,6 +72,11 @@ impl StatusFlag {
             StatusFlag::FootSlip,
             "footSlip",
             "a stance foot's velocity beyond the slip gate (treated as swinging)",
+        ),
+        (
+            StatusFlag::OdometryDoubtful,
+            "odometryDoubtful",
+            "stance feet dropped at the slip gate on a large share of recent ticks (slipping feet or misjudged contacts): the position estimate may drift",
         ),
     ];
 

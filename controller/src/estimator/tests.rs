@@ -843,3 +843,110 @@ fn a_loaded_foot_in_scheduled_swing_is_contact() {
         0
     );
 }
+
+#[test]
+fn a_leg_at_its_velocity_limit_gives_no_force_evidence() {
+    // The same load on every foot as above, but leg 0 swings its knee at the velocity limit:
+    // whatever its effort implies, the schedule (swing) decides.
+    let model = model();
+    let weight = model.total_mass() * GRAVITY;
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    let truth = Truth::standing(&model);
+    let (mut state, imu) = truth.measure(&model);
+    let knee = 2;
+    state.joint_velocities[knee] = model.velocity_limits()[knee];
+    let forces = [Vector3::new(0.0, 0.0, weight / 4.0); NUM_LEGS];
+    let torques = torques_for(
+        &model,
+        &state,
+        &state.joint_velocities,
+        Vector3::new(0.0, 0.0, -GRAVITY),
+        &forces,
+    );
+    let mut plan = ALL_STANCE;
+    plan[0] = None;
+    for _ in 0..100 {
+        estimator.update(&model, &state, &sensors(imu), &plan, DT);
+        estimator.record_applied_torques(&torques);
+    }
+    let contacts = estimator.detected_contacts();
+    assert!(contacts[0].normal_force.is_none(), "{:?}", contacts[0]);
+    assert!(!contacts[0].in_contact, "{:?}", contacts[0]);
+    assert!(contacts[0].probability < 0.2, "{:?}", contacts[0]);
+    // Just below the limit the effort is evidence again: the loaded foot is in contact.
+    state.joint_velocities[knee] = 0.9 * model.velocity_limits()[knee];
+    for _ in 0..100 {
+        estimator.update(&model, &state, &sensors(imu), &plan, DT);
+        estimator.record_applied_torques(&torques_for(
+            &model,
+            &state,
+            &state.joint_velocities,
+            Vector3::new(0.0, 0.0, -GRAVITY),
+            &forces,
+        ));
+    }
+    let contact = estimator.detected_contacts()[0];
+    assert!(
+        contact.in_contact && contact.normal_force.is_some(),
+        "{contact:?}"
+    );
+    for contact in &estimator.detected_contacts()[1..] {
+        assert!(contact.in_contact, "{contact:?}");
+    }
+}
+
+/// A robot standing still whose foot 0 slides back and forth on `sliding(t)` (its velocity then);
+/// the status bits seen before and after `split` s.
+fn standing_with_a_sliding_foot(
+    sliding: impl Fn(f64) -> Option<Vector3<f64>>,
+    ticks: usize,
+    split: f64,
+) -> (u32, u32) {
+    let model = model();
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    let truth = Truth::standing(&model);
+    let mut offset = Vector3::zeros();
+    let (mut before, mut after) = (0, 0);
+    for k in 0..ticks {
+        let t = k as f64 * DT;
+        let mut moving = truth;
+        if let Some(velocity) = sliding(t) {
+            offset += velocity * DT;
+            moving.feet_velocity[0] = velocity;
+        }
+        moving.feet[0] += offset;
+        let (state, imu) = moving.measure(&model);
+        estimator.update(&model, &state, &sensors(imu), &ALL_STANCE, DT);
+        let status = estimator.report().status;
+        if t < split {
+            before |= status;
+        } else {
+            after |= status;
+        }
+    }
+    (before, after)
+}
+
+#[test]
+fn a_foot_slipping_on_many_ticks_makes_the_odometry_doubtful_and_an_occasional_slip_does_not() {
+    let doubtful = StatusFlag::OdometryDoubtful.bit();
+    let slip = StatusFlag::FootSlip.bit();
+    // One quick slip of 50 ms every second: flagged as slips, not as doubtful odometry.
+    let occasional = |t: f64| {
+        (t.fract() > 0.5 && t.fract() < 0.55)
+            .then(|| Vector3::new(0.8 * (std::f64::consts::PI * t).cos().signum(), 0.0, 0.0))
+    };
+    let (before, after) = standing_with_a_sliding_foot(occasional, 4000, 2.0);
+    assert!(
+        before & slip != 0 && after & slip != 0,
+        "{before:#x} {after:#x}"
+    );
+    assert_eq!((before | after) & doubtful, 0, "{:#x}", before | after);
+    // The foot skating for good from 1 s on (back and forth, 0.6 m/s): doubtful within 0.5 s.
+    let skating =
+        |t: f64| (t >= 1.0).then(|| Vector3::new(0.6 * (8.0 * t).sin().signum(), 0.0, 0.0));
+    let (before, _) = standing_with_a_sliding_foot(skating, 1500, 1.0);
+    assert_eq!(before & (doubtful | slip), 0, "{before:#x}");
+    let (_, skated) = standing_with_a_sliding_foot(skating, 2500, 1.5);
+    assert!(skated & doubtful != 0, "{skated:#x}");
+}

@@ -98,25 +98,20 @@ fn check_all_inertials(
     tree: &Tree<'_>,
     config: &RobotConfig,
 ) -> Result<(), ModelError> {
-    let mut problems = Vec::new();
-    let mut placeholders = Vec::new();
-    for link in &robot.links {
-        if let Err(e) = tree.mass_properties(link) {
-            let text = match e {
-                ModelError::InvalidValue(text) => text,
-                other => other.to_string(),
-            };
-            // Impossible principal moments are what placeholder inertials look like; a negative
-            // or non-finite value is an error in the file, not something to declare massless.
-            if text.contains("principal moments") {
-                placeholders.push(link.name.as_str());
-            }
-            problems.push(text);
-        }
-    }
+    let problems = inertial_problems(robot, tree);
+    let placeholders: Vec<&str> = problems
+        .iter()
+        .filter(|p| p.placeholder)
+        .map(|p| p.link.as_str())
+        .collect();
+    let text = problems
+        .iter()
+        .map(|p| p.text.as_str())
+        .collect::<Vec<_>>()
+        .join("; ");
     match (problems.len(), placeholders.len()) {
         (0, _) => Ok(()),
-        (_, 0) => Err(ModelError::InvalidValue(problems.join("; "))),
+        (_, 0) => Err(ModelError::InvalidValue(text)),
         (_, n) => {
             let massless: Vec<String> = config
                 .massless_links
@@ -126,14 +121,49 @@ fn check_all_inertials(
                 .map(|name| format!("\"{name}\""))
                 .collect();
             Err(ModelError::InvalidValue(format!(
-                "{}; if {} placeholder{}, set `massless_links = [{}]` in the robot config (the links become massless frames)",
-                problems.join("; "),
+                "{text}; if {} placeholder{}, set `massless_links = [{}]` in the robot config (the links become massless frames)",
                 if n == 1 { "it is a" } else { "they are" },
                 if n == 1 { "" } else { "s" },
                 massless.join(", ")
             )))
         }
     }
+}
+
+/// A link whose inertial the model cannot use.
+pub(crate) struct InertialProblem {
+    pub link: String,
+    pub text: String,
+    /// Impossible principal moments: what placeholder inertials look like. A negative or
+    /// non-finite value is an error in the file, not something to declare massless.
+    pub placeholder: bool,
+}
+
+fn inertial_problems(robot: &urdf_rs::Robot, tree: &Tree<'_>) -> Vec<InertialProblem> {
+    robot
+        .links
+        .iter()
+        .filter_map(|link| {
+            let text = match tree.mass_properties(link).err()? {
+                ModelError::InvalidValue(text) => text,
+                other => other.to_string(),
+            };
+            Some(InertialProblem {
+                link: link.name.clone(),
+                placeholder: text.contains("principal moments"),
+                text,
+            })
+        })
+        .collect()
+}
+
+/// Every link of `robot` whose inertial the model refuses, with `massless` links exempt.
+pub(crate) fn unusable_inertials(
+    robot: &urdf_rs::Robot,
+    massless: &[String],
+) -> Result<Vec<InertialProblem>, ModelError> {
+    let tree = Tree::new(robot, massless)?;
+    Ok(inertial_problems(robot, &tree))
 }
 
 fn check_inertia(link: &str, inertia: &Matrix3<f64>) -> Result<(), ModelError> {
@@ -767,12 +797,8 @@ impl RobotModel {
         let tuning = if config.tuning.is_empty() {
             None
         } else {
-            let tuned = crate::tuning::tuned_for_robot(
-                crate::RobotScale::of(&model),
-                config.stand_height,
-                &config.tuning,
-            )
-            .map_err(in_config)?;
+            let tuned =
+                crate::tuning::tuned_for_robot(&model, &config.tuning).map_err(in_config)?;
             Some(Box::new(tuned))
         };
         Ok(RobotModel { tuning, ..model })

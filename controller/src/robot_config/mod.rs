@@ -3,7 +3,9 @@
 //! URDF; the key table is in `robot/README.md`. Deserialisation refuses unknown keys, so a typo
 //! is an error rather than a silently ignored setting.
 
+pub mod check;
 mod package_path;
+pub mod srdf;
 
 pub use package_path::{PackagePath, PACKAGE_PATH_ENV};
 

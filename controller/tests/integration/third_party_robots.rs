@@ -187,45 +187,33 @@ fn stand_pose_puts_the_feet_under_the_hips_at_the_stand_height() {
     }
 }
 
-/// The `standing` pose of the SRDF shipped next to the URDF (`../srdf/*.srdf` or
-/// `../../srdf/*.srdf`), joint name → angle: the package authors' own stand, independent of our
-/// configs.
+/// The `standing` pose of the SRDF shipped next to the URDF, joint name → angle: the package
+/// authors' own stand, independent of our configs.
 fn srdf_standing_pose(urdf: &Path) -> Vec<(String, f64)> {
-    let srdf = [urdf.parent(), urdf.parent().and_then(Path::parent)]
-        .into_iter()
-        .flatten()
-        .filter_map(|dir| std::fs::read_dir(dir.join("../srdf")).ok())
-        .flatten()
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|e| e == "srdf"))
-        .unwrap_or_else(|| panic!("no SRDF next to {}", urdf.display()));
-    let text = std::fs::read_to_string(&srdf).expect("SRDF readable");
-    let start = text
-        .find("<group_state name=\"standing\"")
-        .unwrap_or_else(|| panic!("no standing pose in {}", srdf.display()));
-    let end = start
-        + text[start..]
-            .find("</group_state>")
-            .expect("group_state closed");
-    text[start..end]
-        .split("<joint ")
-        .skip(1)
-        .filter_map(|element| {
-            let attribute = |key: &str| {
-                let from = element.find(&format!("{key}=\""))? + key.len() + 2;
-                let to = from + element[from..].find('"')?;
-                Some(element[from..to].to_string())
-            };
-            let value = attribute("value")?.trim().parse::<f64>().ok()?;
-            Some((attribute("name")?, value))
-        })
-        .collect()
+    quad_controller::robot_config::srdf::standing_pose_near(urdf)
+        .unwrap_or_else(|| panic!("no SRDF standing pose next to {}", urdf.display()))
+        .joints
 }
+
+/// Robots whose package ships no SRDF (their configs take the stand from the maker's own
+/// software, named in the config).
+const WITHOUT_SRDF: [&str; 1] = ["laikago"];
 
 #[test]
 fn stand_pose_bends_the_joints_like_the_packages_own_standing_pose() {
     for robot in load_all() {
+        let stem = robot
+            .path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("");
+        if WITHOUT_SRDF.contains(&stem) {
+            assert!(
+                quad_controller::robot_config::srdf::standing_pose_near(&robot.urdf).is_none(),
+                "{stem} has an SRDF now: compare it"
+            );
+            continue;
+        }
         let srdf = srdf_standing_pose(&robot.urdf);
         let q = robot
             .model
@@ -358,4 +346,150 @@ fn controller_stands_still_on_the_rigid_body_simulation() {
             drift.y
         );
     }
+}
+
+#[test]
+fn default_tuning_lowers_the_swing_of_robots_whose_joints_cannot_follow_it() {
+    use quad_controller::tuning::{swing_speed_share, SWING_SPEED_SHARE, TUNED_STAND_HEIGHT};
+    let defaults = ControllerConfig::default();
+    let mut lowered = Vec::new();
+    for robot in load_all() {
+        let name = robot.path.display();
+        let tuned = ControllerConfig::for_robot(&robot.model);
+        let length = robot.model.stand_height() / TUNED_STAND_HEIGHT;
+        let scaled = ControllerConfig {
+            swing_height: defaults.swing_height * length,
+            ..tuned.clone()
+        };
+        // Only the swing height changes, and only down.
+        assert_eq!(
+            tuned.gait_period,
+            defaults.gait_period * length.sqrt(),
+            "{name}"
+        );
+        assert!(tuned.swing_height <= scaled.swing_height + 1e-12, "{name}");
+        let share = swing_speed_share(&robot.model, &tuned);
+        if tuned.swing_height < scaled.swing_height - 1e-12 {
+            lowered.push(robot.config.urdf.clone());
+            // Lowered to the limit, or as low as it goes (40 % of the scaled swing).
+            let at_limit = (share - SWING_SPEED_SHARE).abs() < 1e-6;
+            let lowest = (tuned.swing_height - 0.4 * scaled.swing_height).abs() < 1e-12;
+            assert!(
+                at_limit || lowest,
+                "{name}: share {share:.3}, swing {}",
+                tuned.swing_height
+            );
+            assert!(share < swing_speed_share(&robot.model, &scaled), "{name}");
+        } else {
+            assert!(share <= SWING_SPEED_SHARE, "{name}: {share:.3}");
+        }
+    }
+    // ANYmal C's 7.5 rad/s knees cannot follow the scaled 0.15 m swing; HyQ's 12 rad/s neither.
+    for needle in ["anymal_c", "hyq"] {
+        assert!(
+            lowered.iter().any(|urdf| urdf.contains(needle)),
+            "{needle} not lowered: {lowered:?}"
+        );
+    }
+}
+
+#[test]
+fn check_finds_every_fault_of_a_broken_config_in_one_run_and_proposes_the_srdf_stand() {
+    use quad_controller::robot_config::check::{check_robot_config, STAND_HEIGHT_TOLERANCE};
+    let packages = package_path();
+    let source = repo_root().join("robot/third_party/hyq.toml");
+    let good = std::fs::read_to_string(&source).expect("hyq.toml");
+    // What a new user writes first: the body link as base, no massless links, one knee wrong,
+    // a guessed stand height, no crouch.
+    let broken: String = good
+        .lines()
+        .filter(|line| !line.starts_with("massless_links") && !line.starts_with("crouch"))
+        .collect::<Vec<_>>()
+        .join("\n")
+        .replace("base_link = \"base_link\"", "base_link = \"trunk\"")
+        .replace("stand_height = 0.60", "stand_height = 0.5")
+        .replacen("knee_points = \"forward\"", "knee_points = \"backward\"", 1);
+    let dir = std::env::temp_dir().join(format!("pf-robot-check-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("hyq_broken.toml");
+    std::fs::write(&path, broken).expect("write config");
+    let check = check_robot_config(&path, &packages, None);
+    let keys: Vec<&str> = check.findings.iter().map(|f| f.key.as_str()).collect();
+    for (key, fix) in [
+        ("base_link", "base_link = \"base_link\""),
+        ("massless_links", "\"lf_foot\""),
+        ("legs.RR.knee_points", "knee_points = \"forward\""),
+        ("stand_height", "stand_height = 0.599"),
+        ("legs.FR.crouch", "crouch = [0.000, 0.750, -1.500]"),
+    ] {
+        let finding = check
+            .findings
+            .iter()
+            .find(|f| f.key == key)
+            .unwrap_or_else(|| panic!("no finding for `{key}` in {keys:?}"));
+        let proposed = finding.fix.as_deref().unwrap_or("");
+        assert!(
+            proposed.contains(fix),
+            "`{key}`: fix `{proposed}`, expected `{fix}`"
+        );
+    }
+    // The proposals stand the robot where the SRDF stands it.
+    let model = check.model.as_ref().expect("the repaired config loads");
+    let srdf = srdf_standing_pose(&model_urdf(&packages, &source));
+    let srdf_height = srdf_base_height(
+        model,
+        &RobotConfig::from_file(&source).expect("config"),
+        &srdf,
+    );
+    let proposed = check.stand_height.expect("stand height proposed");
+    assert!(
+        (proposed - srdf_height).abs() < STAND_HEIGHT_TOLERANCE,
+        "{proposed} vs {srdf_height}"
+    );
+    let stand = model.stand_joint_positions(proposed).expect("stand pose");
+    for leg in Leg::ALL {
+        let foot = model.foot_position_body(leg, leg_q(&stand, leg));
+        let below = model.foot_radius() - foot[2];
+        assert!(
+            (below - srdf_height).abs() < STAND_HEIGHT_TOLERANCE,
+            "{leg:?}: {below}"
+        );
+    }
+    // The shipped configs have nothing to fix.
+    for robot in load_all() {
+        let check = check_robot_config(&robot.path, &packages, None);
+        assert!(
+            check.findings.is_empty(),
+            "{}: {:?}",
+            robot.path.display(),
+            check.findings
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn model_urdf(packages: &PackagePath, config: &Path) -> PathBuf {
+    RobotConfig::from_file(config)
+        .expect("config")
+        .urdf_path(config, packages)
+        .expect("urdf")
+}
+
+/// Base origin above the soles at the SRDF stand, by the model's forward kinematics.
+fn srdf_base_height(model: &RobotModel, config: &RobotConfig, srdf: &[(String, f64)]) -> f64 {
+    let angle = |name: &str| {
+        srdf.iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| *v)
+            .unwrap_or_else(|| panic!("{name} not in the SRDF stand"))
+    };
+    let heights: Vec<f64> = Leg::ALL
+        .iter()
+        .map(|&leg| {
+            let joints = &config.legs.get(leg).joints;
+            let q = [angle(&joints[0]), angle(&joints[1]), angle(&joints[2])];
+            model.foot_radius() - model.foot_position_body(leg, q)[2]
+        })
+        .collect();
+    heights.iter().sum::<f64>() / heights.len() as f64
 }

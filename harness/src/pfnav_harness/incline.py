@@ -234,12 +234,16 @@ class InclineOutcome:
     rms_tracking_error: float
     non_foot_contacts: dict[str, float] = field(default_factory=dict)
     """Link name → first time it touched the ground (a knee, the trunk…)."""
+    walk_contacts: dict[str, float] = field(default_factory=dict)
+    """The same from the walk start on (up to a fall): a link other than a foot on the ground while
+    walking, which the stand-up from lying does not excuse."""
     wall_time: float = 0.0
 
     @property
     def passed(self) -> bool:
-        """The benchmark's criterion: stood up, no fall, at least `MIN_WALKED` along the direction."""
-        return self.stood_up and not self.fell and self.walked >= MIN_WALKED
+        """The benchmark's criterion: stood up, no fall, at least `MIN_WALKED` along the direction, and
+        only the feet on the ground while walking (a thigh or calf dragging is no pass)."""
+        return self.stood_up and not self.fell and self.walked >= MIN_WALKED and not self.walk_contacts
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -386,7 +390,18 @@ def evaluate(
         torque_saturation=saturated,
         rms_tracking_error=rms_tracking_error(log),
         non_foot_contacts=dict(sorted(((name, times[0]) for name, times in probe.link_contacts.items()), key=lambda item: item[1])),
+        walk_contacts=contacts_between(probe.link_contacts, walk_start, fall_time),
     )
+
+
+def contacts_between(link_contacts: dict[str, list[float]], start: float, end: float | None) -> dict[str, float]:
+    """Link → first contact time in [start, end] (`end` None: to the end of the run), by time."""
+    first = {
+        name: next(t for t in times if t >= start and (end is None or t <= end))
+        for name, times in link_contacts.items()
+        if any(t >= start and (end is None or t <= end) for t in times)
+    }
+    return dict(sorted(first.items(), key=lambda item: item[1]))
 
 
 @dataclass

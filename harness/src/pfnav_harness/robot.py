@@ -42,7 +42,9 @@ PACKAGE_PATH_ENV = "PFNAV_PACKAGE_PATH"
 PACKAGE_SCHEME = "package://"
 KNEE_DIRECTIONS = ("backward", "forward")
 
-TOP_LEVEL_KEYS = ("urdf", "base_link", "stand_height", "foot_radius", "massless_links", "limits", "legs")
+# `tuning` is the controller's (bundled into the robot's FMU by bundle-fmu, which checks it); the
+# DART side does not read it.
+TOP_LEVEL_KEYS = ("urdf", "base_link", "stand_height", "foot_radius", "massless_links", "limits", "tuning", "legs")
 LEG_KEYS = ("joints", "foot_link", "foot_offset", "knee_points", "crouch")
 LIMIT_KEYS = ("effort", "velocity")
 # A foot sphere counts when its centre is this close to the foot point (controller/src/model/urdf.rs).

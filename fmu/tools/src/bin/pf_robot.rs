@@ -1,0 +1,99 @@
+//! Checks a robot config before anything runs on it.
+//!
+//! ```sh
+//! pf-robot check robot/third_party/hyq.toml
+//! pf-robot check myrobot.toml --srdf myrobot_description/srdf/myrobot.srdf
+//! ```
+//! Prints every problem found (each with the config line that fixes it), the values proposed
+//! from the SRDF `standing` pose next to the URDF (stand height, knee branches, crouch) and how
+//! the default tuning carries over to the robot. `package://` resolves through
+//! `PFNAV_PACKAGE_PATH`. Exit status: 0 no problem, 1 problems found.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use quad_controller::robot_config::check::{check_robot_config, RobotCheck};
+use quad_controller::PackagePath;
+
+/// Tools for robot configs.
+#[derive(Parser)]
+#[command(name = "pf-robot")]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Every problem of a robot config at once, with fixes and proposals from the SRDF.
+    Check {
+        /// The robot config (TOML).
+        config: PathBuf,
+        /// The SRDF whose `standing` pose the proposals come from [default: the first SRDF with
+        /// one in the `srdf/` folder beside the URDF's].
+        #[arg(long)]
+        srdf: Option<PathBuf>,
+    },
+}
+
+fn print_report(config: &std::path::Path, check: &RobotCheck) {
+    println!("pf-robot check {}", config.display());
+    if let Some(model) = &check.model {
+        println!(
+            "  robot `{}`: {:.3} kg, stand height {:.3} m, foot radius {:.4} m",
+            model.name(),
+            model.total_mass(),
+            model.stand_height(),
+            model.foot_radius()
+        );
+    }
+    if check.findings.is_empty() {
+        println!("  no problems");
+    } else {
+        println!("  {} problem(s):", check.findings.len());
+        for (i, finding) in check.findings.iter().enumerate() {
+            println!("  {}. `{}`: {}", i + 1, finding.key, finding.problem);
+            if let Some(fix) = &finding.fix {
+                println!("     fix: {fix}");
+            }
+        }
+    }
+    if let Some(srdf) = &check.srdf {
+        println!("  proposed from the `standing` pose of {}:", srdf.display());
+        if let Some(height) = check.stand_height {
+            println!("    stand_height = {height:.3}");
+        }
+        for leg in &check.legs {
+            println!(
+                "    [legs.{}] knee_points = \"{}\", crouch = [{:.3}, {:.3}, {:.3}]",
+                leg.leg.name(),
+                match leg.knee_points {
+                    quad_controller::robot_config::KneeDirection::Backward => "backward",
+                    quad_controller::robot_config::KneeDirection::Forward => "forward",
+                },
+                leg.crouch[0],
+                leg.crouch[1],
+                leg.crouch[2]
+            );
+        }
+    }
+    for note in &check.notes {
+        println!("  note: {note}");
+    }
+}
+
+fn main() -> ExitCode {
+    let Args { command } = Args::parse();
+    match command {
+        Command::Check { config, srdf } => {
+            let check = check_robot_config(&config, &PackagePath::from_env(), srdf.as_deref());
+            print_report(&config, &check);
+            if check.findings.is_empty() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            }
+        }
+    }
+}
