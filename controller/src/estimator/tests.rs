@@ -805,29 +805,39 @@ fn a_foot_in_scheduled_stance_without_load_is_no_contact() {
     );
 }
 
-#[test]
-fn a_loaded_foot_in_scheduled_swing_is_contact() {
-    let model = model();
+/// 100 ticks of a robot standing still with `knee_rate` on leg 0's knee, a quarter of the weight
+/// on every foot (the leg effort recorded says so), leg 0 planned in swing (an early
+/// touch-down). Continues `estimator`.
+fn loaded_with_leg_0_planned_in_swing(
+    model: &RobotModel,
+    estimator: &mut StateEstimator,
+    knee_rate: f64,
+) {
     let weight = model.total_mass() * GRAVITY;
-    let mut estimator = StateEstimator::new(&model, &kalman_config());
-    let truth = Truth::standing(&model);
-    let (state, imu) = truth.measure(&model);
+    let (mut state, imu) = Truth::standing(model).measure(model);
+    state.joint_velocities[2] = knee_rate;
     let forces = [Vector3::new(0.0, 0.0, weight / 4.0); NUM_LEGS];
     let torques = torques_for(
-        &model,
+        model,
         &state,
         &state.joint_velocities,
         Vector3::new(0.0, 0.0, -GRAVITY),
         &forces,
     );
-    // Leg 0 planned in swing (an early touch-down): its effort says it carries a quarter of
-    // the weight.
     let mut plan = ALL_STANCE;
     plan[0] = None;
     for _ in 0..100 {
-        estimator.update(&model, &state, &sensors(imu), &plan, DT);
+        estimator.update(model, &state, &sensors(imu), &plan, DT);
         estimator.record_applied_torques(&torques);
     }
+}
+
+#[test]
+fn a_loaded_foot_in_scheduled_swing_is_contact() {
+    let model = model();
+    let weight = model.total_mass() * GRAVITY;
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    loaded_with_leg_0_planned_in_swing(&model, &mut estimator, 0.0);
     let contacts = estimator.detected_contacts();
     for contact in &contacts {
         assert!(contact.in_contact, "{contact:?}");
@@ -846,45 +856,18 @@ fn a_loaded_foot_in_scheduled_swing_is_contact() {
 
 #[test]
 fn a_leg_at_its_velocity_limit_gives_no_force_evidence() {
-    // The same load on every foot as above, but leg 0 swings its knee at the velocity limit:
-    // whatever its effort implies, the schedule (swing) decides.
+    // The same load, but leg 0's knee turns at its velocity limit: whatever its effort implies,
+    // the schedule (swing) decides.
     let model = model();
-    let weight = model.total_mass() * GRAVITY;
+    let limit = model.velocity_limits()[2];
     let mut estimator = StateEstimator::new(&model, &kalman_config());
-    let truth = Truth::standing(&model);
-    let (mut state, imu) = truth.measure(&model);
-    let knee = 2;
-    state.joint_velocities[knee] = model.velocity_limits()[knee];
-    let forces = [Vector3::new(0.0, 0.0, weight / 4.0); NUM_LEGS];
-    let torques = torques_for(
-        &model,
-        &state,
-        &state.joint_velocities,
-        Vector3::new(0.0, 0.0, -GRAVITY),
-        &forces,
-    );
-    let mut plan = ALL_STANCE;
-    plan[0] = None;
-    for _ in 0..100 {
-        estimator.update(&model, &state, &sensors(imu), &plan, DT);
-        estimator.record_applied_torques(&torques);
-    }
+    loaded_with_leg_0_planned_in_swing(&model, &mut estimator, limit);
     let contacts = estimator.detected_contacts();
     assert!(contacts[0].normal_force.is_none(), "{:?}", contacts[0]);
     assert!(!contacts[0].in_contact, "{:?}", contacts[0]);
     assert!(contacts[0].probability < 0.2, "{:?}", contacts[0]);
     // Just below the limit the effort is evidence again: the loaded foot is in contact.
-    state.joint_velocities[knee] = 0.9 * model.velocity_limits()[knee];
-    for _ in 0..100 {
-        estimator.update(&model, &state, &sensors(imu), &plan, DT);
-        estimator.record_applied_torques(&torques_for(
-            &model,
-            &state,
-            &state.joint_velocities,
-            Vector3::new(0.0, 0.0, -GRAVITY),
-            &forces,
-        ));
-    }
+    loaded_with_leg_0_planned_in_swing(&model, &mut estimator, 0.9 * limit);
     let contact = estimator.detected_contacts()[0];
     assert!(
         contact.in_contact && contact.normal_force.is_some(),

@@ -100,32 +100,10 @@ pub fn check_robot_config(path: &Path, packages: &PackagePath, srdf: Option<&Pat
             return check;
         }
     };
-    let urdf_path = match config.urdf_path(path, packages) {
-        Ok(p) => p,
-        Err(e) => {
-            check.find("urdf", e.to_string(), None);
-            return check;
-        }
-    };
-    let xml = match std::fs::read_to_string(&urdf_path) {
-        Ok(xml) => xml,
-        Err(e) => {
-            check.find(
-                "urdf",
-                format!("cannot read {}: {e}", urdf_path.display()),
-                None,
-            );
-            return check;
-        }
-    };
-    let robot = match urdf_rs::read_from_string(&xml) {
-        Ok(robot) => robot,
-        Err(e) => {
-            check.find(
-                "urdf",
-                format!("cannot parse {}: {e}", urdf_path.display()),
-                None,
-            );
+    let (urdf_path, xml, robot) = match read_urdf(&config, path, packages) {
+        Ok(read) => read,
+        Err(problem) => {
+            check.find("urdf", problem, None);
             return check;
         }
     };
@@ -157,6 +135,22 @@ pub fn check_robot_config(path: &Path, packages: &PackagePath, srdf: Option<&Pat
     note_tuning(&model, &mut check);
     check.model = Some(model);
     check
+}
+
+/// The URDF a config names: its path, text and parsed tree, or why not.
+fn read_urdf(
+    config: &RobotConfig,
+    path: &Path,
+    packages: &PackagePath,
+) -> Result<(PathBuf, String, urdf_rs::Robot), String> {
+    let urdf_path = config
+        .urdf_path(path, packages)
+        .map_err(|e| e.to_string())?;
+    let xml = std::fs::read_to_string(&urdf_path)
+        .map_err(|e| format!("cannot read {}: {e}", urdf_path.display()))?;
+    let robot = urdf_rs::read_from_string(&xml)
+        .map_err(|e| format!("cannot parse {}: {e}", urdf_path.display()))?;
+    Ok((urdf_path, xml, robot))
 }
 
 /// The base link must be the URDF tree's root.

@@ -18,9 +18,14 @@ use pf_planner::map::GridMap;
 use pf_planner_service::{ServiceConfig, ServiceReport};
 
 thread_local! {
-    /// Set on the thread that runs the service's LCM handlers (see `MaxAllocation`).
-    pub static TRACKED_THREAD: Cell<bool> = const { Cell::new(false) };
+    /// On the thread that runs a service's LCM handlers: that service's `handler_id` (0 on every
+    /// other thread). The tests of one binary run at once, so an allocation counter must tell its
+    /// own service's thread from the others' (see `MaxAllocation`).
+    pub static HANDLER_ID: Cell<u64> = const { Cell::new(0) };
 }
+
+/// The next `TestService::handler_id`.
+static NEXT_HANDLER_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 pub struct TestService {
     pub lcm: &'static Lcm,
@@ -28,6 +33,8 @@ pub struct TestService {
     shutdown: Arc<AtomicBool>,
     thread: Option<JoinHandle<anyhow::Result<ServiceReport>>>,
     pub replies: Receiver<PlanReply>,
+    /// The value of `HANDLER_ID` on this service's handler thread.
+    pub handler_id: u64,
     pub statuses: Receiver<ServiceStatus>,
     /// `feedback_field_t` messages, in the order the service sent them.
     pub fields: Receiver<FeedbackField>,
@@ -81,12 +88,13 @@ impl TestService {
         field_sub.set_queue_capacity(1_000_000).unwrap();
         std::mem::forget(field_sub);
         let shutdown = Arc::new(AtomicBool::new(false));
+        let handler_id = NEXT_HANDLER_ID.fetch_add(1, Ordering::SeqCst);
         let thread = {
             let (config, shutdown) = (config.clone(), Arc::clone(&shutdown));
             std::thread::Builder::new()
                 .name("service".into())
                 .spawn(move || {
-                    TRACKED_THREAD.with(|t| t.set(true));
+                    HANDLER_ID.with(|t| t.set(handler_id));
                     pf_planner_service::run(lcm_arc, config, shutdown)
                 })
                 .unwrap()
@@ -100,6 +108,7 @@ impl TestService {
             shutdown,
             thread: Some(thread),
             replies,
+            handler_id,
             statuses,
             fields,
         }

@@ -6,20 +6,23 @@
 use crate::common;
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
-use common::{config, flat_map, inline_request, map_message, TestService, TRACKED_THREAD};
+use common::{config, flat_map, inline_request, map_message, TestService, HANDLER_ID};
 use lcm_types::pfnav::{PlanReply, PlanRequest};
 
 struct MaxAllocation;
 
 static LARGEST_ON_HANDLER_THREAD: AtomicUsize = AtomicUsize::new(0);
+/// The `handler_id` of the service under test (0: none yet).
+static WATCHED_HANDLER: AtomicU64 = AtomicU64::new(0);
 
 unsafe impl GlobalAlloc for MaxAllocation {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         // try_with: the thread-local may already be gone while a thread shuts down.
-        if TRACKED_THREAD.try_with(|t| t.get()).unwrap_or(false) {
+        let watched = WATCHED_HANDLER.load(Ordering::SeqCst);
+        if watched != 0 && HANDLER_ID.try_with(|t| t.get()).unwrap_or(0) == watched {
             LARGEST_ON_HANDLER_THREAD.fetch_max(layout.size(), Ordering::SeqCst);
         }
         // SAFETY: forwarded unchanged to the system allocator.
@@ -39,6 +42,7 @@ fn oversize_maps_are_refused_before_allocation() {
     let mut cfg = config("OVR_");
     cfg.max_map_cells = 32 * 32;
     let service = TestService::start(cfg);
+    WATCHED_HANDLER.store(service.handler_id, Ordering::SeqCst);
     // Warm up: one small valid request, so that one-time allocations are done.
     let small = flat_map(8, &[]);
     service.publish_request(&inline_request(
