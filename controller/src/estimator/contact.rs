@@ -74,6 +74,9 @@ pub struct ContactDetector {
     primed: bool,
     in_contact: [bool; NUM_LEGS],
     weight: f64,
+    /// Joint rate from which a leg's effort is no evidence, rad/s: [`VELOCITY_LIMIT_SHARE`] of
+    /// each joint's velocity limit.
+    rate_limits: [f64; NUM_JOINTS],
 }
 
 /// The readings the detector needs on one tick.
@@ -93,15 +96,18 @@ pub struct ContactInputs<'a> {
 }
 
 impl ContactDetector {
-    /// A detector for a robot of `total_mass` kg, starting with every foot on the ground.
-    pub fn new(total_mass: f64) -> Self {
+    /// A detector for `model`, starting with every foot on the ground.
+    pub fn new(model: &RobotModel) -> Self {
         ContactDetector {
             applied_torques: None,
             previous_rates: None,
             external_torque: [Vector3::zeros(); NUM_LEGS],
             primed: false,
             in_contact: [true; NUM_LEGS],
-            weight: total_mass * crate::api::GRAVITY,
+            weight: model.total_mass() * crate::api::GRAVITY,
+            rate_limits: model
+                .velocity_limits()
+                .map(|limit| VELOCITY_LIMIT_SHARE * limit),
         }
     }
 
@@ -134,10 +140,8 @@ impl ContactDetector {
             }
         };
         self.previous_rates = rates_valid.then_some(*inputs.joint_rates);
-        let limits = model.velocity_limits();
         let at_velocity_limit: [bool; NUM_LEGS] = std::array::from_fn(|l| {
-            (3 * l..3 * l + 3)
-                .any(|j| inputs.joint_rates[j].abs() >= VELOCITY_LIMIT_SHARE * limits[j])
+            (3 * l..3 * l + 3).any(|j| inputs.joint_rates[j].abs() >= self.rate_limits[j])
         });
         let spread = CONTACT_FORCE_SPREAD_FRACTION * self.weight;
         let neutral = CONTACT_FORCE_FRACTION * self.weight;

@@ -63,7 +63,7 @@ pub const SLIP_SHARE_TIME: f64 = 1.0;
 /// slip, or contacts the detector misjudges, make the leg kinematics disagree with the
 /// prediction this often: ANYmal C with its knees at their velocity limits dropped a foot on
 /// 17 % of its ticks and its height estimate drifted 0.4 m in 20 s; a sound walk drops one on
-/// 0.4–1 % (docs/robots.md).
+/// 0.2–1.3 % (docs/robots.md).
 pub const DOUBTFUL_SLIP_SHARE: f64 = 0.12;
 
 /// Noise values of the Kalman filter (from [`ControllerConfig`]).
@@ -158,7 +158,7 @@ impl StateEstimator {
             time_without_contact: [0.0; NUM_LEGS],
             fix_rejections: 0,
             slip_share: 0.0,
-            contact_detector: ContactDetector::new(model.total_mass()),
+            contact_detector: ContactDetector::new(model),
             contacts: [LegContact {
                 probability: 1.0,
                 in_contact: true,

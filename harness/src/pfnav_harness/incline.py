@@ -396,12 +396,8 @@ def evaluate(
 
 def contacts_between(link_contacts: dict[str, list[float]], start: float, end: float | None) -> dict[str, float]:
     """Link → first contact time in [start, end] (`end` None: to the end of the run), by time."""
-    first = {
-        name: next(t for t in times if t >= start and (end is None or t <= end))
-        for name, times in link_contacts.items()
-        if any(t >= start and (end is None or t <= end) for t in times)
-    }
-    return dict(sorted(first.items(), key=lambda item: item[1]))
+    inside = ((name, [t for t in times if t >= start and (end is None or t <= end)]) for name, times in link_contacts.items())
+    return dict(sorted(((name, min(times)) for name, times in inside if times), key=lambda item: item[1]))
 
 
 @dataclass
