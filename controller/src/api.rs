@@ -575,6 +575,9 @@ pub enum ModelError {
     Config {
         /// Config file (or the label of a config given as text).
         file: String,
+        /// The key whose value is wrong (`stand_height`, `legs.FR.crouch`, …), when one is; a
+        /// syntax error has none.
+        key: Option<String>,
         /// What is wrong, naming the key.
         reason: String,
     },
@@ -603,6 +606,14 @@ impl ModelError {
         match self {
             ModelError::InFile { source, .. } => source.innermost(),
             other => other,
+        }
+    }
+
+    /// The config key an error is about (see [`ModelError::Config`]), through file wrappers.
+    pub fn config_key(&self) -> Option<&str> {
+        match self.innermost() {
+            ModelError::Config { key, .. } => key.as_deref(),
+            _ => None,
         }
     }
 

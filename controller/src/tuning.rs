@@ -7,6 +7,7 @@
 use serde::Deserialize;
 
 use crate::config::{FieldValue, RobotScale, Scaling};
+use crate::robot_config::KeyProblem;
 use crate::{ControllerConfig, RobotModel};
 
 /// Mass of the robot the default tuning was made on, kg.
@@ -131,35 +132,42 @@ pub fn swing_speed_share(model: &RobotModel, config: &ControllerConfig) -> f64 {
 pub(crate) fn tuned_for_robot(
     model: &RobotModel,
     overrides: &toml::Table,
-) -> Result<ControllerConfig, String> {
+) -> Result<ControllerConfig, KeyProblem> {
     let scale = RobotScale::of(model);
     let scaled = default_tuning_for(model);
     if overrides.is_empty() {
         return Ok(scaled);
     }
+    let whole = |reason: String| KeyProblem::of("tuning", reason);
     let mut table = toml::Table::try_from(&scaled)
-        .map_err(|e| format!("cannot express the tuning as TOML: {e}"))?;
+        .map_err(|e| whole(format!("cannot express the tuning as TOML: {e}")))?;
     for (key, value) in overrides {
         if ControllerConfig::field(key).is_none() {
             let known: Vec<&str> = ControllerConfig::FIELDS.iter().map(|f| f.name).collect();
-            return Err(format!(
-                "key `tuning.{key}` is not a controller config field (one of: {})",
-                known.join(", ")
+            return Err(KeyProblem::of(
+                format!("tuning.{key}"),
+                format!(
+                    "key `tuning.{key}` is not a controller config field (one of: {})",
+                    known.join(", ")
+                ),
             ));
         }
         table.insert(key.clone(), value.clone());
     }
     let config = ControllerConfig::deserialize(toml::Value::Table(table)).map_err(|e| {
-        format!(
+        whole(format!(
             "table `tuning`: {}",
             e.to_string().trim_end().replace('\n', " ")
-        )
+        ))
     })?;
     if let Err(e) = config.check_ranges_for(scale) {
-        return Err(format!("key `tuning.{e}`"));
+        return Err(KeyProblem::of(
+            format!("tuning.{}", e.field),
+            format!("key `tuning.{e}`"),
+        ));
     }
     crate::validation::validate_config(&config, scale)
-        .map_err(|e| format!("table `tuning`: {e}"))?;
+        .map_err(|e| whole(format!("table `tuning`: {e}")))?;
     Ok(config)
 }
 

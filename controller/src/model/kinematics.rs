@@ -63,6 +63,12 @@ impl RobotModel {
         }
     }
 
+    /// Rotation of the knee's link (and of the foot link welded to it) at `q_leg` relative to its
+    /// orientation with the leg's joints at zero, in the base frame.
+    pub(crate) fn knee_link_rotation(&self, leg: Leg, q_leg: [f64; 3]) -> Matrix3<f64> {
+        self.frames(leg, q_leg).link_rotation[2]
+    }
+
     /// Forward kinematics: foot (sphere centre) position in the base frame, m.
     pub fn foot_position_body(&self, leg: Leg, q_leg: [f64; 3]) -> [f64; 3] {
         to_array3(&self.frames(leg, q_leg).foot)

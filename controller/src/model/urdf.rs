@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::{ChainJoint, LegChain, LegGeometry, MassProperties, RobotModel, Transform};
 use crate::api::{Leg, ModelError, NUM_JOINTS};
-use crate::robot_config::{LegConfig, PackagePath, RobotConfig};
+use crate::robot_config::{KeyProblem, LegConfig, PackagePath, RobotConfig};
 
 /// Principal moments may break the triangle inequality by this relative amount (rounding in
 /// published values) before the inertia is refused as physically impossible.
@@ -552,7 +552,10 @@ fn foot_sphere_radius(link: &urdf_rs::Link, offset: [f64; 3]) -> Option<f64> {
 
 /// Foot radius: the feet's sphere collisions, else the config's `foot_radius`. Errors are the
 /// config's (`Ok(Err)`) or the URDF's (`Err`).
-fn foot_radius(tree: &Tree<'_>, config: &RobotConfig) -> Result<Result<f64, String>, ModelError> {
+fn foot_radius(
+    tree: &Tree<'_>,
+    config: &RobotConfig,
+) -> Result<Result<f64, KeyProblem>, ModelError> {
     let mut from_urdf: Option<(f64, &str)> = None;
     for leg in Leg::ALL {
         let leg_config = config.legs.get(leg);
@@ -580,18 +583,18 @@ fn foot_radius(tree: &Tree<'_>, config: &RobotConfig) -> Result<Result<f64, Stri
     Ok(match (from_urdf, config.foot_radius) {
         (Some((radius, _)), None) => Ok(radius),
         (Some((radius, link)), Some(configured)) if (radius - configured).abs() > 1e-9 => Err(
-            format!("key `foot_radius` = {configured} contradicts the sphere collision of `{link}` (radius {radius}); remove the key"),
+            KeyProblem::of("foot_radius", format!("key `foot_radius` = {configured} contradicts the sphere collision of `{link}` (radius {radius}); remove the key")),
         ),
         (Some((radius, _)), Some(_)) => Ok(radius),
         (None, Some(configured)) => Ok(configured),
-        (None, None) => Err(format!(
+        (None, None) => Err(KeyProblem::of("foot_radius", format!(
             "no foot radius: the foot links ({}) have no sphere collision at the foot point and key `foot_radius` is not set",
             Leg::ALL
                 .iter()
                 .map(|leg| format!("`{}`", config.legs.get(*leg).foot_link))
                 .collect::<Vec<_>>()
                 .join(", ")
-        )),
+        ))),
     })
 }
 
@@ -600,7 +603,7 @@ fn crouch_pose(
     config: &RobotConfig,
     lower: &[f64; NUM_JOINTS],
     upper: &[f64; NUM_JOINTS],
-) -> Result<Option<[f64; NUM_JOINTS]>, String> {
+) -> Result<Option<[f64; NUM_JOINTS]>, KeyProblem> {
     let given: Vec<Leg> = Leg::ALL
         .into_iter()
         .filter(|leg| config.legs.get(*leg).crouch.is_some())
@@ -611,22 +614,25 @@ fn crouch_pose(
     let mut pose = [0.0; NUM_JOINTS];
     for leg in Leg::ALL {
         let leg_config = config.legs.get(leg);
+        let key = format!("legs.{}.crouch", leg.name());
         let Some(angles) = leg_config.crouch else {
-            return Err(format!(
-                "key `legs.{}.crouch` is missing while other legs give one; give all four or none",
-                leg.name()
-            ));
+            return Err(KeyProblem {
+                reason: format!(
+                    "key `{key}` is missing while other legs give one; give all four or none"
+                ),
+                key: Some(key),
+            });
         };
         for (j, angle) in angles.into_iter().enumerate() {
             let i = 3 * leg.index() + j;
             if !(lower[i]..=upper[i]).contains(&angle) {
-                return Err(format!(
-                    "key `legs.{}.crouch`: {angle} rad for joint `{}` is outside its limits [{}, {}]",
-                    leg.name(),
-                    leg_config.joints[j],
-                    lower[i],
-                    upper[i]
-                ));
+                return Err(KeyProblem {
+                    reason: format!(
+                        "key `{key}`: {angle} rad for joint `{}` is outside its limits [{}, {}]",
+                        leg_config.joints[j], lower[i], upper[i]
+                    ),
+                    key: Some(key),
+                });
             }
             pose[i] = angle;
         }
@@ -687,6 +693,21 @@ impl RobotModel {
         Self::build(config, urdf_xml, &sources)
     }
 
+    /// [`RobotModel::from_config`] for a URDF already parsed (a tool loading one robot under
+    /// several configs parses it once); errors name `config_file` and `urdf_file`.
+    pub fn from_parsed_urdf(
+        robot: &urdf_rs::Robot,
+        config: &RobotConfig,
+        config_file: &str,
+        urdf_file: &str,
+    ) -> Result<Self, ModelError> {
+        let sources = Sources {
+            config: config_file,
+            urdf: urdf_file,
+        };
+        Self::from_urdf_robot(robot, config, &sources)
+    }
+
     fn build(config: &RobotConfig, xml: &str, sources: &Sources<'_>) -> Result<Self, ModelError> {
         let robot = urdf_rs::read_from_string(xml)
             .map_err(|e| ModelError::Parse(e.to_string()).in_file(sources.urdf))?;
@@ -699,16 +720,16 @@ impl RobotModel {
         sources: &Sources<'_>,
     ) -> Result<Self, ModelError> {
         let in_urdf = |e: ModelError| e.in_file(sources.urdf);
-        let in_config = |reason: String| ModelError::Config {
-            file: sources.config.to_string(),
-            reason,
-        };
+        let in_config = |problem: KeyProblem| problem.in_file(sources.config);
         let tree = Tree::new(robot, &config.massless_links).map_err(in_urdf)?;
         for link in &config.massless_links {
             if !tree.links.contains_key(link.as_str()) {
-                return Err(in_config(format!(
-                    "key `massless_links` names `{link}`, which is not a link of {}",
-                    sources.urdf
+                return Err(in_config(KeyProblem::of(
+                    "massless_links",
+                    format!(
+                        "key `massless_links` names `{link}`, which is not a link of {}",
+                        sources.urdf
+                    ),
                 )));
             }
         }
@@ -781,17 +802,20 @@ impl RobotModel {
             ..model
         };
         if config.stand_height <= foot_radius {
-            return Err(in_config(format!(
-                "key `stand_height` = {} m is not above the foot radius {foot_radius} m",
-                config.stand_height
+            return Err(in_config(KeyProblem::of(
+                "stand_height",
+                format!(
+                    "key `stand_height` = {} m is not above the foot radius {foot_radius} m",
+                    config.stand_height
+                ),
             )));
         }
         model
             .stand_joint_positions(config.stand_height)
             .map_err(|e| {
-                in_config(format!(
-                    "key `stand_height` = {} m: {e}",
-                    config.stand_height
+                in_config(KeyProblem::of(
+                    "stand_height",
+                    format!("key `stand_height` = {} m: {e}", config.stand_height),
                 ))
             })?;
         let tuning = if config.tuning.is_empty() {

@@ -7,9 +7,10 @@
 
 use std::path::{Path, PathBuf};
 
+use super::foot_mesh::{measure_foot_radius, FootMeshRadius, STANCE_PITCH_RANGE};
 use super::srdf::{standing_pose_near, GroupState};
 use super::{KneeDirection, PackagePath, RobotConfig};
-use crate::api::{Leg, NUM_JOINTS};
+use crate::api::{Leg, ModelError, NUM_JOINTS};
 use crate::model::{unusable_inertials, RobotModel};
 use crate::tuning::{swing_speed_share, SWING_SPEED_SHARE, TUNED_STAND_HEIGHT};
 use crate::ControllerConfig;
@@ -63,6 +64,8 @@ pub struct RobotCheck {
     pub stand_height: Option<f64>,
     /// Per-leg proposals from the SRDF stand.
     pub legs: Vec<LegProposal>,
+    /// The foot radius measured from the foot meshes, for a config that needs one.
+    pub foot_mesh: Option<FootMeshRadius>,
     /// The model loaded from the config with every proposed fix applied.
     pub model: Option<RobotModel>,
 }
@@ -100,7 +103,7 @@ pub fn check_robot_config(path: &Path, packages: &PackagePath, srdf: Option<&Pat
             return check;
         }
     };
-    let (urdf_path, xml, robot) = match read_urdf(&config, path, packages) {
+    let (urdf_path, robot) = match read_urdf(&config, path, packages) {
         Ok(read) => read,
         Err(problem) => {
             check.find("urdf", problem, None);
@@ -118,12 +121,36 @@ pub fn check_robot_config(path: &Path, packages: &PackagePath, srdf: Option<&Pat
     if !check_inertials(&robot, &mut config, &mut check) {
         return check;
     }
-    let Some(model) = load_repairing(&mut config, &xml, &mut check) else {
+    let urdf = ParsedUrdf {
+        robot,
+        config_file: path.display().to_string(),
+        urdf_file: urdf_path.display().to_string(),
+    };
+    let configured_radius = config.foot_radius;
+    let Some(mut model) = load_repairing(&mut config, &urdf, &mut check) else {
         return check;
     };
+    if configured_radius.is_none() && config.foot_radius.is_some() {
+        let urdf_dir = urdf_path.parent().unwrap_or_else(|| Path::new("."));
+        let feet = MeshFeet {
+            urdf: &urdf,
+            standing: standing.as_ref(),
+            packages,
+            urdf_dir,
+        };
+        match feet.measure(&mut model, &mut config) {
+            Ok(measured) => {
+                report_foot_radius(&measured, &mut check);
+                check.foot_mesh = Some(measured);
+            }
+            Err(why) => check
+                .notes
+                .push(format!("the foot radius could not be measured: {why}")),
+        }
+    }
     check_limits(&model, &config, &mut check);
     let model = match &standing {
-        Some(standing) => check_against_srdf(model, &mut config, &xml, standing, &mut check),
+        Some(standing) => check_against_srdf(model, &mut config, &urdf, standing, &mut check),
         None => {
             check.notes.push(format!(
                 "no SRDF with a `standing` pose next to {}: stand height, knee branches and crouch are not checked (give one with --srdf)",
@@ -137,12 +164,26 @@ pub fn check_robot_config(path: &Path, packages: &PackagePath, srdf: Option<&Pat
     check
 }
 
-/// The URDF a config names: its path, text and parsed tree, or why not.
+/// A robot config's URDF, parsed once for every load the check tries.
+struct ParsedUrdf {
+    robot: urdf_rs::Robot,
+    /// Names the config and the URDF in errors.
+    config_file: String,
+    urdf_file: String,
+}
+
+impl ParsedUrdf {
+    fn load(&self, config: &RobotConfig) -> Result<RobotModel, ModelError> {
+        RobotModel::from_parsed_urdf(&self.robot, config, &self.config_file, &self.urdf_file)
+    }
+}
+
+/// The URDF a config names: its path and parsed tree, or why not.
 fn read_urdf(
     config: &RobotConfig,
     path: &Path,
     packages: &PackagePath,
-) -> Result<(PathBuf, String, urdf_rs::Robot), String> {
+) -> Result<(PathBuf, urdf_rs::Robot), String> {
     let urdf_path = config
         .urdf_path(path, packages)
         .map_err(|e| e.to_string())?;
@@ -150,7 +191,7 @@ fn read_urdf(
         .map_err(|e| format!("cannot read {}: {e}", urdf_path.display()))?;
     let robot = urdf_rs::read_from_string(&xml)
         .map_err(|e| format!("cannot parse {}: {e}", urdf_path.display()))?;
-    Ok((urdf_path, xml, robot))
+    Ok((urdf_path, robot))
 }
 
 /// The base link must be the URDF tree's root.
@@ -221,18 +262,19 @@ fn check_inertials(
 /// height, a crouch outside the limits, a missing foot radius) and recording each problem.
 fn load_repairing(
     config: &mut RobotConfig,
-    xml: &str,
+    urdf: &ParsedUrdf,
     check: &mut RobotCheck,
 ) -> Option<RobotModel> {
     let mut probing_height = false;
     for _ in 0..MAX_ROUNDS {
-        let error = match RobotModel::from_config(config, xml) {
+        let error = match urdf.load(config) {
             Ok(model) => return Some(model),
-            Err(e) => e.to_string(),
+            Err(e) => e,
         };
-        if error.contains("key `stand_height`") {
+        let key = error.config_key().unwrap_or("urdf").to_string();
+        if key == "stand_height" {
             if !probing_height {
-                check.find("stand_height", error, None);
+                check.find(key, error.to_string(), None);
                 probing_height = true;
             }
             // Any reachable height gives the model the SRDF check proposes the real one from.
@@ -241,40 +283,27 @@ fn load_repairing(
                     stand_height: *h,
                     ..config.clone()
                 };
-                RobotModel::from_config(&probe, xml).is_ok()
+                urdf.load(&probe).is_ok()
             });
             match reachable {
                 Some(height) => config.stand_height = height,
                 None => return None,
             }
-        } else if error.contains("crouch") {
-            check.find("legs.*.crouch", error, None);
+        } else if key.starts_with("legs.") && key.ends_with(".crouch") {
+            check.find("legs.*.crouch", error.to_string(), None);
             for leg in Leg::ALL {
                 leg_config_mut(config, leg).crouch = None;
             }
-        } else if error.contains("no foot radius") {
-            check.find(
-                "foot_radius",
-                error,
-                Some("foot_radius = <radius of the foot's sole curvature, m>".into()),
-            );
+        } else if key == "foot_radius" && config.foot_radius.is_none() {
+            let fix = "foot_radius = <radius of the foot's sole curvature, m>".to_string();
+            check.find(key, error.to_string(), Some(fix));
             config.foot_radius = Some(PROVISIONAL_FOOT_RADIUS);
         } else {
-            check.find(error_key(&error), error, None);
+            check.find(key, error.to_string(), None);
             return None;
         }
     }
     None
-}
-
-/// The config key an error text names, else `urdf`.
-fn error_key(error: &str) -> String {
-    error
-        .split("key `")
-        .nth(1)
-        .and_then(|rest| rest.split('`').next())
-        .unwrap_or("urdf")
-        .to_string()
 }
 
 fn leg_config_mut(config: &mut RobotConfig, leg: Leg) -> &mut super::LegConfig {
@@ -284,6 +313,95 @@ fn leg_config_mut(config: &mut RobotConfig, leg: Leg) -> &mut super::LegConfig {
         Leg::RR => &mut config.legs.RR,
         Leg::RL => &mut config.legs.RL,
     }
+}
+
+/// Leg angles of the stand the foot mesh is measured in: the SRDF's where it names every joint,
+/// else the model's own stand.
+fn stand_angles(
+    model: &RobotModel,
+    config: &RobotConfig,
+    standing: Option<&GroupState>,
+) -> [[f64; 3]; 4] {
+    let own = model
+        .stand_joint_positions(model.stand_height())
+        .unwrap_or([0.0; NUM_JOINTS]);
+    Leg::ALL.map(|leg| {
+        standing
+            .and_then(|s| srdf_leg_angles(config, s, leg))
+            .unwrap_or_else(|| {
+                let l = 3 * leg.index();
+                [own[l], own[l + 1], own[l + 2]]
+            })
+    })
+}
+
+/// Where a config's mesh feet are measured.
+struct MeshFeet<'a> {
+    urdf: &'a ParsedUrdf,
+    standing: Option<&'a GroupState>,
+    packages: &'a PackagePath,
+    urdf_dir: &'a Path,
+}
+
+/// Measurements before the stand pose (which depends on the radius) stops moving.
+const FOOT_RADIUS_ROUNDS: usize = 4;
+
+impl MeshFeet<'_> {
+    /// Measures the feet in the stand pose, sets the radius in `config` and reloads `model`
+    /// with it, until the stand (which depends on the radius) and the radius agree.
+    fn measure(
+        &self,
+        model: &mut RobotModel,
+        config: &mut RobotConfig,
+    ) -> Result<FootMeshRadius, String> {
+        let mut measured = None;
+        for _ in 0..FOOT_RADIUS_ROUNDS {
+            let stand = stand_angles(model, config, self.standing);
+            let feet = measure_foot_radius(
+                &self.urdf.robot,
+                config,
+                model,
+                &stand,
+                self.packages,
+                self.urdf_dir,
+            )?;
+            // A tenth of a millimetre: finer than any sole is made to.
+            let radius = (feet.radius * 1e4).round() / 1e4;
+            let settled = config.foot_radius == Some(radius);
+            config.foot_radius = Some(radius);
+            if let Ok(reloaded) = self.urdf.load(config) {
+                *model = reloaded;
+            }
+            measured = Some(feet);
+            if settled {
+                break;
+            }
+        }
+        measured.ok_or_else(|| "no measurement".to_string())
+    }
+}
+
+/// Makes the measured radius the fix of the missing-radius finding.
+fn report_foot_radius(measured: &FootMeshRadius, check: &mut RobotCheck) {
+    if let Some(finding) = check.findings.iter_mut().find(|f| f.key == "foot_radius") {
+        finding.fix = Some(format!(
+            "foot_radius = {:.4}  # lowest point of {} below the foot point in the stand",
+            measured.radius,
+            measured.meshes.join(", ")
+        ));
+    }
+    let (low, high) = measured.stance_range;
+    check.notes.push(format!(
+        "foot meshes reach {:.1}–{:.1} mm below the foot point while the foot pitches ±{:.0}° about the stand{}",
+        1e3 * low,
+        1e3 * high,
+        STANCE_PITCH_RANGE.to_degrees(),
+        if measured.legs_differ() {
+            ": the legs' feet differ by more than 1 mm, the largest is proposed"
+        } else {
+            ""
+        }
+    ));
 }
 
 /// Placeholder effort and velocity limits (exporters write 1000): the controller would clamp
@@ -350,7 +468,7 @@ fn knee_side(model: &RobotModel, leg: Leg, q: [f64; 3]) -> KneeDirection {
 fn check_against_srdf(
     model: RobotModel,
     config: &mut RobotConfig,
-    xml: &str,
+    urdf: &ParsedUrdf,
     standing: &GroupState,
     check: &mut RobotCheck,
 ) -> RobotModel {
@@ -412,11 +530,11 @@ fn check_against_srdf(
             config.stand_height = height;
         }
     }
-    match RobotModel::from_config(config, xml) {
+    match urdf.load(config) {
         Ok(repaired) => repaired,
         Err(e) => {
             check.find(
-                error_key(&e.to_string()),
+                e.config_key().unwrap_or("urdf"),
                 format!("with the proposals applied: {e}"),
                 None,
             );

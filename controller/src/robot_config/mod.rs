@@ -4,6 +4,7 @@
 //! is an error rather than a silently ignored setting.
 
 pub mod check;
+pub mod foot_mesh;
 mod package_path;
 pub mod srdf;
 
@@ -14,6 +15,36 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::api::{Leg, ModelError};
+
+/// A config value the model cannot be built with: the key it sits under, when there is one, and
+/// a message that names it. Tools such as `pf-robot check` act on the key, never on the text.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeyProblem {
+    /// The key (`stand_height`, `legs.FR.crouch`, `tuning`, …), `None` for a problem of the whole
+    /// config (two legs naming one joint).
+    pub key: Option<String>,
+    /// What is wrong, in words that name the key.
+    pub reason: String,
+}
+
+impl KeyProblem {
+    /// A problem of the value under `key`.
+    pub(crate) fn of(key: impl Into<String>, reason: String) -> Self {
+        Self {
+            key: Some(key.into()),
+            reason,
+        }
+    }
+
+    /// The error of the config read from `file`.
+    pub(crate) fn in_file(self, file: &str) -> ModelError {
+        ModelError::Config {
+            file: file.to_string(),
+            key: self.key,
+            reason: self.reason,
+        }
+    }
+}
 
 /// Where the knee joint sits relative to the hip–foot line when the leg is bent. The inverse
 /// kinematics picks the matching branch, so the stand pose of a robot whose front and rear knees
@@ -145,12 +176,10 @@ impl RobotConfig {
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ModelError> {
         let config: RobotConfig = toml::from_str(text).map_err(|e| ModelError::Config {
             file: origin.to_string(),
+            key: None,
             reason: e.to_string().trim_end().to_string(),
         })?;
-        config.check().map_err(|reason| ModelError::Config {
-            file: origin.to_string(),
-            reason,
-        })?;
+        config.check().map_err(|problem| problem.in_file(origin))?;
         Ok(config)
     }
 
@@ -170,26 +199,28 @@ impl RobotConfig {
         packages: &PackagePath,
     ) -> Result<PathBuf, ModelError> {
         let config_dir = config_path.parent().unwrap_or_else(|| Path::new("."));
-        packages
-            .resolve(&self.urdf, config_dir)
-            .map_err(|reason| ModelError::Config {
-                file: config_path.display().to_string(),
-                reason: format!("key `urdf`: {reason}"),
-            })
+        packages.resolve(&self.urdf, config_dir).map_err(|reason| {
+            KeyProblem::of("urdf", format!("key `urdf`: {reason}"))
+                .in_file(&config_path.display().to_string())
+        })
     }
 
     /// Value checks serde cannot express; the message names the key.
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), KeyProblem> {
         if !(self.stand_height.is_finite() && self.stand_height > 0.0) {
-            return Err(format!(
-                "key `stand_height` must be a positive length in m, is {}",
-                self.stand_height
+            return Err(KeyProblem::of(
+                "stand_height",
+                format!(
+                    "key `stand_height` must be a positive length in m, is {}",
+                    self.stand_height
+                ),
             ));
         }
         if let Some(radius) = self.foot_radius {
             if !(radius.is_finite() && radius > 0.0) {
-                return Err(format!(
-                    "key `foot_radius` must be a positive length in m, is {radius}"
+                return Err(KeyProblem::of(
+                    "foot_radius",
+                    format!("key `foot_radius` must be a positive length in m, is {radius}"),
                 ));
             }
         }
@@ -199,8 +230,9 @@ impl RobotConfig {
         ] {
             if let Some(values) = values {
                 if values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-                    return Err(format!(
-                        "key `{key}` must hold three positive values, is {values:?}"
+                    return Err(KeyProblem::of(
+                        key,
+                        format!("key `{key}` must hold three positive values, is {values:?}"),
                     ));
                 }
             }
@@ -213,10 +245,11 @@ impl RobotConfig {
             ] {
                 if let Some(values) = values {
                     if values.iter().any(|v| !v.is_finite()) {
-                        return Err(format!(
-                            "key `legs.{}.{key}` is not finite: {values:?}",
-                            leg.name()
-                        ));
+                        let key = format!("legs.{}.{key}", leg.name());
+                        return Err(KeyProblem {
+                            reason: format!("key `{key}` is not finite: {values:?}"),
+                            key: Some(key),
+                        });
                     }
                 }
             }
@@ -227,7 +260,10 @@ impl RobotConfig {
             .collect();
         joints.sort_unstable();
         if let Some(pair) = joints.windows(2).find(|pair| pair[0] == pair[1]) {
-            return Err(format!("joint `{}` is named by two legs", pair[0]));
+            return Err(KeyProblem {
+                key: None,
+                reason: format!("joint `{}` is named by two legs", pair[0]),
+            });
         }
         Ok(())
     }

@@ -29,7 +29,7 @@ knee_points = "forward"
 
 fn config_error(text: &str) -> String {
     match RobotConfig::from_toml_str(text, "test.toml") {
-        Err(ModelError::Config { file, reason }) => {
+        Err(ModelError::Config { file, reason, .. }) => {
             assert_eq!(file, "test.toml");
             reason
         }

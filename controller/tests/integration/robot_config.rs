@@ -63,8 +63,9 @@ fn load_error(config: &str, urdf: &str) -> (String, ModelError) {
                 ModelError::Structure(s) => ModelError::Structure(s.clone()),
                 ModelError::InvalidValue(s) => ModelError::InvalidValue(s.clone()),
                 ModelError::Parse(s) => ModelError::Parse(s.clone()),
-                ModelError::Config { file, reason } => ModelError::Config {
+                ModelError::Config { file, key, reason } => ModelError::Config {
                     file: file.clone(),
+                    key: key.clone(),
                     reason: reason.clone(),
                 },
                 other => panic!("unexpected error kind {other:?}"),
@@ -725,5 +726,220 @@ fn the_tuning_table_overrides_the_scaled_tuning_and_names_its_keys_in_errors() {
         ("kp_stand = [1, 1]", "table `tuning`"),
     ] {
         assert_config_error(&with_tuning(table), &tiny_urdf(), needle);
+    }
+}
+
+/// A UV sphere of `radius` around `centre` as triangles (every vertex on the sphere).
+fn sphere_triangles(centre: [f64; 3], radius: f64) -> Vec<[[f64; 3]; 3]> {
+    let (rings, sectors) = (32, 64);
+    let point = |i: usize, j: usize| {
+        let polar = std::f64::consts::PI * i as f64 / rings as f64;
+        let azimuth = 2.0 * std::f64::consts::PI * j as f64 / sectors as f64;
+        [
+            centre[0] + radius * polar.sin() * azimuth.cos(),
+            centre[1] + radius * polar.sin() * azimuth.sin(),
+            centre[2] + radius * polar.cos(),
+        ]
+    };
+    let mut triangles = Vec::new();
+    for i in 0..rings {
+        for j in 0..sectors {
+            let (a, b) = (point(i, j), point(i + 1, j));
+            let (c, d) = (point(i + 1, j + 1), point(i, j + 1));
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    triangles
+}
+
+fn binary_stl(triangles: &[[[f64; 3]; 3]]) -> Vec<u8> {
+    let mut bytes = vec![0u8; 80];
+    bytes.extend((triangles.len() as u32).to_le_bytes());
+    for triangle in triangles {
+        bytes.extend([0u8; 12]);
+        for v in triangle {
+            for x in v {
+                bytes.extend((*x as f32).to_le_bytes());
+            }
+        }
+        bytes.extend([0u8; 2]);
+    }
+    bytes
+}
+
+fn ascii_stl(triangles: &[[[f64; 3]; 3]]) -> String {
+    let mut text = String::from("solid foot\n");
+    for triangle in triangles {
+        text.push_str("facet normal 0 0 0\nouter loop\n");
+        for v in triangle {
+            text.push_str(&format!("vertex {} {} {}\n", v[0], v[1], v[2]));
+        }
+        text.push_str("endloop\nendfacet\n");
+    }
+    text.push_str("endsolid foot\n");
+    text
+}
+
+fn obj(triangles: &[[[f64; 3]; 3]]) -> String {
+    let mut text = String::new();
+    for (k, triangle) in triangles.iter().enumerate() {
+        for v in triangle {
+            text.push_str(&format!("v {} {} {}\n", v[0], v[1], v[2]));
+        }
+        text.push_str(&format!("f {} {} {}\n", 3 * k + 1, 3 * k + 2, 3 * k + 3));
+    }
+    text
+}
+
+#[test]
+fn check_measures_mesh_feet_in_stl_and_obj_and_says_what_it_cannot_read() {
+    use quad_controller::robot_config::check::check_robot_config;
+    let dir = scratch("foot-mesh");
+    // The foot sphere in millimetres, off the mesh origin; the collision origin (shifted and
+    // turned) and the scale put it back around the foot point: the radius is 25 mm whatever the
+    // leg's pose.
+    let in_mm = sphere_triangles([0.0, 0.0, 10.0], 25.0);
+    std::fs::write(dir.join("foot.stl"), binary_stl(&in_mm)).expect("write");
+    std::fs::write(dir.join("foot_ascii.stl"), ascii_stl(&in_mm)).expect("write");
+    std::fs::write(dir.join("foot.obj"), obj(&in_mm)).expect("write");
+    std::fs::write(dir.join("foot.dae"), "<COLLADA/>").expect("write");
+    std::fs::write(dir.join("broken.stl"), b"solid x\nfacet normal nonsense").expect("write");
+    std::fs::write(dir.join("tiny.toml"), tiny_config()).expect("write");
+    let shift = nalgebra::Rotation3::from_euler_angles(0.3, 0.2, 0.1)
+        * nalgebra::Vector3::new(0.0, 0.0, 0.01);
+    for mesh in [
+        "foot.stl",
+        "foot_ascii.stl",
+        "foot.obj",
+        "foot.dae",
+        "broken.stl",
+    ] {
+        let collision = format!(
+            r#"<collision><origin xyz="{} {} {}" rpy="0.3 0.2 0.1"/><geometry><mesh filename="{mesh}" scale="0.001 0.001 0.001"/></geometry></collision>"#,
+            -shift[0], -shift[1], -shift[2]
+        );
+        let urdf = tiny_urdf().replace(
+            r#"<collision><geometry><sphere radius="0.02"/></geometry></collision>"#,
+            &collision,
+        );
+        std::fs::write(dir.join("tiny.urdf"), urdf).expect("write");
+        let check = check_robot_config(&dir.join("tiny.toml"), &PackagePath::default(), None);
+        let finding = check
+            .findings
+            .iter()
+            .find(|f| f.key == "foot_radius")
+            .unwrap_or_else(|| panic!("{mesh}: no foot_radius finding: {:?}", check.findings));
+        let fix = finding.fix.as_deref().unwrap_or("");
+        match mesh {
+            "foot.dae" | "broken.stl" => {
+                assert!(check.foot_mesh.is_none(), "{mesh}");
+                assert!(fix.contains("<radius"), "{mesh}: {fix}");
+                let why = if mesh == "foot.dae" {
+                    "cannot read `.dae` meshes"
+                } else {
+                    "is not a readable STL"
+                };
+                assert!(
+                    check.notes.iter().any(|n| n.contains(why)),
+                    "{mesh}: {:?}",
+                    check.notes
+                );
+            }
+            _ => {
+                let measured = check.foot_mesh.as_ref().expect("measured");
+                assert!(
+                    (measured.radius - 0.025).abs() < 5e-5,
+                    "{mesh}: {}",
+                    measured.radius
+                );
+                assert!(fix.starts_with("foot_radius = 0.0250"), "{mesh}: {fix}");
+                let model = check.model.as_ref().expect("loads with the radius");
+                assert!((model.foot_radius() - 0.025).abs() < 1e-4);
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn check_measures_a_mesh_foot_in_the_pose_the_leg_stands_in() {
+    use quad_controller::robot_config::check::check_robot_config;
+    let dir = scratch("foot-spike");
+    // A spike 30 mm straight down from the foot point: how deep it reaches depends on how the
+    // lower leg is turned in the stand.
+    let length = 0.03;
+    let spike = [[[0.0, 0.0, -length], [0.001, 0.0, 0.0], [-0.001, 0.0, 0.0]]];
+    std::fs::write(dir.join("spike.stl"), binary_stl(&spike)).expect("write");
+    std::fs::write(dir.join("tiny.toml"), tiny_config()).expect("write");
+    let urdf = tiny_urdf().replace(
+        r#"<collision><geometry><sphere radius="0.02"/></geometry></collision>"#,
+        r#"<collision><geometry><mesh filename="spike.stl"/></geometry></collision>"#,
+    );
+    std::fs::write(dir.join("tiny.urdf"), urdf).expect("write");
+    let check = check_robot_config(&dir.join("tiny.toml"), &PackagePath::default(), None);
+    let measured = check.foot_mesh.as_ref().expect("measured");
+    let model = check.model.as_ref().expect("loads");
+    let q = model
+        .stand_joint_positions(model.stand_height())
+        .expect("stand");
+    for (leg, depth) in &measured.per_leg {
+        let l = 3 * leg.index();
+        let expected = length * (q[l + 1] + q[l + 2]).cos() * q[l].cos();
+        assert!(
+            (depth - expected).abs() < 1e-4,
+            "{leg:?}: {depth} vs {expected} (lower leg pitched {} rad)",
+            q[l + 1] + q[l + 2]
+        );
+    }
+    assert!(
+        (measured.radius - length).abs() > 1e-3,
+        "the stand turns the lower leg, the spike must not reach its full length"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn config_errors_carry_the_key_they_are_about() {
+    let key_of = |config: &str, urdf: &str| {
+        RobotModel::from_config_str(config, urdf)
+            .expect_err("must fail")
+            .config_key()
+            .map(str::to_string)
+    };
+    let no_spheres = tiny_urdf().replace(
+        r#"<collision><geometry><sphere radius="0.02"/></geometry></collision>"#,
+        "",
+    );
+    let crouch = tiny_config().replace(
+        "foot_link = \"fr_toe\"",
+        "foot_link = \"fr_toe\"\ncrouch = [0.0, 9.0, -1.0]",
+    );
+    let cases: [(String, String, Option<&str>); 6] = [
+        (
+            tiny_config().replace("stand_height = 0.3", "stand_height = 0.9"),
+            tiny_urdf(),
+            Some("stand_height"),
+        ),
+        (tiny_config(), no_spheres, Some("foot_radius")),
+        (crouch, tiny_urdf(), Some("legs.FR.crouch")),
+        (
+            format!("{}\n[tuning]\nswing_height = 50.0\n", tiny_config()),
+            tiny_urdf(),
+            Some("tuning.swing_height"),
+        ),
+        (
+            format!("{}\n[tuning]\nno_such_gain = 1.0\n", tiny_config()),
+            tiny_urdf(),
+            Some("tuning.no_such_gain"),
+        ),
+        (
+            "urdf = \"x.urdf\"\nbase_link = \n".into(),
+            tiny_urdf(),
+            None,
+        ),
+    ];
+    for (config, urdf, key) in cases {
+        assert_eq!(key_of(&config, &urdf).as_deref(), key, "{config}");
     }
 }

@@ -493,3 +493,48 @@ fn srdf_base_height(model: &RobotModel, config: &RobotConfig, srdf: &[(String, f
         .collect();
     heights.iter().sum::<f64>() / heights.len() as f64
 }
+
+#[test]
+fn check_measures_the_foot_radius_of_mesh_feet_as_the_shipped_configs_give_it() {
+    use quad_controller::robot_config::check::check_robot_config;
+    let packages = package_path();
+    let dir = std::env::temp_dir().join(format!("pf-robot-feet-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    // Go2 and Solo-12 have mesh feet; their configs give the radius measured by hand.
+    for name in ["go2", "solo12"] {
+        let source = repo_root().join(format!("robot/third_party/{name}.toml"));
+        let text = std::fs::read_to_string(&source).expect("config");
+        let by_hand = RobotConfig::from_file(&source)
+            .expect("config")
+            .foot_radius
+            .expect("mesh-footed configs give foot_radius");
+        let without: String = text
+            .lines()
+            .filter(|line| !line.starts_with("foot_radius"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let path = dir.join(format!("{name}.toml"));
+        std::fs::write(&path, without).expect("write config");
+        let check = check_robot_config(&path, &packages, None);
+        let finding = check
+            .findings
+            .iter()
+            .find(|f| f.key == "foot_radius")
+            .unwrap_or_else(|| panic!("{name}: no foot_radius finding in {:?}", check.findings));
+        let measured = check.foot_mesh.as_ref().expect("foot mesh measured");
+        assert!(
+            (measured.radius - by_hand).abs() < 0.001,
+            "{name}: measured {} vs {by_hand} by hand",
+            measured.radius
+        );
+        let fix = finding.fix.as_deref().unwrap_or("");
+        assert!(
+            fix.starts_with(&format!("foot_radius = {:.4}", measured.radius)),
+            "{name}: {fix}"
+        );
+        let model = check.model.as_ref().expect("the repaired config loads");
+        assert!((model.foot_radius() - measured.radius).abs() < 1e-4);
+        assert_eq!(check.findings.len(), 1, "{name}: {:?}", check.findings);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
