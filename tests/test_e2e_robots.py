@@ -28,6 +28,10 @@ WALK = 1.0
 STEEP_ANGLE = 30.0
 # As for our robot (harness/tests/test_hs_incline.py): feet slip most while braking at the end.
 STEEP_MAX_SLIP = 0.15
+# Cases the incline benchmark fails only because links other than the feet touch the plane while
+# walking (docs/results/slopes-go1.md, slopes-a1.md): going 30° down, both robots' rear thighs
+# touch 0.2 s into the walk and their rear calves about 2 s later.
+TOUCH_WHILE_WALKING = {("go1", "down"), ("a1", "down")}
 
 
 def third_party_robot(name: str) -> RobotDescription:
@@ -92,3 +96,8 @@ def test_third_party_robot_walks_30_degrees(
     assert not outcome.fell, summary
     assert MIN_WALKED <= outcome.walked <= WALK_DISTANCE + 0.5, summary
     assert outcome.max_stance_slip < STEEP_MAX_SLIP, summary
+    if (name, direction) in TOUCH_WHILE_WALKING:
+        assert outcome.walk_contacts, f"{summary}: only the feet touch now; remove the case from TOUCH_WHILE_WALKING"
+        pytest.xfail(f"{name} 30° {direction}: {', '.join(outcome.walk_contacts)} touch the plane while walking")
+    assert not outcome.walk_contacts, f"{summary}; touching while walking: {outcome.walk_contacts}"
+    assert outcome.passed, summary

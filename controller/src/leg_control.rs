@@ -24,6 +24,10 @@ const HELD_KD_LIMIT: f64 = 1.0;
 const HELD_KP_LIMIT: f64 = 0.25;
 /// Step of the finite difference that gives J̇q̇ along the reference joint velocity, s.
 const JDOT_STEP: f64 = 1e-6;
+/// The knee guard acts once a knee is bent less than this towards its branch, rad. Walking keeps
+/// every shipped robot's knees bent 0.5 rad or more (ANYmal's the least); a leg that reaches
+/// for ground that is not there straightens through this.
+pub const KNEE_GUARD_BEND: f64 = 0.25;
 /// Fractions of the hip → target distance tried, in order, when a swing target is out of reach.
 const IK_PULL_IN: [f64; 5] = [1.0, 0.95, 0.9, 0.8, 0.7];
 
@@ -263,6 +267,35 @@ impl LegControl {
         (torques, forces)
     }
 
+    /// A virtual end stop at the straight knee: a knee bent less than [`KNEE_GUARD_BEND`] towards
+    /// its branch gets a spring (the full effort limit at straight) and a damper against
+    /// straightening further, added to `torques`. A knee without a mechanical stop (ANYmal B's
+    /// turn all the way round) that goes through straight flips the leg to the other branch,
+    /// where the IK and the stance forces no longer fit it, and the robot falls.
+    pub fn guard_knees(
+        &self,
+        model: &RobotModel,
+        estimate: &Estimate,
+        torques: &mut [f64; NUM_JOINTS],
+    ) {
+        for leg in Leg::ALL {
+            let l = leg.index();
+            let bend = model.knee_bend(leg, estimate.q[l]);
+            if bend >= KNEE_GUARD_BEND {
+                continue;
+            }
+            let per_angle = model.knee_bend_per_angle(leg);
+            let bend_rate = per_angle * estimate.dq[l][2];
+            let i = 3 * l + 2;
+            let stiffness = self.effort_limits[i] / KNEE_GUARD_BEND;
+            let inertia = model.mass_matrix(leg, estimate.q[l])[(2, 2)];
+            let (stiffness, damping) =
+                self.held_gains(stiffness, 2.0 * (stiffness * inertia).sqrt(), inertia);
+            let push = stiffness * (KNEE_GUARD_BEND - bend) - damping * bend_rate.min(0.0);
+            torques[i] += per_angle * push;
+        }
+    }
+
     /// Joint damping `−k_d q̇` with the joint inertia of the current pose.
     pub fn damping_torques(&self, model: &RobotModel, estimate: &Estimate) -> [f64; NUM_JOINTS] {
         let mut torques = [0.0; NUM_JOINTS];
@@ -308,5 +341,87 @@ impl LegControl {
             };
         }
         torques
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn our_robot() -> RobotModel {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robot/quadruped.toml");
+        RobotModel::from_config_file(&path).expect("our robot loads")
+    }
+
+    fn guard_at(
+        model: &RobotModel,
+        legs: &LegControl,
+        q: [f64; NUM_JOINTS],
+        dq: [f64; NUM_JOINTS],
+    ) -> [f64; NUM_JOINTS] {
+        let state = RobotState {
+            base_position: [0.0, 0.0, model.stand_height()],
+            joint_positions: q,
+            joint_velocities: dq,
+            ..RobotState::default()
+        };
+        let estimate = Estimate::from_measurement(model, &state);
+        let mut torques = [0.0; NUM_JOINTS];
+        legs.guard_knees(model, &estimate, &mut torques);
+        torques
+    }
+
+    #[test]
+    fn the_knee_guard_pushes_a_nearly_straight_knee_back_to_its_branch_and_leaves_bent_knees_alone()
+    {
+        let model = our_robot();
+        let stand = model
+            .stand_joint_positions(model.stand_height())
+            .expect("stand");
+        let legs = LegControl::new(
+            &model,
+            &ControllerConfig::default(),
+            stand,
+            Vector3::zeros(),
+        );
+        assert_eq!(
+            guard_at(&model, &legs, stand, [0.0; NUM_JOINTS]),
+            [0.0; NUM_JOINTS]
+        );
+        for leg in Leg::ALL {
+            let l = leg.index();
+            let i = 3 * l + 2;
+            let per_angle = model.knee_bend_per_angle(leg);
+            let stand_bend = model.knee_bend(leg, leg_slice(&stand, leg));
+            assert!(stand_bend > 2.0 * KNEE_GUARD_BEND, "{leg:?}: {stand_bend}");
+            // The knee angle at which the leg is straight, and three bends around it.
+            let straight = stand[i] - stand_bend / per_angle;
+            let push_at = |bend: f64, rate: f64| {
+                let mut q = stand;
+                q[i] = straight + bend / per_angle;
+                let mut dq = [0.0; NUM_JOINTS];
+                dq[i] = rate / per_angle;
+                let torques = guard_at(&model, &legs, q, dq);
+                assert!(torques.iter().enumerate().all(|(k, t)| k == i || *t == 0.0));
+                per_angle * torques[i]
+            };
+            let (near, flipped) = (push_at(0.1, 0.0), push_at(-0.1, 0.0));
+            let expected = model.effort_limits()[i] * (KNEE_GUARD_BEND - 0.1) / KNEE_GUARD_BEND;
+            assert!(
+                (near - expected).abs() < 1e-9,
+                "{leg:?}: {near} vs {expected}"
+            );
+            assert!(flipped > near, "{leg:?}: a flipped knee is pushed harder");
+            assert!(
+                push_at(0.1, -2.0) > near,
+                "{leg:?}: straightening is damped"
+            );
+            assert_eq!(
+                push_at(0.1, 2.0),
+                near,
+                "{leg:?}: bending back is not damped"
+            );
+            assert_eq!(push_at(KNEE_GUARD_BEND + 1e-3, -5.0), 0.0, "{leg:?}");
+        }
     }
 }

@@ -60,5 +60,6 @@ pub use config::{ControllerConfig, RobotScale, Scaling};
 pub use controller::{Controller, ControllerState};
 pub use estimator::{EstimatorStatus, StatusFlag};
 pub use fsm::FsmTransition;
+pub use leg_control::KNEE_GUARD_BEND;
 pub use model::RobotModel;
 pub use robot_config::{PackagePath, RobotConfig};

@@ -153,6 +153,7 @@ impl Locomotion {
                 }
             }
         }
+        stages.legs.guard_knees(model, estimate, &mut torques);
         self.gait_time += dt;
         Actuation {
             torques,

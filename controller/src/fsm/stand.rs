@@ -88,6 +88,7 @@ impl Stand {
                 .legs
                 .stance_torques(model, estimate, leg, forces[leg.index()], &mut torques);
         }
+        stages.legs.guard_knees(model, estimate, &mut torques);
         Actuation::all_stance(torques, forces, estimate)
     }
 

@@ -141,6 +141,16 @@ struct LegGeometry {
     knee: KneeDirection,
 }
 
+impl LegGeometry {
+    /// Sign of the canonical knee bend on the configured branch (backward knees bend negative).
+    fn knee_branch_sign(&self) -> f64 {
+        match self.knee {
+            KneeDirection::Backward => -1.0,
+            KneeDirection::Forward => 1.0,
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 struct LegChain {
     joints: [ChainJoint; 3],
@@ -257,6 +267,21 @@ impl RobotModel {
     /// the left).
     pub fn hip_lateral_offset(&self, leg: Leg) -> f64 {
         self.legs[leg.index()].geometry.lateral_offset
+    }
+
+    /// How far the knee is bent towards its configured branch (`knee_points`) at `q_leg`, rad:
+    /// 0 with the thigh and calf in line, positive on the branch's side, negative once the knee
+    /// has gone through straight to the other branch.
+    pub fn knee_bend(&self, leg: Leg, q_leg: [f64; 3]) -> f64 {
+        let g = &self.legs[leg.index()].geometry;
+        let canonical_bend = g.axis_signs[2] * q_leg[2] - (g.calf_angle - g.thigh_angle);
+        g.knee_branch_sign() * canonical_bend
+    }
+
+    /// d(knee_bend)/d(knee joint angle): +1 or −1.
+    pub fn knee_bend_per_angle(&self, leg: Leg) -> f64 {
+        let g = &self.legs[leg.index()].geometry;
+        g.knee_branch_sign() * g.axis_signs[2]
     }
 
     /// Thigh (hip → knee) and calf (knee → foot) lengths in the leg's sagittal plane, m.

@@ -538,3 +538,49 @@ fn check_measures_the_foot_radius_of_mesh_feet_as_the_shipped_configs_give_it() 
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn knee_bend_is_zero_where_the_leg_is_straight_and_every_stand_is_clear_of_the_knee_guard() {
+    use quad_controller::KNEE_GUARD_BEND;
+    let mut robots = load_all();
+    let ours = repo_root().join("robot/quadruped.toml");
+    robots.push(Loaded {
+        config: RobotConfig::from_file(&ours).expect("config"),
+        urdf: ours.clone(),
+        model: RobotModel::from_config_file(&ours).expect("our robot"),
+        path: ours,
+    });
+    for robot in robots {
+        let model = &robot.model;
+        let stand = model
+            .stand_joint_positions(model.stand_height())
+            .expect("stand pose");
+        for leg in Leg::ALL {
+            let q = leg_q(&stand, leg);
+            let bend = model.knee_bend(leg, q);
+            assert!(
+                bend > 2.0 * KNEE_GUARD_BEND,
+                "{} {leg:?}: stand knee bent only {bend} rad",
+                robot.path.display()
+            );
+            // The hip-to-foot distance peaks where the bend is zero.
+            let straight = q[2] - bend / model.knee_bend_per_angle(leg);
+            let reach = |knee: f64| {
+                let at = [q[0], q[1], knee];
+                let hip = model.joint_positions_body(leg, at)[1];
+                let foot = model.foot_position_body(leg, at);
+                (0..3)
+                    .map(|i| (foot[i] - hip[i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            };
+            for delta in [-0.05, 0.05] {
+                assert!(
+                    reach(straight + delta) < reach(straight) - 1e-6,
+                    "{} {leg:?}: the leg is longer {delta} rad away from `straight`",
+                    robot.path.display()
+                );
+            }
+        }
+    }
+}
