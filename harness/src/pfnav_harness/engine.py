@@ -4,8 +4,12 @@ The co-simulation (cosim.py), the incline benchmark (incline.py) and the body se
 engine for the same few things: place the robot, step 1 ms, read the trunk and joint state in the
 FMU's layout, hold joint torques, push the trunk, say which feet (and which other links) touch
 something, and save/restore the state a fork continues from. `PhysicsEngine` is that contract;
-`QuadrupedWorld` (world.py, DART) implements it from the robot config and its URDF, the
-scenario's terrain heights and the friction.
+`QuadrupedWorld` (world.py, DART) and `MujocoWorld` (mujoco_world.py, MuJoCo) implement it from
+the same sources: the robot config and its URDF, the scenario's terrain heights, the friction.
+
+DART is the default: every published result comes from it. MuJoCo is the second opinion
+(`--engine mujoco`): a different contact model (soft constraints, elliptic friction cone) under
+the same controller.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from .robot import RobotDescription
 from .scenario import Terrain
 from .world import DEFAULT_FRICTION, Payload, RobotState
 
-ENGINE_NAMES = ("dart",)
+ENGINE_NAMES = ("dart", "mujoco")
 DEFAULT_ENGINE = "dart"
 
 
@@ -135,11 +139,16 @@ def make_engine(
     friction: float = DEFAULT_FRICTION,
     payload: Payload | None = None,
 ) -> PhysicsEngine:
-    """The physics world of engine `name` (one of `ENGINE_NAMES`) with `robot` on `terrain`."""
+    """The physics world of engine `name` ("dart" or "mujoco") with `robot` on `terrain`."""
     if name == "dart":
         from .world import QuadrupedWorld
 
         return QuadrupedWorld(terrain, robot, cache_dir, time_step, friction, payload=payload)
+    if name == "mujoco":
+        # Imported here: DART-only runs never load MuJoCo.
+        from .mujoco_world import MujocoWorld
+
+        return MujocoWorld(terrain, robot, time_step, friction, payload=payload)
     raise SimulationError(f"unknown physics engine '{name}' (choose from {', '.join(ENGINE_NAMES)})")
 
 

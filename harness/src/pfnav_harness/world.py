@@ -738,11 +738,13 @@ class QuadrupedWorld:
             contacts=self.foot_contacts(),
         )
 
-    def restore(self, snapshot: WorldSnapshot) -> None:
+    def restore(self, snapshot: object) -> None:
         """Puts the world in the state of `snapshot` (taken in this world or in one built the same way).
 
         Pending external forces (pushes) are cleared; this world's own payload and friction stay.
         """
+        if not isinstance(snapshot, WorldSnapshot):
+            raise SimulationError(f"a DART world cannot restore a {type(snapshot).__name__} (taken in another engine)")
         skeletons = {s.getName(): s for s in self._skeletons() if s.getNumDofs() > 0}
         if set(skeletons) != set(snapshot.positions) or set(skeletons) != set(snapshot.velocities):
             raise SimulationError(f"the snapshot holds skeletons {sorted(snapshot.positions)}, this world has {sorted(skeletons)}")
