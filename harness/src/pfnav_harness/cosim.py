@@ -1,6 +1,6 @@
-"""Co-simulation master: DART physics at 1 kHz, the controller FMU at its communication step.
+"""Co-simulation master: physics (DART, or MuJoCo: `CoSimConfig.engine`) at 1 kHz, the controller FMU at its communication step.
 
-Per communication point: DART state → FMU inputs (state, reference at plan time, terrain plane,
+Per communication point: physics state → FMU inputs (state, reference at plan time, terrain plane,
 mode request) → fmi2DoStep(h) → joint torques, held (zero-order) for the physics steps of h.
 The robot first stands (mode request "stand") for `stand_time`, then the plan clock starts and
 the mode request becomes "locomotion". Every physics step is logged.
@@ -687,6 +687,7 @@ class CoSimulation:
         if loop.log_push is not None:
             log["push_force"] = loop.log_push[:n]
         log["estimator"] = np.array(c.estimator)
+        log["engine"] = np.array(c.engine)
         if loop.estimator is not None:
             log.update(loop.estimator.log(n))
         if online is not None:

@@ -16,18 +16,26 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .errors import SimulationError
-from .robot import RobotDescription
-from .scenario import Terrain
-from .world import DEFAULT_FRICTION, Payload, RobotState
+
+if TYPE_CHECKING:
+    # The engines' modules load their engines: imported where a world is made, not by the command line.
+    from .robot import RobotDescription
+    from .scenario import Terrain
+    from .world import Payload, RobotState
 
 ENGINE_NAMES = ("dart", "mujoco")
 DEFAULT_ENGINE = "dart"
+# How reports name each engine's physics.
+ENGINE_LABELS = {"dart": "DART, ODE collision on the terrain mesh", "mujoco": "MuJoCo, terrain height field"}
+# Coulomb friction of feet and ground unless a run sets its own: rubber feet on dry ground, above
+# the coefficient the controller's MPC assumes (mpc.mu), so a default run has friction to spare.
+DEFAULT_FRICTION = 0.8
 
 
 @runtime_checkable

@@ -37,6 +37,7 @@ import dartpy as dart
 import numpy as np
 from numpy.typing import NDArray
 
+from .engine import DEFAULT_FRICTION
 from .errors import SimulationError
 from .robot import NUM_JOINTS, RobotDescription
 from .scenario import Terrain
@@ -342,9 +343,6 @@ def terrain_digest(terrain: Terrain) -> str:
     return h.hexdigest()[:16]
 
 
-# Coulomb friction of feet and ground unless a run sets its own: rubber feet on dry ground, above
-# the coefficient the controller's MPC assumes (mpc.mu), so a default run has friction to spare.
-DEFAULT_FRICTION = 0.8
 
 
 def set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
