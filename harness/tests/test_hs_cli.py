@@ -178,3 +178,17 @@ def test_online_runs_fit_the_slope_unless_told_otherwise(args: tuple[str, ...], 
     from pfnav_harness import cli
 
     assert cli._service_traversability(cli.build_parser().parse_args(args)) == expected
+
+
+@pytest.mark.parametrize(("args", "engine"), [((), "dart"), (("--engine", "mujoco"), "mujoco"), (("--engine", "dart"), "dart")])
+def test_the_engine_reaches_the_co_simulation_config(args: tuple[str, ...], engine: str) -> None:
+    from pfnav_harness import cli
+
+    parsed = cli.build_parser().parse_args(("run", "--scenario", "ramp", "--estimator", "groundTruth", *args))
+    assert cli._config(parsed).engine == engine
+
+
+def test_an_unknown_engine_is_a_usage_error(fake_tools: dict[str, str], tmp_path: Path) -> None:
+    proc = run_cli(fake_tools, "run", "--scenario", "ramp", "--engine", "bullet", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "invalid choice: 'bullet'" in proc.stderr

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import paths
+from .engine import DEFAULT_ENGINE, ENGINE_LABELS, ENGINE_NAMES
 from .errors import HarnessError
 from .fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
@@ -174,8 +175,14 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--contact-sensor",
         action="store_true",
-        help="kalman: tell the estimator which feet touch the ground (DART's contacts, an ideal sensor; "
+        help="kalman: tell the estimator which feet touch the ground (the physics engine's contacts, an ideal sensor; "
         "default: it detects contact from the leg effort and its gait schedule)",
+    )
+    p.add_argument(
+        "--engine",
+        choices=ENGINE_NAMES,
+        default=DEFAULT_ENGINE,
+        help=f"physics engine the robot walks in: dart (triangle-mesh terrain, ODE collision) or mujoco (height field); default {DEFAULT_ENGINE}",
     )
     p.add_argument("--allow-host-network", action="store_true", help=argparse.SUPPRESS)
 
@@ -192,7 +199,7 @@ def _results_page_name(text: str) -> str:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pfnav-demo",
-        description="Plans with pf-planner-service over LCM and walks the plans with the controller FMU on a DART body model.",
+        description="Plans with pf-planner-service over LCM and walks the plans with the controller FMU on a simulated body (DART or MuJoCo).",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="one scenario or map, one method")
@@ -238,6 +245,7 @@ def _config(args: argparse.Namespace) -> CoSimConfig:
         pushes=_pushes(args),
         estimator=args.estimator,
         body_sensors=_body_sensors(args),
+        engine=args.engine,
     )
 
 
@@ -592,7 +600,7 @@ def execute(args: argparse.Namespace) -> int:
     sim_wall = sum(r.wall_seconds for rs in runs.values() for r in rs)
     header = [
         f"Command: `pfnav-demo {' '.join(sys.argv[1:]) if sys.argv[1:] else args.command}`; FMU `{fmu.name}`, "
-        f"communication step {config.comm_step * 1000:.0f} ms, physics 1 kHz (DART, ODE collision).",
+        f"communication step {config.comm_step * 1000:.0f} ms, physics 1 kHz ({ENGINE_LABELS[config.engine]}).",
         "",
         f"Robot: config `{robot.config_path}`, URDF `{robot.urdf_path}`.",
         "",
@@ -600,7 +608,7 @@ def execute(args: argparse.Namespace) -> int:
             f"State estimate in the loop (kalman): {config.body_sensors.imu.name} IMU, {config.body_sensors.encoder.name} "
             f"{config.body_sensors.encoder.bits}-bit joint encoders, position fixes "
             + (f"at {config.body_sensors.fix_rate:g} Hz, σ {config.body_sensors.fix_noise:g} m" if config.body_sensors.fix_rate > 0 else "off")
-            + f", foot contact {'from DART (ideal sensor)' if config.body_sensors.contact_sensor else 'from the gait schedule'}"
+            + f", foot contact {'from the physics engine (ideal sensor)' if config.body_sensors.contact_sensor else 'from the gait schedule'}"
             + f", sensor seed {config.body_sensors.seed}."
             if config.estimator == "kalman"
             else "The controller runs on the simulated body's exact state (estimator groundTruth)."

@@ -1,6 +1,6 @@
-"""Co-simulation master: DART physics at 1 kHz, the controller FMU at its communication step.
+"""Co-simulation master: physics (DART, or MuJoCo: `CoSimConfig.engine`) at 1 kHz, the controller FMU at its communication step.
 
-Per communication point: DART state → FMU inputs (state, reference at plan time, terrain plane,
+Per communication point: physics state → FMU inputs (state, reference at plan time, terrain plane,
 mode request) → fmi2DoStep(h) → joint torques, held (zero-order) for the physics steps of h.
 The robot first stands (mode request "stand") for `stand_time`, then the plan clock starts and
 the mode request becomes "locomotion". Every physics step is logged.
@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from . import fmu_runner as fr
 from .body_sensors import BodyReadings, BodySensorConfig, BodySensors, BodySensorsState
 from .elevation_map import PoseBelief
+from .engine import DEFAULT_ENGINE, PhysicsEngine, make_engine, validate_engine_name
 from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
@@ -42,7 +43,7 @@ from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RAT
 from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
 from .robot import RobotDescription
 from .scenario import Scenario
-from .world import DEFAULT_FRICTION, Payload, QuadrupedWorld, WorldSnapshot, quaternion_to_rpy, terrain_digest
+from .world import DEFAULT_FRICTION, Payload, quaternion_to_rpy, terrain_digest
 
 Progress = Callable[[float], None]
 # FMU reference input ← column of a reference row. ref.z is the height of the local terrain plane
@@ -108,6 +109,8 @@ class CoSimConfig:
     # from the body sensors below; needs an FMU with the estimator).
     estimator: str = fr.DEFAULT_ESTIMATOR
     body_sensors: BodySensorConfig = field(default_factory=BodySensorConfig)
+    # The physics engine the robot walks in (engine.ENGINE_NAMES).
+    engine: str = DEFAULT_ENGINE
 
     def validate(self) -> None:
         if not (self.physics_dt > 0 and math.isfinite(self.physics_dt)):
@@ -122,6 +125,7 @@ class CoSimConfig:
         if self.estimator not in fr.ESTIMATOR_MODES:
             raise SimulationError(f"unknown estimator mode '{self.estimator}' (choose from {', '.join(fr.ESTIMATOR_MODES)})")
         self.body_sensors.validate()
+        validate_engine_name(self.engine)
 
 
 # Ground and foot friction of every fork prefix (CoSimConfig's default): a run's own friction
@@ -210,7 +214,8 @@ class ForkPoint:
 
     key: str
     step: int
-    world: WorldSnapshot
+    # The physics engine's snapshot (`PhysicsEngine.snapshot`).
+    world: object
     fmu_state: bytes
     fmu_io: fr.FmuIoSnapshot
     mode: int
@@ -248,7 +253,7 @@ class _Loop:
 
 
 class CoSimulation:
-    """One run: one scenario, one plan (or an online navigator that replans), one FMU instance, one DART world."""
+    """One run: one scenario, one plan (or an online navigator that replans), one FMU instance, one physics world (`config.engine`)."""
 
     def __init__(
         self,
@@ -282,7 +287,7 @@ class CoSimulation:
             self.source = FieldSource(field, scenario.terrain, c.plane_radius, c.physics_dt, start_yaw)
         else:
             self.source = TrajectorySource(plan, scenario.terrain, c.plane_radius, c.heading_smoothing)
-        self.world = QuadrupedWorld(scenario.terrain, robot, cache_dir, self.config.physics_dt, self.config.friction, payload=self.config.payload)
+        self.world: PhysicsEngine = make_engine(c.engine, scenario.terrain, robot, cache_dir, c.physics_dt, c.friction, payload=c.payload)
         start_yaw = float(plan.yaw[0]) if len(plan.yaw) else scenario.start_yaw
         self.world.place(float(plan.x[0]), float(plan.y[0]), start_yaw)
         if controller is not None:
@@ -682,6 +687,7 @@ class CoSimulation:
         if loop.log_push is not None:
             log["push_force"] = loop.log_push[:n]
         log["estimator"] = np.array(c.estimator)
+        log["engine"] = np.array(c.engine)
         if loop.estimator is not None:
             log.update(loop.estimator.log(n))
         if online is not None:
@@ -709,7 +715,7 @@ class EstimatorInTheLoop:
     Joint angles reach the FMU as the encoders read them; the log keeps the DART truth.
     """
 
-    def __init__(self, fmu: fr.ControllerFmu, world: QuadrupedWorld, config: CoSimConfig, n_steps: int) -> None:
+    def __init__(self, fmu: fr.ControllerFmu, world: PhysicsEngine, config: CoSimConfig, n_steps: int) -> None:
         self.config = config
         self.world = world
         self.io = io = fmu.enable_estimation(config.estimator)

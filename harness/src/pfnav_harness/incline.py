@@ -5,7 +5,7 @@ maps' 0.125 m resolution, so the robot starts ≥ 2.5 m from every edge). The re
 straight walk of `distance` metres (horizontal) through the map centre, built directly as a
 `Plan` timed at the planner's nominal speed: no planner is needed for a straight line.
 
-What a run is judged by (`InclineOutcome`, from the co-simulation log and a probe on the DART
+What a run is judged by (`InclineOutcome`, from the co-simulation log and a probe on the physics
 world that records foot positions and non-foot contacts):
 - stood up: at the walk start the controller is in its stand state, the base is at least
   `STOOD_HEIGHT_FRACTION` of the nominal stand height above the ground and it has not fallen;
@@ -40,12 +40,13 @@ from numpy.typing import NDArray
 
 from . import fmu_runner as fr
 from .cosim import CoSimConfig, CoSimulation, RunResult
+from .engine import PhysicsEngine
 from .errors import ScenarioError, SimulationError
 from .metrics import FallThresholds, judge_fall, rms_tracking_error, roll_pitch_yaw, terrain_pitch_roll
 from .planner_client import Plan
 from .robot import RobotDescription
 from .scenario import GoalRegion, Scenario, Terrain
-from .world import DEFAULT_FRICTION, QuadrupedWorld
+from .world import DEFAULT_FRICTION
 
 FloatArray = NDArray[np.float64]
 
@@ -68,7 +69,7 @@ MAX_ANGLE_DEG = 60.0
 STOOD_HEIGHT_FRACTION = 0.75
 # A foot that loses contact for longer than this (s) has ended its stance.
 CONTACT_GAP = 0.01
-# The probe reads the DART collision result every this many physics steps (it is the probe's dearest part).
+# The probe reads the collision result every this many physics steps (it is the probe's dearest part).
 CONTACT_PROBE_EVERY = 5
 
 
@@ -147,16 +148,16 @@ def straight_plan(scenario: Scenario, speed: float = NOMINAL_SPEED, sample_perio
 class WorldProbe:
     """Records, per physics step, the feet's world transforms and which non-foot links touch anything.
 
-    It wraps `QuadrupedWorld.step` of one world (the co-simulation calls it once per physics step).
+    It wraps the `step` of one physics world (the co-simulation calls it once per physics step).
     """
 
-    def __init__(self, world: QuadrupedWorld, n_steps: int) -> None:
+    def __init__(self, world: PhysicsEngine, n_steps: int) -> None:
         self.world = world
-        self.foot_rotation = np.zeros((n_steps, len(world.feet), 3, 3))
-        self.foot_position = np.zeros((n_steps, len(world.feet), 3))
+        legs = len(world.description.legs)
+        self.foot_rotation = np.zeros((n_steps, legs, 3, 3))
+        self.foot_position = np.zeros((n_steps, legs, 3))
         self.link_contacts: dict[str, list[float]] = {}
         self.count = 0
-        self._foot_names = set(world.description.foot_links)
         self._step = world.step
         world.step = self.step  # type: ignore[method-assign]
 
@@ -166,18 +167,15 @@ class WorldProbe:
         if k < len(self.foot_position):
             self.foot_rotation[k], self.foot_position[k] = self.world.foot_poses()
             if k % CONTACT_PROBE_EVERY == 0:
-                result = self.world.world.getLastCollisionResult()
-                for body in result.getCollidingBodyNodes():
-                    name = body.getName()
-                    if name not in self._foot_names and body.getSkeleton().getName() != "terrain":
-                        self.link_contacts.setdefault(name, []).append(k * self.world.time_step)
+                for name in self.world.touching_links():
+                    self.link_contacts.setdefault(name, []).append(k * self.world.time_step)
         self.count += 1
 
 
-def support_margin(world: QuadrupedWorld) -> float:
+def support_margin(world: PhysicsEngine) -> float:
     """Horizontal distance of the whole robot's centre of mass inside the polygon of its feet (m,
     negative: outside, the pose cannot stand still whatever the joints do)."""
-    com = np.asarray(world.robot.getCOM(), dtype=np.float64)[:2]
+    com = world.center_of_mass()[:2]
     feet = world.foot_positions()[:, :2]
     centre = feet.mean(axis=0)
     order = np.argsort(np.arctan2(feet[:, 1] - centre[1], feet[:, 0] - centre[0]))
@@ -296,7 +294,7 @@ def evaluate(
     scenario: Scenario,
     result: RunResult,
     probe: WorldProbe,
-    world: QuadrupedWorld,
+    world: PhysicsEngine,
     nominal_height: float,
     stand_code: int,
     friction: float,
@@ -414,14 +412,14 @@ LYING_BEND = 1.5
 LYING_LIMIT_MARGIN = 0.05
 
 
-def lying_pose(world: QuadrupedWorld) -> NDArray[np.float64]:
+def lying_pose(world: PhysicsEngine) -> NDArray[np.float64]:
     """The robot config's crouch with hip and knee angles × `LYING_BEND`, inside the joint limits."""
     pose = np.array(world.description.crouch, dtype=np.float64)
     pose[1::3] *= LYING_BEND
     pose[2::3] *= LYING_BEND
-    joints = [world.robot.getJoint(name) for name in world.description.joint_names]
-    lower = np.array([j.getPositionLowerLimit(0) for j in joints]) + LYING_LIMIT_MARGIN
-    upper = np.array([j.getPositionUpperLimit(0) for j in joints]) - LYING_LIMIT_MARGIN
+    lower, upper = world.joint_position_limits()
+    lower = lower + LYING_LIMIT_MARGIN
+    upper = upper - LYING_LIMIT_MARGIN
     return np.clip(pose, np.minimum(lower, upper), np.maximum(lower, upper))
 
 

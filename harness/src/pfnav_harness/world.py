@@ -37,6 +37,7 @@ import dartpy as dart
 import numpy as np
 from numpy.typing import NDArray
 
+from .engine import DEFAULT_FRICTION
 from .errors import SimulationError
 from .robot import NUM_JOINTS, RobotDescription
 from .scenario import Terrain
@@ -79,12 +80,30 @@ def add_payload(body: dart.dynamics.BodyNode, payload: Payload, trunk_mass: floa
     mass = float(inertia.getMass())
     com = np.asarray(inertia.getLocalCOM(), dtype=np.float64)
     moment = np.asarray(inertia.getMoment(), dtype=np.float64)
+    total, new_com, new_moment = loaded_inertia(body.getName(), mass, com, moment, payload, trunk_mass, trunk_com, offset)
+    body.setInertia(dart.dynamics.Inertia(total, new_com, new_moment))
+
+
+def loaded_inertia(
+    name: str,
+    mass: float,
+    com: NDArray[np.float64],
+    moment: NDArray[np.float64],
+    payload: Payload,
+    trunk_mass: float,
+    trunk_com: NDArray[np.float64],
+    offset: NDArray[np.float64],
+) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
+    """Mass, centre of mass and inertia about it (body frame) of link `name` (`mass`, `com`, `moment`) with the payload's point mass.
+
+    The arguments are those of `add_payload`; every engine loads its trunk link with these numbers.
+    """
     extra = payload.mass_fraction * trunk_mass
     total = mass + extra
     point = trunk_com + offset
     if not total > 0.0:
         raise SimulationError(
-            f"payload {payload.mass_fraction:+.0%} of the trunk's {trunk_mass:.3f} kg is more than its heaviest link '{body.getName()}' "
+            f"payload {payload.mass_fraction:+.0%} of the trunk's {trunk_mass:.3f} kg is more than its heaviest link '{name}' "
             f"({mass:.3f} kg) has: take less mass away"
         )
     new_com = (mass * com + extra * point) / total
@@ -98,7 +117,7 @@ def add_payload(body: dart.dynamics.BodyNode, payload: Payload, trunk_mass: floa
             f"payload {payload.mass_fraction:+.0%} at offset {payload.offset} m leaves the trunk without a positive inertia: "
             "take less mass away, or closer to the centre of mass"
         )
-    body.setInertia(dart.dynamics.Inertia(total, new_com, new_moment))
+    return total, new_com, new_moment
 
 
 def load_robot_skeleton(robot: RobotDescription) -> dart.dynamics.Skeleton:
@@ -129,35 +148,66 @@ def make_massless(body: dart.dynamics.BodyNode) -> None:
     body.setInertia(dart.dynamics.Inertia(0.0, np.zeros(3), np.zeros((3, 3))))
 
 
-def replace_mesh_collisions(skeleton: dart.dynamics.Skeleton, lower_legs: set[str]) -> tuple[list[str], list[str]]:
-    """Mesh collision shapes become primitive stand-ins: their bounding box, or nothing on the links in `lower_legs`.
+@dataclass(frozen=True)
+class MeshBox:
+    """The bounding box standing in for a mesh collision shape of link `link` (box centre pose in the link's frame)."""
 
-    The lower legs (the knees' child links and what is welded to them, feet included) collide
-    through the foot spheres only: a box around a lower-leg mesh would reach the ground beside the
-    foot. Returns the links given a box and the links left without their mesh.
+    link: str
+    size: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    translation: NDArray[np.float64]
+
+
+def mesh_collision_boxes(skeleton: dart.dynamics.Skeleton, lower_legs: set[str]) -> tuple[list[tuple[dart.dynamics.ShapeNode, MeshBox]], list[str]]:
+    """The robot's mesh collision shapes with their bounding boxes, and the links whose meshes get none.
+
+    The lower legs (`lower_legs`: the knees' child links and what is welded to them, feet
+    included) collide through the foot spheres only: a box around a lower-leg mesh would reach the
+    ground beside the foot. DART reads the meshes (Collada included), so every engine takes its
+    stand-in boxes from here.
     """
-    boxed: list[str] = []
-    dropped: list[str] = []
+    boxes: list[tuple[dart.dynamics.ShapeNode, MeshBox]] = []
+    dropped: list[tuple[dart.dynamics.ShapeNode, str]] = []
     for i in range(skeleton.getNumBodyNodes()):
         body = skeleton.getBodyNode(i)
         for node in body.getShapeNodes():
             shape = node.getShape()
             if node.getCollisionAspect() is None or not isinstance(shape, dart.dynamics.MeshShape):
                 continue
-            node.removeCollisionAspect()
             bounds = shape.getBoundingBox()
             low, high = np.asarray(bounds.getMin()), np.asarray(bounds.getMax())
             if body.getName() in lower_legs or not np.all(high - low > 0.0):
-                dropped.append(body.getName())
+                dropped.append((node, body.getName()))
                 continue
-            box = body.createShapeNode(dart.dynamics.BoxShape(high - low))
             transform = node.getRelativeTransform()
-            box.setRelativeRotation(transform.rotation())
-            box.setRelativeTranslation(transform.rotation() @ (0.5 * (low + high)) + transform.translation())
-            box.createCollisionAspect()
-            box.createDynamicsAspect()
-            boxed.append(body.getName())
-    return boxed, dropped
+            translation = transform.rotation() @ (0.5 * (low + high)) + transform.translation()
+            boxes.append((node, MeshBox(body.getName(), high - low, np.asarray(transform.rotation()), np.asarray(translation))))
+    return boxes, [name for _, name in dropped]
+
+
+def lower_leg_links(skeleton: dart.dynamics.Skeleton, robot: RobotDescription) -> set[str]:
+    """The knees' child links and every link welded to them (feet included)."""
+    lower_legs: set[str] = set()
+    for name in robot.joint_names[2::3]:
+        lower_legs.update(body.getName() for body in welded_bodies(skeleton.getJoint(name).getChildBodyNode()))
+    return lower_legs
+
+
+def replace_mesh_collisions(skeleton: dart.dynamics.Skeleton, lower_legs: set[str]) -> tuple[list[str], list[str]]:
+    """Mesh collision shapes become primitive stand-ins: their bounding box, or nothing on the links in `lower_legs`
+    (`mesh_collision_boxes`). Returns the links given a box and the links left without their mesh."""
+    boxes, dropped = mesh_collision_boxes(skeleton, lower_legs)
+    for i in range(skeleton.getNumBodyNodes()):
+        for node in skeleton.getBodyNode(i).getShapeNodes():
+            if node.getCollisionAspect() is not None and isinstance(node.getShape(), dart.dynamics.MeshShape):
+                node.removeCollisionAspect()
+    for node, box in boxes:
+        shape_node = node.getBodyNodePtr().createShapeNode(dart.dynamics.BoxShape(box.size))
+        shape_node.setRelativeRotation(box.rotation)
+        shape_node.setRelativeTranslation(box.translation)
+        shape_node.createCollisionAspect()
+        shape_node.createDynamicsAspect()
+    return [box.link for _, box in boxes], dropped
 
 
 def add_foot_sphere(foot: dart.dynamics.BodyNode, radius: float, offset: NDArray[np.float64]) -> None:
@@ -244,6 +294,18 @@ def _eigen_quaternion(
     return w, xyz[0], xyz[1], xyz[2]
 
 
+def quaternion_to_rotation(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in q)
+    return np.array(
+        [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        ]
+    )
+
+
 def quaternion_to_rpy(q: NDArray[np.float64]) -> tuple[float, float, float]:
     """Roll, pitch, yaw (ZYX convention) of a quaternion (w, x, y, z)."""
     w, x, y, z = q.tolist() if isinstance(q, np.ndarray) else (float(v) for v in q)
@@ -281,9 +343,6 @@ def terrain_digest(terrain: Terrain) -> str:
     return h.hexdigest()[:16]
 
 
-# Coulomb friction of feet and ground unless a run sets its own: rubber feet on dry ground, above
-# the coefficient the controller's MPC assumes (mpc.mu), so a default run has friction to spare.
-DEFAULT_FRICTION = 0.8
 
 
 def set_friction(skeleton: dart.dynamics.Skeleton, mu: float) -> None:
@@ -349,7 +408,8 @@ class WorldSnapshot:
 
 
 class QuadrupedWorld:
-    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs.
+    """DART world with terrain and robot, and the state/torque exchange the co-simulation needs
+    (the DART implementation of engine.PhysicsEngine).
 
     `mesh_collisions`: "boxes" (default) turns the robot's mesh collision shapes into their bounding
     boxes (none on the lower legs), "meshes" keeps them as the URDF has them (slower; for comparing,
@@ -367,6 +427,7 @@ class QuadrupedWorld:
         payload: Payload | None = None,
         mesh_collisions: str = "boxes",
     ) -> None:
+        self.name = "dart"
         if not (time_step > 0.0 and math.isfinite(time_step)):
             raise SimulationError(f"physics time step must be positive, got {time_step}")
         if mesh_collisions not in MESH_COLLISION_MODES:
@@ -414,9 +475,7 @@ class QuadrupedWorld:
             self.feet.append(foot)
         self.foot_offsets = robot.foot_offsets
         self.foot_radius = robot.foot_radius
-        lower_legs = set()
-        for name in robot.joint_names[2::3]:
-            lower_legs.update(body.getName() for body in welded_bodies(skeleton.getJoint(name).getChildBodyNode()))
+        lower_legs = lower_leg_links(skeleton, robot)
         boxed, dropped = replace_mesh_collisions(skeleton, lower_legs) if mesh_collisions == "boxes" else ([], [])
         if boxed or dropped:
             log.info(
@@ -520,6 +579,49 @@ class QuadrupedWorld:
             gaps.append(p[2] - self.foot_radius - self.terrain.height_at(float(p[0]), float(p[1])))
         positions[5] -= min(gaps) - clearance
         self.robot.setPositions(positions)
+
+    def set_state(self, state: RobotState) -> None:
+        """Puts the robot in `state`: base pose and world-frame twist, joint angles and rates."""
+        joint = self.base.getParentJoint()
+        if not isinstance(joint, dart.dynamics.FreeJoint):
+            raise SimulationError(f"{self.description.config_path}: the base hangs on no free joint, its state cannot be set")
+        w, x, y, z = (float(v) for v in state.quaternion)
+        norm = math.sqrt(w * w + x * x + y * y + z * z)
+        transform = dart.math.Isometry3()
+        transform.set_rotation(quaternion_to_rotation(np.array([w, x, y, z]) / norm))
+        transform.set_translation(np.asarray(state.position, dtype=np.float64))
+        joint.setTransform(transform, dart.dynamics.Frame.World())
+        positions = self.robot.getPositions()
+        positions[self.joint_dofs] = state.joint_positions
+        self.robot.setPositions(positions)
+        velocities = np.zeros(self.robot.getNumDofs())
+        velocities[self.joint_dofs] = state.joint_velocities
+        self.robot.setVelocities(velocities)
+        world = dart.dynamics.Frame.World()
+        joint.setSpatialVelocity(np.concatenate([state.angular_velocity, state.linear_velocity]), world, world)
+
+    def center_of_mass(self) -> NDArray[np.float64]:
+        return np.asarray(self.robot.getCOM(), dtype=np.float64)
+
+    def touching_links(self) -> list[str]:
+        """Robot links other than the feet that touched anything in the last collision check."""
+        feet = set(self.description.foot_links)
+        names = []
+        for body in self.world.getLastCollisionResult().getCollidingBodyNodes():
+            name = body.getName()
+            if name not in feet and body.getSkeleton().getName() == self.robot.getName() and name not in names:
+                names.append(name)
+        return names
+
+    def joint_position_limits(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        joints = [self.robot.getJoint(name) for name in self.description.joint_names]
+        lower = np.array([j.getPositionLowerLimit(0) for j in joints], dtype=np.float64)
+        upper = np.array([j.getPositionUpperLimit(0) for j in joints], dtype=np.float64)
+        return lower, upper
+
+    def ground_height(self, x: float, y: float) -> float:
+        """The terrain mesh's height under (x, y): the mesh is the map's own triangulation (`Terrain.height`)."""
+        return self.terrain.height_at(x, y)
 
     def state(self) -> RobotState:
         transform = self.base.getWorldTransform()
@@ -634,11 +736,13 @@ class QuadrupedWorld:
             contacts=self.foot_contacts(),
         )
 
-    def restore(self, snapshot: WorldSnapshot) -> None:
+    def restore(self, snapshot: object) -> None:
         """Puts the world in the state of `snapshot` (taken in this world or in one built the same way).
 
         Pending external forces (pushes) are cleared; this world's own payload and friction stay.
         """
+        if not isinstance(snapshot, WorldSnapshot):
+            raise SimulationError(f"a DART world cannot restore a {type(snapshot).__name__} (taken in another engine)")
         skeletons = {s.getName(): s for s in self._skeletons() if s.getNumDofs() > 0}
         if set(skeletons) != set(snapshot.positions) or set(skeletons) != set(snapshot.velocities):
             raise SimulationError(f"the snapshot holds skeletons {sorted(snapshot.positions)}, this world has {sorted(skeletons)}")
