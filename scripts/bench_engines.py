@@ -37,8 +37,10 @@ class Row:
 def table(rows: list[Row]) -> str:
     by_key = {(r.scenario, r.estimator, r.engine): r for r in rows}
     lines = [
-        "| scenario | estimator | engine | goal | fell | RMS tracking, m | MuJoCo/DART RMS | effort ∫τ²dt, N²m²s | simulated, s | wall, s | "
-        "wall per simulated s | physics per simulated s | DART/MuJoCo wall |",
+        (
+            "| scenario | estimator | engine | goal | fell | RMS tracking, m | MuJoCo/DART RMS | effort ∫τ²dt, N²m²s | simulated, s | wall, s | "
+            "wall per simulated s | physics per simulated s | DART/MuJoCo wall |"
+        ),
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -89,11 +91,13 @@ def main() -> int:
                 print(f"{name:14s} {estimator:12s} {engine:7s} goal={row.goal} fell={row.fell} rms={row.rms:.3f} wall={row.wall_seconds:.1f} s", flush=True)
     text = "\n".join(
         [
-            "P-F plans of the paper scenarios (planned once, walked in both engines), our robot (robot/quadruped.toml), "
+            (
+                "P-F plans of the paper scenarios (planned once, walked in both engines), our robot (robot/quadruped.toml), "
             "the default controller FMU, 1 ms communication step, 1 kHz physics. Engines: DART (terrain triangle mesh, ODE "
             "collision, box friction LCP) and MuJoCo (terrain height field of the same heights, soft contacts, elliptic "
             "friction cone, impratio 100); see harness/README.md, physics engines. Wall time includes the FMU and the "
-            "harness's loop; both engines ran one after the other in one process.",
+                "harness's loop; both engines ran one after the other in one process."
+            ),
             "",
             table(rows),
         ]
