@@ -105,7 +105,7 @@ CONTRACTS = [
     ),
     Contract(
         "the default ground friction",
-        declared_in=("harness/src/pfnav_harness/world.py",),
+        declared_in=("harness/src/pfnav_harness/engine.py",),
         copies=(r"(?i)friction[^\n]*(?<![\w.])0?\.80*(?![\d])",),
         example="    friction: float = 0.8",
         suffixes=(".py",),
