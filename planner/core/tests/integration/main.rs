@@ -10,6 +10,7 @@ mod import_dem;
 mod import_fixtures;
 mod maze;
 mod optimality;
+mod paper_lp;
 mod pf_scenarios;
 mod rbf_scale;
 mod scenarios;
