@@ -39,17 +39,26 @@ METHODS = ("pf", "astar", "astar-admissible", "dijkstra")
 ROBOT_FOOTPRINT_RADIUS = 0.25
 
 
+def _schema_method_code(method: str) -> int | None:
+    """`plan_request_t.METHOD_<NAME>` of a method name, None if the generated types lack it."""
+    code = getattr(_import_types().plan_request_t, "METHOD_" + method.upper().replace("-", "_"), None)
+    return None if code is None else int(code)
+
+
 def method_code(method: str) -> int:
     """`plan_request_t.METHOD_*` of a method name of `METHODS`."""
     if method not in METHODS:
         raise PlannerError(f"unknown planning method '{method}' (choose from {', '.join(METHODS)})")
-    return int(getattr(_import_types().plan_request_t, "METHOD_" + method.upper().replace("-", "_")))
+    code = _schema_method_code(method)
+    if code is None:
+        raise HarnessError(f"the generated LCM Python types have no code for '{method}': run `bash lcm_types/gen_python.sh`")
+    return code
 
 
 def method_name(code: int) -> str:
     """The name of a `plan_request_t.METHOD_*` code (`method<code>` for one this client does not know)."""
     for name in METHODS:
-        if method_code(name) == code:
+        if _schema_method_code(name) == code:
             return name
     return f"method{code}"
 
