@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """The planner alone on the paper's scenarios, published as a results page.
 
-Runs `pf-plan demo --out OUT` (P-F indicator and RBF, A*, Dijkstra on every scenario; OUT/report.md
-and one PNG per scenario) and writes its table to docs/results/NAME.md with the stamp of
+Runs `pf-plan demo --out OUT` (A* with the paper's heuristic, A* admissible, Dijkstra, P-F indicator
+and P-F RBF on every scenario, each planned `--repeats` times from scratch; OUT/report.md with ∫p ds,
+length, max slope and solve-time ranges, and one PNG per scenario) and writes its table to docs/results/NAME.md with the stamp of
 `pfnav_harness.results_page`. The stamp lives in one place (Python) instead of a second copy in
 the planner's Rust CLI.
 
@@ -39,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "demo_args",
         nargs="*",
-        help="after --: more arguments of `pf-plan demo` (--grid, --rbf-grid, --speed)",
+        help="after --: more arguments of `pf-plan demo` (--grid, --rbf-grid, --speed, --repeats)",
     )
     args = parser.parse_args(argv)
     sys.path.insert(0, str(REPO / "harness" / "src"))
@@ -73,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         body = results_page.without_pictures(report)
         page = results_page.write_results_page(
             args.results_page,
-            "Planner: P-F, A* and Dijkstra on the paper's scenarios",
+            "Planner: P-F and fair graph baselines on the paper's scenarios",
             body,
             command,
             stamp,

@@ -81,6 +81,7 @@ def test_the_harness_reports_the_planners_cost_of_every_plan(
         )
         plans = sorted(out.glob(f"{name}_*.json"))
         assert [p.stem.removeprefix(f"{name}_") for p in plans] == [
+            "astar-admissible",
             "astar",
             "dijkstra",
             "pf",

@@ -9,7 +9,7 @@ import pytest
 
 from pfnav_harness.errors import PlannerError
 from pfnav_harness.lcm_channels import PLANNER
-from pfnav_harness.planner_client import PlannerClient, _import_types, plan_from_reply, terrain_map_message
+from pfnav_harness.planner_client import METHODS, PlannerClient, _import_types, method_code, method_name, plan_from_reply, terrain_map_message
 from pfnav_harness.scenario import Scenario, Terrain
 
 pfnav = _import_types()
@@ -92,6 +92,18 @@ def test_request_is_answered_and_converted(ramp_scenario: Scenario) -> None:
     assert plan.method == "astar" and len(plan) == 5
     np.testing.assert_allclose(plan.x, [0.5, 0.75, 1.0, 1.25, 1.5])
     assert plan.metrics["cost"] == 1.25 and plan.duration == 2.0
+
+
+def test_every_method_name_maps_to_its_own_schema_constant() -> None:
+    constants = {name: value for name, value in vars(pfnav.plan_request_t).items() if name.startswith("METHOD_")}
+    codes = [method_code(m) for m in METHODS]
+    # One name per constant and back: a method added to the schema but not here (or the reverse) fails.
+    assert sorted(codes) == sorted(constants.values())
+    assert [method_name(c) for c in codes] == list(METHODS)
+    assert method_code("astar-admissible") == pfnav.plan_request_t.METHOD_ASTAR_ADMISSIBLE
+    assert method_name(99) == "method99"
+    with pytest.raises(PlannerError, match="unknown planning method"):
+        method_code("bfs")
 
 
 def test_silence_is_retried_with_a_new_request_id(ramp_scenario: Scenario) -> None:

@@ -29,12 +29,38 @@ from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, PLANNER
 from .paths import repo_root
 from .scenario import GoalRegion, Scenario, Terrain
 
-METHODS = ("pf", "astar", "dijkstra")
+# Planning methods by name; the wire code of each is the schema's constant
+# plan_request_t.METHOD_<NAME> (upper case, '-' as '_'), looked up by `method_code`.
+METHODS = ("pf", "astar", "astar-admissible", "dijkstra")
 # Footprint radius the harness starts the service with (m). The robot's feet stand 0.13 m beside
 # its centre line and its controller keeps them 5 cm off edges; a path closer than ~0.25 m to the
 # foot of a steep flank makes it pull the uphill feet in under the body, and the narrowed trot
 # support tips over (mountain_pass). 0.25 m is two cells of the scenario maps.
 ROBOT_FOOTPRINT_RADIUS = 0.25
+
+
+def _schema_method_code(method: str) -> int | None:
+    """`plan_request_t.METHOD_<NAME>` of a method name, None if the generated types lack it."""
+    code = getattr(_import_types().plan_request_t, "METHOD_" + method.upper().replace("-", "_"), None)
+    return None if code is None else int(code)
+
+
+def method_code(method: str) -> int:
+    """`plan_request_t.METHOD_*` of a method name of `METHODS`."""
+    if method not in METHODS:
+        raise PlannerError(f"unknown planning method '{method}' (choose from {', '.join(METHODS)})")
+    code = _schema_method_code(method)
+    if code is None:
+        raise HarnessError(f"the generated LCM Python types have no code for '{method}': run `bash lcm_types/gen_python.sh`")
+    return code
+
+
+def method_name(code: int) -> str:
+    """The name of a `plan_request_t.METHOD_*` code (`method<code>` for one this client does not know)."""
+    for name in METHODS:
+        if _schema_method_code(name) == code:
+            return name
+    return f"method{code}"
 
 
 def start_density_belief() -> int:
@@ -198,7 +224,7 @@ def _per_cell(values: NDArray[np.generic] | None, terrain: Terrain, what: str) -
 
 def plan_from_reply(reply: Any) -> Plan:
     samples = reply.samples
-    method = METHODS[reply.method] if 0 <= reply.method < len(METHODS) else f"method{reply.method}"
+    method = method_name(reply.method)
     m = reply.metrics
     plan = Plan(
         method=method,
@@ -409,8 +435,7 @@ class PlannerClient:
 
     def send_request(self, pose: StartPose, goal: GoalRegion, method: str, map_seq: int, options: RequestOptions | None = None) -> int:
         """Publishes one plan request and returns its id without waiting for the answer."""
-        if method not in METHODS:
-            raise PlannerError(f"unknown planning method '{method}' (choose from {', '.join(METHODS)})")
+        code = method_code(method)
         options = options or RequestOptions()
         pfnav = self._pfnav
         request_id = self._next_request_id
@@ -427,7 +452,7 @@ class PlannerClient:
         req.start_yaw = pose.yaw
         req.goal_x, req.goal_y = goal.center
         req.goal_radius = goal.radius
-        req.method = METHODS.index(method)
+        req.method = code
         req.options.directions = options.directions
         req.options.speed = options.speed
         req.options.sample_period = options.sample_period

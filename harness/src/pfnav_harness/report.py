@@ -21,8 +21,22 @@ from .metrics import OnlineMetrics, RunMetrics
 from .robot import JOINT_ROLES, LEG_LABELS
 from .scenario import Scenario, Terrain
 
-METHOD_COLOURS = {"pf": "tab:red", "astar": "tab:blue", "dijkstra": "tab:green", "pf-feedback": "tab:purple", "pf-online": "tab:orange"}
-METHOD_LABELS = {"pf": "P-F", "astar": "A*", "dijkstra": "Dijkstra", "pf-feedback": "P-F feedback", "pf-online": "P-F online"}
+METHOD_COLOURS = {
+    "pf": "tab:red",
+    "astar": "tab:blue",
+    "astar-admissible": "tab:cyan",
+    "dijkstra": "tab:green",
+    "pf-feedback": "tab:purple",
+    "pf-online": "tab:orange",
+}
+METHOD_LABELS = {
+    "pf": "P-F",
+    "astar": "A*",
+    "astar-admissible": "A* admissible",
+    "dijkstra": "Dijkstra",
+    "pf-feedback": "P-F feedback",
+    "pf-online": "P-F online",
+}
 
 
 @dataclass

@@ -65,7 +65,8 @@ enum Command {
     /// A map from an elevation model (GeoTIFF or ESRI ASCII grid): crop, resample, nodata to
     /// obstacles, uniform scale; written like `scenario export` (see docs/terrain-import.md).
     Import(ImportArgs),
-    /// All methods on all scenarios: DIR/report.md and one PNG per scenario.
+    /// All methods on all scenarios, each planned --repeats times from scratch: DIR/report.md
+    /// (path metrics and solve-time ranges) and one PNG per scenario.
     Demo {
         /// Output directory.
         #[arg(long, default_value = "demo_out")]
@@ -79,6 +80,9 @@ enum Command {
         /// Nominal speed of the reference trajectories, m/s.
         #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
         speed: f64,
+        /// Plans per method and scenario; the report gives the range of their solve times.
+        #[arg(long, default_value_t = 5)]
+        repeats: usize,
     },
 }
 
@@ -185,7 +189,10 @@ struct TraversabilityArgs {
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     Pf,
+    /// A* with the paper's Euclidean heuristic (inadmissible where p < 1).
     Astar,
+    /// A* with the admissible heuristic p_min × distance: Dijkstra's optimum.
+    AstarAdmissible,
     Dijkstra,
     All,
 }
@@ -201,7 +208,7 @@ struct PlanArgs {
     /// The map; it is resampled to --grid cells for planning.
     #[command(flatten)]
     map: MapArgs,
-    /// Planning method (all = P-F, A* and Dijkstra on the same grid).
+    /// Planning method (all = P-F, both A*s and Dijkstra on the same grid).
     #[arg(long, value_enum, default_value = "all")]
     method: MethodArg,
     /// P-F basis: grid-cell indicators (Ulam) or Gaussian RBFs on the cell centres.
@@ -339,7 +346,8 @@ fn main() -> Result<()> {
             grid,
             rbf_grid,
             speed,
-        } => run_demo(&out, grid, rbf_grid, speed),
+            repeats,
+        } => run_demo(&out, grid, rbf_grid, speed, repeats),
     }
 }
 
@@ -498,6 +506,7 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
     let methods: Vec<Method> = match args.method {
         MethodArg::Pf => vec![Method::Pf],
         MethodArg::Astar => vec![Method::AStar],
+        MethodArg::AstarAdmissible => vec![Method::AStarAdmissible],
         MethodArg::Dijkstra => vec![Method::Dijkstra],
         MethodArg::All => Method::ALL.to_vec(),
     };
@@ -610,7 +619,8 @@ fn label(method: Method, options: &PlannerOptions) -> String {
             BasisKind::Indicator => format!("P-F indicator {n}²"),
             BasisKind::Rbf { .. } => format!("P-F RBF {n}²"),
         },
-        Method::AStar => format!("A* {n}²"),
+        Method::AStar => format!("A* paper heuristic {n}²"),
+        Method::AStarAdmissible => format!("A* admissible {n}²"),
         Method::Dijkstra => format!("Dijkstra {n}²"),
     }
 }
@@ -657,7 +667,10 @@ fn write_plan(stem: &Path, scenario: &str, plan: &Plan) -> Result<()> {
     Ok(())
 }
 
-fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> {
+fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64, repeats: usize) -> Result<()> {
+    if repeats == 0 {
+        bail!("--repeats must be at least 1");
+    }
     fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let base = PlannerOptions {
         grid_size: grid,
@@ -670,12 +683,13 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> 
         ..base.clone()
     };
     let runs: Vec<(Method, &PlannerOptions)> = vec![
+        (Method::AStar, &base),
+        (Method::AStarAdmissible, &base),
+        (Method::Dijkstra, &base),
         (Method::Pf, &base),
         (Method::Pf, &rbf),
-        (Method::AStar, &base),
-        (Method::Dijkstra, &base),
     ];
-    let bar = ProgressBar::new((SCENARIO_NAMES.len() * runs.len()) as u64);
+    let bar = ProgressBar::new((SCENARIO_NAMES.len() * runs.len() * repeats) as u64);
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} [{elapsed}]")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -683,7 +697,6 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> 
     let mut rows = Vec::new();
     for name in SCENARIO_NAMES {
         let scenario = scenarios::by_name(name)?;
-        let mut planner = Planner::new(scenario.map.clone(), scenario.traversability, grid)?;
         let mut drawn = Vec::new();
         let mut notes = Vec::new();
         for (method, options) in &runs {
@@ -693,33 +706,52 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> 
             };
             let method_label = label(*method, &options);
             bar.set_message(format!("{name}: {method_label}"));
-            let result = planner.plan(
-                scenario.start,
-                scenario.start_yaw,
-                &scenario.goal,
-                *method,
-                &options,
-            );
-            let outcome = match result {
-                Ok(plan) => {
+            let mut plans = Vec::with_capacity(repeats);
+            let mut failure = None;
+            for _ in 0..repeats {
+                // A fresh planner each time: P-F builds its generators in every repeat, so its
+                // time is that of a first request on the map, like the graph searches'.
+                let result = Planner::new(
+                    scenario.map.clone(),
+                    scenario.traversability,
+                    options.grid_size,
+                )
+                .and_then(|mut planner| {
+                    planner.plan(
+                        scenario.start,
+                        scenario.start_yaw,
+                        &scenario.goal,
+                        *method,
+                        &options,
+                    )
+                });
+                bar.inc(1);
+                match result {
+                    Ok(plan) => plans.push(plan),
+                    Err(e) => {
+                        failure = Some(e.to_string());
+                        break;
+                    }
+                }
+            }
+            let outcome = match (failure, plans.first()) {
+                (None, Some(first)) => {
                     let file_label = method_label
                         .replace(['²', '*'], "")
                         .replace(' ', "_")
                         .to_lowercase();
-                    write_plan(&out.join(format!("{name}_{file_label}")), name, &plan)?;
+                    write_plan(&out.join(format!("{name}_{file_label}")), name, first)?;
                     drawn.push(PlotPath {
                         label: method_label.clone(),
-                        points: plan.path.clone(),
-                        metrics: Some(plan.metrics),
+                        points: first.path.clone(),
+                        metrics: Some(first.metrics),
                     });
-                    Ok(RowData {
-                        metrics: plan.metrics,
-                        solve_time_s: plan.solve_time_s,
-                    })
+                    Ok(row_data(&plans))
                 }
-                Err(e) => {
-                    notes.push(format!("{method_label}: failed: {e}"));
-                    Err(e.to_string())
+                (failure, _) => {
+                    let reason = failure.unwrap_or_else(|| "no plan".to_string());
+                    notes.push(format!("{method_label}: failed: {reason}"));
+                    Err(reason)
                 }
             };
             rows.push(ReportRow {
@@ -728,7 +760,6 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> 
                 is_reference: *method == Method::Dijkstra,
                 outcome,
             });
-            bar.inc(1);
         }
         plot_plans(
             &out.join(format!("{name}.png")),
@@ -742,10 +773,33 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> 
     }
     bar.finish_and_clear();
     let table = markdown_table(&rows);
+    let spread = rows
+        .iter()
+        .filter_map(|r| r.outcome.as_ref().ok())
+        .map(|d| d.metrics_spread)
+        .fold(0.0, f64::max);
+    let repeatability = if spread == 0.0 {
+        "every repeat returned the same path".to_string()
+    } else {
+        format!("the repeats' ∫p ds differed by up to {spread:.1e} (relative); the table shows the first")
+    };
     let report = format!(
-        "# P-F planner demo\n\nAll methods on all scenarios; ∫p ds is measured with the same quadrature \
-         on every path (bilinear p of the map, trapezoid rule, step ≤ resolution/8). Grid {grid}² for \
-         P-F indicator and the graph baselines (8-connected), {rbf_grid}² RBF centres for P-F RBF.\n\n{table}\n{}\n",
+        "# P-F planner demo\n\n\
+         Every method on the paper's scenarios, on the same cost: the planning grid's p (edge weight \
+         p(source cell) × step on the graph). ∫p ds, length, clearance and slope are measured on \
+         the map with the same quadrature on every path (bilinear p, trapezoid rule, step ≤ \
+         resolution/8); max slope is the steepest terrain inclination under the path. Grid {grid}² \
+         for P-F indicator and the graph searches (8-connected), {rbf_grid}² RBF centres for P-F \
+         RBF (Shepard transfer generators), P-F with the exact solver and the uniform start \
+         density.\n\n\
+         - A* paper heuristic: Euclidean distance to the goal centre, as in the paper; it \
+         over-estimates the cost-to-go where p < 1, so its path is not optimal.\n\
+         - A* admissible: p_min × distance beyond the goal cells, consistent with the edge \
+         weights, so its cost is Dijkstra's optimum (tested to 1e-9).\n\
+         - Dijkstra: the optimum on the graph, the reference of the ratio column.\n\n\
+         Each method planned {repeats} times from scratch (P-F builds its generators every time); \
+         solve time is the range over the repeats, wall clock on this machine; {repeatability}.\n\n\
+         {table}\n{}\n",
         SCENARIO_NAMES.iter().map(|n| format!("![{n}]({n}.png)\n")).collect::<String>()
     );
     let report_path = out.join("report.md");
@@ -754,4 +808,29 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64) -> Result<()> 
     print!("{table}");
     println!("report -> {}", report_path.display());
     Ok(())
+}
+
+/// The table's numbers of one method over its repeats (at least one plan).
+fn row_data(plans: &[Plan]) -> RowData {
+    let first = &plans[0];
+    let metrics_spread = plans
+        .iter()
+        .map(|p| {
+            (p.metrics.cost_integral - first.metrics.cost_integral).abs()
+                / first.metrics.cost_integral.abs().max(f64::MIN_POSITIVE)
+        })
+        .fold(0.0, f64::max);
+    let generator_times_s = first.lp.as_ref().map(|_| {
+        plans
+            .iter()
+            .filter_map(|p| p.lp.as_ref().map(|lp| lp.generator_time_s))
+            .collect()
+    });
+    RowData {
+        metrics: first.metrics,
+        metrics_spread,
+        solve_times_s: plans.iter().map(|p| p.solve_time_s).collect(),
+        generator_times_s,
+        expanded: first.expanded,
+    }
 }

@@ -1,4 +1,5 @@
 //! Graph-search baselines on the planning grid: Dijkstra, A* with the paper's Euclidean heuristic,
+//! A* with an admissible and consistent heuristic (same optimum as Dijkstra, fewer expansions),
 //! and cost-to-go to a target set (the reference the P-F LP optimum is checked against).
 //!
 //! Graph: one node per free cell; an edge to each 4- or 8-neighbour that is free, with weight
@@ -150,7 +151,7 @@ pub fn dijkstra_path(
     goal: &GoalRegion,
     conn: Connectivity,
 ) -> Result<GraphPath, PlanError> {
-    search(grid, start, goal, conn, |_| 0.0)
+    search(grid, start, goal, conn, |_: &[usize]| |_: Point| 0.0)
 }
 
 /// A* with the plain Euclidean distance to the goal centre as heuristic: the paper's baseline.
@@ -164,9 +165,83 @@ pub fn astar_path(
     conn: Connectivity,
 ) -> Result<GraphPath, PlanError> {
     let center = goal.center;
-    search(grid, start, goal, conn, move |p: Point| {
-        (p[0] - center[0]).hypot(p[1] - center[1])
+    search(grid, start, goal, conn, |_: &[usize]| {
+        move |p: Point| (p[0] - center[0]).hypot(p[1] - center[1])
     })
+}
+
+/// A* with an admissible and consistent heuristic: it returns a path of Dijkstra's optimal cost
+/// (up to floating-point rounding) while expanding no more nodes than Dijkstra.
+///
+/// Heuristic: `h(x) = p_min · max(0, ‖x − goal.center‖ − R)`, where
+/// - `p_min` is the smallest p over the free cells of this grid (≥ the traversability model's
+///   p_floor > 0): every edge leaves a free cell, so every edge weight `p(u)·step(u, v)` is at
+///   least `p_min · ‖c_u − c_v‖` (a step is exactly the distance between the two cell centres);
+/// - `R` is the largest distance from the goal centre to the centre of a free goal cell of
+///   [`PlanningGrid::goal_cells`] (at most `max(radius, cell_size·√2/2)`: those are the cells
+///   whose centre lies in the disc plus the cell containing the centre), so `h = 0` on every
+///   goal cell and, by the triangle inequality, `h(x) ≤ p_min · ‖x − c_g‖` for every goal cell g.
+///
+/// Consistency: `D(x) = max(0, ‖x − center‖ − R)` is 1-Lipschitz, so for every edge u → v
+/// `h(u) − h(v) ≤ p_min·‖c_u − c_v‖ ≤ p(u)·step(u, v)`. A consistent heuristic that vanishes on
+/// the targets is admissible, and graph-search A* that never reopens closed nodes is then
+/// optimal. Each node costs O(1) to evaluate, whatever the goal's size.
+pub fn astar_admissible_path(
+    grid: &PlanningGrid,
+    start: Point,
+    goal: &GoalRegion,
+    conn: Connectivity,
+) -> Result<GraphPath, PlanError> {
+    search(grid, start, goal, conn, |targets: &[usize]| {
+        let heuristic = AdmissibleHeuristic::from_targets(grid, goal.center, targets);
+        move |p: Point| heuristic.at(p)
+    })
+}
+
+/// The heuristic of [`astar_admissible_path`]: a lower bound on the cost-to-go from any point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdmissibleHeuristic {
+    /// Smallest p over the free cells of the grid.
+    pub p_min: f64,
+    /// Goal centre.
+    pub center: Point,
+    /// Largest distance from `center` to the centre of a free goal cell.
+    pub reach: f64,
+}
+
+impl AdmissibleHeuristic {
+    /// The heuristic towards the free goal cells `targets` (as [`PlanningGrid::goal_cells`]
+    /// returns them) of the goal centred at `center`. With no target it is 0 everywhere.
+    pub fn from_targets(grid: &PlanningGrid, center: Point, targets: &[usize]) -> Self {
+        let reach = targets
+            .iter()
+            .map(|&t| {
+                let c = grid.center_of_index(t);
+                (c[0] - center[0]).hypot(c[1] - center[1])
+            })
+            .fold(0.0, f64::max);
+        // 0 without a free cell (nothing to search then): the heuristic stays finite.
+        let p_min = grid
+            .cost
+            .iter()
+            .zip(&grid.blocked)
+            .filter(|(_, &blocked)| !blocked)
+            .map(|(&p, _)| p)
+            .reduce(f64::min)
+            .unwrap_or(0.0);
+        let p_min = if targets.is_empty() { 0.0 } else { p_min };
+        Self {
+            p_min,
+            center,
+            reach,
+        }
+    }
+
+    /// `p_min · max(0, ‖p − center‖ − reach)`.
+    pub fn at(&self, p: Point) -> f64 {
+        let distance = (p[0] - self.center[0]).hypot(p[1] - self.center[1]);
+        self.p_min * (distance - self.reach).max(0.0)
+    }
 }
 
 /// Checks the start and the goal against the grid and returns (start cell, goal cells).
@@ -198,14 +273,17 @@ pub fn endpoints(
     Ok((start_cell, targets))
 }
 
-fn search(
+/// Graph-search A* from `start` to the goal's cells; `make_heuristic` receives the free goal
+/// cells (after the endpoints are checked) and returns the heuristic at a cell centre.
+fn search<H: Fn(Point) -> f64>(
     grid: &PlanningGrid,
     start: Point,
     goal: &GoalRegion,
     conn: Connectivity,
-    heuristic: impl Fn(Point) -> f64,
+    make_heuristic: impl FnOnce(&[usize]) -> H,
 ) -> Result<GraphPath, PlanError> {
     let (start_cell, targets) = endpoints(grid, start, goal)?;
+    let heuristic = make_heuristic(&targets);
     let mut is_target = vec![false; grid.len()];
     for &t in &targets {
         is_target[t] = true;

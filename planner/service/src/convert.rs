@@ -423,6 +423,26 @@ pub trait MapSource {
     fn map_by_seq(&self, seq: i64) -> Option<(i64, Arc<ReceivedMap>)>;
 }
 
+/// The wire code (`plan_request_t.METHOD_*`) of every planning method: the one table between the
+/// schema's constants and [`Method`] (a test checks it covers [`Method::ALL`] once each).
+pub const METHOD_CODES: [(i8, Method); 4] = [
+    (PlanRequest::METHOD_PF, Method::Pf),
+    (PlanRequest::METHOD_ASTAR, Method::AStar),
+    (PlanRequest::METHOD_DIJKSTRA, Method::Dijkstra),
+    (
+        PlanRequest::METHOD_ASTAR_ADMISSIBLE,
+        Method::AStarAdmissible,
+    ),
+];
+
+/// The method of a wire code, `None` for a code the schema does not define.
+pub fn method_of_code(code: i8) -> Option<Method> {
+    METHOD_CODES
+        .iter()
+        .find(|(known, _)| *known == code)
+        .map(|&(_, method)| method)
+}
+
 /// Checks a decoded request field by field and resolves its map.
 pub fn validate_request(
     msg: &PlanRequest,
@@ -437,16 +457,17 @@ pub fn validate_request(
         )));
     }
     check_frame(&msg.header.frame_id, "request").map_err(Rejection::invalid_request)?;
-    let method = match msg.method {
-        PlanRequest::METHOD_PF => Method::Pf,
-        PlanRequest::METHOD_ASTAR => Method::AStar,
-        PlanRequest::METHOD_DIJKSTRA => Method::Dijkstra,
-        other => {
-            return Err(Rejection::invalid_request(format!(
-                "unknown method {other} (0 pf, 1 astar, 2 dijkstra)"
-            )))
-        }
-    };
+    let method = method_of_code(msg.method).ok_or_else(|| {
+        let known: Vec<String> = METHOD_CODES
+            .iter()
+            .map(|(code, method)| format!("{code} {method}"))
+            .collect();
+        Rejection::invalid_request(format!(
+            "unknown method {} ({})",
+            msg.method,
+            known.join(", ")
+        ))
+    })?;
     for (name, value) in [
         ("start_x", msg.start_x),
         ("start_y", msg.start_y),
@@ -569,6 +590,24 @@ mod tests {
             method: PlanRequest::METHOD_DIJKSTRA,
             ..PlanRequest::default()
         }
+    }
+
+    #[test]
+    fn every_method_has_exactly_one_wire_code() {
+        for method in Method::ALL {
+            let codes: Vec<i8> = METHOD_CODES
+                .iter()
+                .filter(|(_, m)| *m == method)
+                .map(|&(code, _)| code)
+                .collect();
+            assert_eq!(codes.len(), 1, "{method}: codes {codes:?}");
+            assert_eq!(method_of_code(codes[0]), Some(method));
+        }
+        assert_eq!(METHOD_CODES.len(), Method::ALL.len());
+        let mut admissible = request();
+        admissible.method = PlanRequest::METHOD_ASTAR_ADMISSIBLE;
+        let v = validate_request(&admissible, &NoMaps, 100, &OptionDefaults::default()).unwrap();
+        assert_eq!(v.method, Method::AStarAdmissible);
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! The integration tests of `planner/core`, one test binary (each module was a test binary of its own).
 
+mod admissible_astar;
 mod bad_input;
 mod baselines;
 mod exact_solver;
@@ -9,6 +10,7 @@ mod import_dem;
 mod import_fixtures;
 mod maze;
 mod optimality;
+mod paper_lp;
 mod pf_scenarios;
 mod rbf_scale;
 mod scenarios;
