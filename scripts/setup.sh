@@ -93,7 +93,7 @@ if ((for_tests)); then
     first_targets=()
     second_targets=()
 else
-    first_targets=(--bin pf-plan --bin pf-planner-service --bin bundle-fmu)
+    first_targets=(--bin pf-plan --bin pf-planner-service --bin bundle-fmu --bin pf-robot)
     second_targets=(--lib --exclude lcm-codegen)
 fi
 log "cargo build --release --workspace (all but the FMU binary${first_targets[*]:+: ${first_targets[*]}})"

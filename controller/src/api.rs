@@ -552,8 +552,8 @@ pub enum ModelError {
     /// The URDF text could not be parsed.
     #[error("cannot parse URDF: {0}")]
     Parse(String),
-    /// The URDF file could not be read.
-    #[error("cannot read URDF file {path}: {reason}")]
+    /// A file (the robot config or its URDF) could not be read.
+    #[error("{path}: cannot read it ({reason})")]
     Io {
         /// File path.
         path: String,

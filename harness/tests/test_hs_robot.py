@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from pfnav_harness import paths
-from pfnav_harness.robot import PACKAGE_PATH_ENV, RobotConfigError, RobotDescription, package_roots_from_env, resolve_file
+from pfnav_harness.robot import PACKAGE_PATH_ENV, RobotConfigError, RobotDescription, package_roots_from_env
 from pfnav_harness.scenario import Terrain
 from pfnav_harness.world import Payload, QuadrupedWorld
 
@@ -102,20 +102,28 @@ def test_the_digest_follows_the_content(tmp_path: Path) -> None:
 
 
 def test_package_uris_resolve_through_the_first_root_holding_the_package(tmp_path: Path) -> None:
-    target = tmp_path / "second" / "pkg" / "urdf" / "r.urdf"
-    target.parent.mkdir(parents=True)
-    target.write_text("<robot/>")
+    """The URDF and its meshes by `package://` through the roots, as the controller's loader resolves them."""
+    sphere = '<collision><origin xyz="0 0 0" rpy="0 0 0"/><geometry><sphere radius="0.02"/></geometry></collision>'
+    mesh = '<collision><origin xyz="0 0 0" rpy="0 0 0"/><geometry><mesh filename="package://pkg/meshes/foot.stl"/></geometry></collision>'
+    urdf = (ROBOTS / "quadruped.urdf").read_text().replace(sphere, mesh, 1)
+    second = tmp_path / "second" / "pkg"
+    (second / "urdf").mkdir(parents=True)
+    (second / "meshes").mkdir()
+    (second / "urdf" / "r.urdf").write_text(urdf)
+    (second / "meshes" / "foot.stl").write_bytes(b"solid foot\nendsolid foot\n")
     (tmp_path / "first").mkdir()
-    roots = [tmp_path / "first", tmp_path / "second"]
-    assert resolve_file("package://pkg/urdf/r.urdf", roots, Path("/elsewhere")) == target
-    with pytest.raises(ValueError, match=f"package `other`.*{PACKAGE_PATH_ENV}"):
-        resolve_file("package://other/r.urdf", roots, tmp_path)
-    with pytest.raises(ValueError, match="must not leave"):
-        resolve_file("package://pkg/../pkg/urdf/r.urdf", roots, tmp_path)
-    with pytest.raises(ValueError, match="package://NAME/PATH"):
-        resolve_file("package://pkg", roots, tmp_path)
-    assert resolve_file("r.urdf", [], target.parent) == target
-    assert resolve_file(str(target), [], Path("/elsewhere")) == target
+    config = tmp_path / "robot.toml"
+    config.write_text(OUR_CONFIG.replace('urdf = "quadruped.urdf"', 'urdf = "package://pkg/urdf/r.urdf"'))
+    robot = RobotDescription.load(config, [tmp_path / "first", tmp_path / "second"])
+    assert robot.urdf_path == second / "urdf" / "r.urdf"
+    assert robot.package_dirs == (("pkg", second),)
+    assert robot.mesh_files == (second / "meshes" / "foot.stl",)
+    assert sorted(leg.has_foot_sphere for leg in robot.legs) == [False, True, True, True]
+    with pytest.raises(RobotConfigError, match=f"robot.toml: key `urdf`: package `pkg`.*{PACKAGE_PATH_ENV}"):
+        RobotDescription.load(config, [tmp_path / "first"])
+    config.write_text(OUR_CONFIG.replace('urdf = "quadruped.urdf"', 'urdf = "package://pkg/../pkg/urdf/r.urdf"'))
+    with pytest.raises(RobotConfigError, match="must not leave"):
+        RobotDescription.load(config, [tmp_path / "second"])
 
 
 def test_package_roots_come_from_the_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
@@ -157,33 +165,41 @@ def without_last(text: str, line: str) -> str:
     return head + tail
 
 
+# The messages are the controller's loader's (`pf-robot describe`): TOML errors carry the line.
 BAD_CONFIGS = {
-    "missing key": (OUR_CONFIG.replace('base_link = "base"\n', ""), ["missing key `base_link`"]),
-    "unknown key": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = 0.28\nfoot_radus = 0.02"), ["unknown key `foot_radus`"]),
-    "unknown leg key": (OUR_CONFIG.replace('foot_link = "FR_foot"', 'foot_link = "FR_foot"\nfoot = 1'), ["unknown key `legs.FR.foot`"]),
-    "two joints": (OUR_CONFIG.replace(FR_JOINTS, 'joints = ["FR_hip_abd_joint", "FR_knee_joint"]'), ["key `legs.FR.joints`", "exactly 3", "found 2"]),
+    "missing key": (OUR_CONFIG.replace('base_link = "base"\n', ""), ["missing field `base_link`"]),
+    "unknown key": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = 0.28\nfoot_radus = 0.02"), ["line 6", "unknown field `foot_radus`"]),
+    "unknown leg key": (OUR_CONFIG.replace('foot_link = "FR_foot"', 'foot_link = "FR_foot"\nfoot = 1'), ["unknown field `foot`", "expected one of `joints`"]),
+    "two joints": (OUR_CONFIG.replace(FR_JOINTS, 'joints = ["FR_hip_abd_joint", "FR_knee_joint"]'), ["line 10", "expected exactly 3 values, found 2"]),
     "missing urdf": (OUR_CONFIG.replace('urdf = "quadruped.urdf"', 'urdf = "elsewhere.urdf"'), ["key `urdf`", "elsewhere.urdf", "not a file"]),
     "package not found": (
         OUR_CONFIG.replace('urdf = "quadruped.urdf"', 'urdf = "package://no-such-package/robot.urdf"'),
         ["key `urdf`", "package `no-such-package`", PACKAGE_PATH_ENV],
     ),
-    "missing crouch": (without_last(OUR_CONFIG, "crouch = [0.0, 0.8, -1.6]"), ["missing key `legs.RL.crouch`", "add `crouch = [abduction, hip, knee]`"]),
-    "crouch of two angles": (OUR_CONFIG.replace("crouch = [0.0, 0.8, -1.6]", "crouch = [0.8, -1.6]", 1), ["key `legs.FR.crouch`", "exactly 3 numbers"]),
-    "crouch not numbers": (OUR_CONFIG.replace("crouch = [0.0, 0.8, -1.6]", 'crouch = ["a", "b", "c"]', 1), ["key `legs.FR.crouch`", "finite number"]),
-    "height as text": (OUR_CONFIG.replace("stand_height = 0.28", 'stand_height = "0.28"'), ["key `stand_height`", "finite number"]),
+    "one crouch missing": (without_last(OUR_CONFIG, "crouch = [0.0, 0.8, -1.6]"), ["key `legs.RL.crouch` is missing while other legs give one"]),
+    "no crouch": (OUR_CONFIG.replace("crouch = [0.0, 0.8, -1.6]\n", ""), ["missing key `legs.FR.crouch`", "add `crouch = [abduction, hip, knee]`"]),
+    "crouch of two angles": (OUR_CONFIG.replace("crouch = [0.0, 0.8, -1.6]", "crouch = [0.8, -1.6]", 1), ["crouch = [0.8, -1.6]", "expected exactly 3 values"]),
+    "crouch not numbers": (OUR_CONFIG.replace("crouch = [0.0, 0.8, -1.6]", 'crouch = ["a", "b", "c"]', 1), ["crouch = [", 'invalid type: string "a"']),
+    "crouch outside the limits": (
+        OUR_CONFIG.replace("crouch = [0.0, 0.8, -1.6]", "crouch = [0.0, 0.8, 1.6]", 1),
+        ["key `legs.FR.crouch`", "outside its limits"],
+    ),
+    "height as text": (OUR_CONFIG.replace("stand_height = 0.28", 'stand_height = "0.28"'), ["stand_height = \"0.28\"", "invalid type"]),
     "negative height": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = -0.28"), ["key `stand_height`", "positive"]),
-    "joints not a list": (OUR_CONFIG.replace(FR_JOINTS, 'joints = "FR_hip_abd_joint"'), ["key `legs.FR.joints`"]),
-    "leg not a table": (OUR_CONFIG + "\n[other]\nlegs = 1\n", ["unknown key `other`"]),
-    "missing leg": (OUR_CONFIG.split("[legs.RL]")[0], ["missing key `legs.RL`"]),
-    "unknown joint": (OUR_CONFIG.replace('"FR_knee_joint"', '"FR_elbow_joint"'), ["key `legs.FR.joints`", "joint `FR_elbow_joint` is not in"]),
-    "unknown foot": (OUR_CONFIG.replace('foot_link = "FR_foot"', 'foot_link = "FR_toe"'), ["key `legs.FR.foot_link`", "link `FR_toe`"]),
-    "unknown base": (OUR_CONFIG.replace('base_link = "base"', 'base_link = "body"'), ["key `base_link`", "link `body`"]),
-    "fixed joint as a leg joint": (OUR_CONFIG.replace('"FR_knee_joint"', '"FR_foot_fixed"'), ["key `legs.FR.joints`", "`FR_foot_fixed` is fixed"]),
+    "unreachable height": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = 0.9"), ["key `stand_height` = 0.9"]),
+    "joints not a list": (OUR_CONFIG.replace(FR_JOINTS, 'joints = "FR_hip_abd_joint"'), ["joints = \"FR_hip_abd_joint\"", "expected a sequence"]),
+    "leg not a table": (OUR_CONFIG + "\n[other]\nlegs = 1\n", ["unknown field `other`"]),
+    "missing leg": (OUR_CONFIG.split("[legs.RL]")[0], ["missing field `RL`"]),
+    "unknown joint": (OUR_CONFIG.replace('"FR_knee_joint"', '"FR_elbow_joint"'), ["quadruped.urdf", "joint `FR_elbow_joint`"]),
+    "unknown foot": (OUR_CONFIG.replace('foot_link = "FR_foot"', 'foot_link = "FR_toe"'), ["quadruped.urdf", "link `FR_toe`"]),
+    "unknown base": (OUR_CONFIG.replace('base_link = "base"', 'base_link = "body"'), ["quadruped.urdf", "base link `body`"]),
+    "fixed joint as a leg joint": (OUR_CONFIG.replace('"FR_knee_joint"', '"FR_foot_fixed"'), ["quadruped.urdf", "leg FR", "FR_foot_fixed"]),
     "joint named twice": (OUR_CONFIG.replace('"FL_knee_joint"', '"FR_knee_joint"'), ["joint `FR_knee_joint` is named by two legs"]),
-    "knee direction": (OUR_CONFIG.replace('knee_points = "backward"', 'knee_points = "up"', 1), ["key `legs.FR.knee_points`"]),
+    "knee direction": (OUR_CONFIG.replace('knee_points = "backward"', 'knee_points = "up"', 1), ["unknown variant `up`, expected `backward` or `forward`"]),
     "contradicting foot radius": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = 0.28\nfoot_radius = 0.03"), ["`foot_radius` = 0.03 contradicts"]),
-    "limits of two values": (OUR_CONFIG + "\n[limits]\neffort = [1.0, 2.0]\n", ["key `limits.effort`", "exactly 3"]),
-    "not TOML": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = "), ["not valid TOML"]),
+    "limits of two values": (OUR_CONFIG + "\n[limits]\neffort = [1.0, 2.0]\n", ["effort = [1.0, 2.0]", "expected exactly 3 values"]),
+    "unknown tuning field": (OUR_CONFIG + "\n[tuning]\nswing_hight = 0.1\n", ["key `tuning.swing_hight` is not a controller config field"]),
+    "not TOML": (OUR_CONFIG.replace("stand_height = 0.28", "stand_height = "), ["TOML parse error at line 5"]),
 }
 
 
@@ -204,12 +220,12 @@ def test_bad_urdfs_and_files_are_named(tmp_path: Path) -> None:
     with pytest.raises(RobotConfigError, match=r"robot.toml: cannot read it"):
         RobotDescription.load(tmp_path / "robot.toml")
     broken = copy_our_robot(tmp_path / "broken", urdf_text=urdf[: len(urdf) // 2])
-    with pytest.raises(RobotConfigError, match=r"quadruped.urdf: cannot parse it"):
+    with pytest.raises(RobotConfigError, match=r"quadruped.urdf: cannot parse URDF"):
         RobotDescription.load(broken)
     meshed = urdf.replace('<sphere radius="0.02"/>', '<mesh filename="meshes/foot.stl"/>', 1)
     assert meshed != urdf
     missing_mesh = copy_our_robot(tmp_path / "mesh", urdf_text=meshed)
-    with pytest.raises(RobotConfigError, match=r"quadruped.urdf: mesh `meshes/foot.stl` resolves to .*foot.stl, which is not a file"):
+    with pytest.raises(RobotConfigError, match=r"quadruped.urdf: URDF is missing a mesh: `meshes/foot.stl` resolves to .*foot.stl, which is not a file"):
         RobotDescription.load(missing_mesh)
 
 

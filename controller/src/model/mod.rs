@@ -21,6 +21,7 @@ mod kinematics;
 
 pub use kinematics::FootKinematics;
 mod urdf;
+pub(crate) use urdf::foot_sphere_radius;
 pub(crate) use urdf::unusable_inertials;
 
 #[cfg(test)]

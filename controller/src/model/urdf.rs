@@ -539,7 +539,7 @@ fn path_joint<'a>(
 }
 
 /// Radius of the sphere collision of the foot link centred on the foot point, if there is one.
-fn foot_sphere_radius(link: &urdf_rs::Link, offset: [f64; 3]) -> Option<f64> {
+pub(crate) fn foot_sphere_radius(link: &urdf_rs::Link, offset: [f64; 3]) -> Option<f64> {
     link.collision.iter().find_map(|c| match c.geometry {
         urdf_rs::Geometry::Sphere { radius }
             if (Vector3::from(*c.origin.xyz) - Vector3::from(offset)).norm() < 1e-6 =>

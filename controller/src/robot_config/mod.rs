@@ -4,6 +4,7 @@
 //! is an error rather than a silently ignored setting.
 
 pub mod check;
+pub mod describe;
 pub mod foot_mesh;
 mod package_path;
 pub mod srdf;

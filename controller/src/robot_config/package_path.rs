@@ -57,6 +57,14 @@ impl PackagePath {
         }
     }
 
+    /// The folder of package `name`: `ROOT/name` of the first root that has one.
+    pub fn package_dir(&self, name: &str) -> Option<PathBuf> {
+        self.roots
+            .iter()
+            .map(|root| root.join(name))
+            .find(|dir| dir.is_dir())
+    }
+
     fn resolve_package(&self, reference: &str, rest: &str) -> Result<PathBuf, String> {
         let (package, inner) = rest
             .split_once('/')
@@ -70,10 +78,7 @@ impl PackagePath {
                 "`{reference}`: the path inside the package must be relative and must not leave it"
             ));
         }
-        self.roots
-            .iter()
-            .map(|root| root.join(package))
-            .find(|dir| dir.is_dir())
+        self.package_dir(package)
             .map(|dir| dir.join(inner))
             .ok_or_else(|| {
                 format!(

@@ -584,3 +584,46 @@ fn knee_bend_is_zero_where_the_leg_is_straight_and_every_stand_is_clear_of_the_k
         }
     }
 }
+
+#[test]
+fn describe_resolves_every_config_as_the_model_loads_it() {
+    use quad_controller::robot_config::describe::describe_robot_config;
+    let packages = package_path();
+    for robot in load_all() {
+        let described = describe_robot_config(&robot.path, &packages)
+            .unwrap_or_else(|e| panic!("{}: {e}", robot.path.display()));
+        let name = robot.path.display();
+        assert_eq!(described.urdf, robot.urdf, "{name}");
+        assert_eq!(described.foot_radius, robot.model.foot_radius(), "{name}");
+        assert_eq!(described.stand_height, robot.config.stand_height, "{name}");
+        let labels: Vec<&str> = described.legs.iter().map(|l| l.label).collect();
+        assert_eq!(labels, ["FR", "FL", "RR", "RL"], "{name}");
+        for (leg, described_leg) in Leg::ALL.iter().zip(&described.legs) {
+            assert_eq!(
+                described_leg.joints,
+                robot.config.legs.get(*leg).joints,
+                "{name}"
+            );
+        }
+        assert!(
+            robot
+                .config
+                .massless_links
+                .iter()
+                .all(|l| described.massless_links.contains(l)),
+            "{name}"
+        );
+        assert!(
+            !described.mesh_files.is_empty(),
+            "{name}: the package URDFs name meshes"
+        );
+        assert!(described.mesh_files.iter().all(|m| m.is_file()), "{name}");
+        assert!(
+            described
+                .package_dirs
+                .iter()
+                .any(|(package, dir)| package == "example-robot-data" && dir.is_dir()),
+            "{name}"
+        );
+    }
+}

@@ -54,6 +54,16 @@ def pf_plan_path() -> Path:
     )
 
 
+def pf_robot_path() -> Path:
+    """`pf-robot`, whose `describe` reads robot configs for the harness (the controller's loader)."""
+    return _artifact(
+        "PFNAV_PF_ROBOT",
+        repo_root() / "target" / "release" / "pf-robot",
+        "pf-robot binary (it reads robot configs with the controller's loader)",
+        "build it with `cargo build --release -p fmu-tools --bin pf-robot`",
+    )
+
+
 def default_robot_config_path() -> Path:
     """Our robot's config, the robot the default FMU is built for."""
     return repo_root() / "robot" / "quadruped.toml"

@@ -1,19 +1,23 @@
-//! Checks a robot config before anything runs on it.
+//! Checks a robot config before anything runs on it, and describes it to the simulation harness.
 //!
 //! ```sh
 //! pf-robot check robot/third_party/hyq.toml
 //! pf-robot check myrobot.toml --srdf myrobot_description/srdf/myrobot.srdf
+//! pf-robot describe robot/third_party/go1.toml
 //! ```
-//! Prints every problem found (each with the config line that fixes it), the values proposed
+//! `check` prints every problem found (each with the config line that fixes it), the values proposed
 //! from the SRDF `standing` pose next to the URDF (stand height, knee branches, crouch) and how
 //! the default tuning carries over to the robot. `package://` resolves through
-//! `PFNAV_PACKAGE_PATH`. Exit status: 0 no problem, 1 problems found.
+//! `PFNAV_PACKAGE_PATH`. Exit status: 0 no problem, 1 problems found. `describe` prints the config
+//! as the controller's loader resolves it, as JSON (the simulation harness builds its robot from
+//! it); exit status 2 with the loader's error on stderr when the config cannot be loaded.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use quad_controller::robot_config::check::{check_robot_config, RobotCheck};
+use quad_controller::robot_config::describe::describe_robot_config;
 use quad_controller::PackagePath;
 
 /// Tools for robot configs.
@@ -35,7 +39,16 @@ enum Command {
         #[arg(long)]
         srdf: Option<PathBuf>,
     },
+    /// The config as the controller's loader resolves it (URDF and mesh paths, foot radius,
+    /// massless links, legs), as JSON on stdout.
+    Describe {
+        /// The robot config (TOML).
+        config: PathBuf,
+    },
 }
+
+/// Exit status of `describe` for a config the loader refuses.
+const CONFIG_REFUSED: u8 = 2;
 
 fn print_report(config: &std::path::Path, check: &RobotCheck) {
     println!("pf-robot check {}", config.display());
@@ -93,6 +106,26 @@ fn main() -> ExitCode {
                 ExitCode::SUCCESS
             } else {
                 ExitCode::FAILURE
+            }
+        }
+        Command::Describe { config } => {
+            match describe_robot_config(&config, &PackagePath::from_env()) {
+                Ok(description) => {
+                    let written =
+                        serde_json::to_writer_pretty(std::io::stdout().lock(), &description);
+                    match written {
+                        Ok(()) => ExitCode::SUCCESS,
+                        // A reader that went away (a closed pipe) is not worth a panic.
+                        Err(e) => {
+                            eprintln!("cannot write the description: {e}");
+                            ExitCode::FAILURE
+                        }
+                    }
+                }
+                Err(e) => {
+                    eprintln!("{e}");
+                    ExitCode::from(CONFIG_REFUSED)
+                }
             }
         }
     }
