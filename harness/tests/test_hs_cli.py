@@ -75,9 +75,9 @@ def test_bad_robot_configs_fail_before_any_work(fake_tools: dict[str, str], tmp_
     (bad.parent / "quadruped.urdf").write_bytes((ours.parent / "quadruped.urdf").read_bytes())
     bad.write_text(ours.read_text().replace("stand_height = 0.28", "stand_heigth = 0.28"))
     proc = run_cli(fake_tools, "demo", "--robot", str(bad), "--out", str(tmp_path / "out"), cwd=tmp_path)
-    assert_clean_failure(proc, 7, "unknown key `stand_heigth`")
+    assert_clean_failure(proc, 7, "unknown field `stand_heigth`")
     proc = run_cli({**fake_tools, "PFNAV_ROBOT": str(bad)}, "run", "--scenario", "ramp", "--out", str(tmp_path / "out"), cwd=tmp_path)
-    assert_clean_failure(proc, 7, "unknown key `stand_heigth`")
+    assert_clean_failure(proc, 7, "unknown field `stand_heigth`")
     bad.write_text(ours.read_text().replace("stand_height = 0.28", "stand_height = 0.3"))
     env = {**fake_tools, "PFNAV_BUNDLE_FMU": str(tmp_path / "no-bundle-fmu")}
     proc = run_cli(env, "run", "--scenario", "ramp", "--robot", str(bad), "--out", str(tmp_path / "out"), cwd=tmp_path)
