@@ -20,6 +20,7 @@ from .engine import DEFAULT_ENGINE, ENGINE_LABELS, ENGINE_NAMES
 from .errors import HarnessError
 from .fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
+from .replay.command import add_replay_command, run_replay
 from .robot_fmu import robot_and_fmu
 from .scenario import paper_scenario_names
 from .sensing import PLANNER_DEFAULT
@@ -114,6 +115,11 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--service-timeout", type=float, default=15.0, help="seconds to wait for the started service's first status (default 15)")
     p.add_argument("--retries", type=int, default=2, help="plan request retries after a timeout (default 2)")
     p.add_argument("--lcm-log", action="store_true", help="also write OUT/logs/SCENARIO_METHOD.lcmlog (robot state, 100 Hz) for lcm-logplayer")
+    p.add_argument(
+        "--record",
+        action="store_true",
+        help="after each run, write its Rerun recording OUT/recordings/SCENARIO_LABEL.rrd from the log (open with `rerun FILE.rrd`)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--jobs",
@@ -221,6 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="also publish the report's tables as docs/results/NAME.md, stamped with commit, machine and date",
     )
     _add_common(demo)
+    add_replay_command(sub)
     return parser
 
 
@@ -488,6 +495,12 @@ def _run_one(context: RunContext, job: RunJob) -> RunRecord:
             field,
             feedback_field=job.answer.field,
         )
+    if args.record:
+        from .replay.run_media import write_run_media
+
+        # After the run, from its log: the co-simulation loop pays nothing for it.
+        field = job.answer.field if job.answer is not None else None
+        write_run_media(out, log_file.stem, outcome.result.log, job.scenario, context.robot, field, record=True)
     return outcome.record(str(log_file.relative_to(out)))
 
 
@@ -676,7 +689,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(format="pfnav-demo: %(message)s")
     logging.getLogger("pfnav_harness").setLevel(logging.INFO)
     try:
-        return execute(args)
+        return run_replay(args) if args.command == "replay" else execute(args)
     except HarnessError as err:
         print(f"pfnav-demo: error: {err}", file=sys.stderr)
         return err.exit_code

@@ -1,0 +1,199 @@
+"""Replays of a run from its log: the Rerun recording, read back with Rerun's own reader."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from pfnav_harness import cli, paths
+from pfnav_harness.feedback_field import FeedbackField
+from pfnav_harness.replay.kinematics import LegKinematics
+from pfnav_harness.replay.recording import write_recording
+from pfnav_harness.replay.run_log import frame_steps, load_run_log
+from pfnav_harness.robot import LEG_LABELS, RobotDescription
+from pfnav_harness.scenario import Scenario, load_scenario
+
+DURATION = 2.0
+DT = 0.001
+
+
+@pytest.fixture(scope="module")
+def robot() -> RobotDescription:
+    return RobotDescription.load(paths.default_robot_config_path())
+
+
+def synthetic_log(scenario: Scenario, robot: RobotDescription, online: bool = False) -> dict[str, np.ndarray]:
+    """A short log in the co-simulation's format: the robot in its crouch, sliding along x over the terrain with a gait-like contact pattern."""
+    t = np.arange(0.0, DURATION, DT)
+    n = len(t)
+    x = scenario.start[0] + 0.3 * t
+    y = np.full(n, scenario.start[1])
+    base_pos = np.stack([x, y, scenario.terrain.height(x, y) + 0.3], axis=1)
+    base_quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+    q = np.tile(robot.crouch, (n, 1)) + 0.1 * np.sin(2.0 * np.pi * t)[:, None]
+    contact = ((np.floor(t / 0.25)[:, None] + np.arange(4)) % 2).astype(np.int8)
+    log: dict[str, np.ndarray] = {
+        "t": t,
+        "base_pos": base_pos,
+        "base_quat": base_quat,
+        "base_vel": np.zeros((n, 3)),
+        "base_omega": np.zeros((n, 3)),
+        "q": q,
+        "dq": np.zeros((n, 12)),
+        "tau": np.sin(t)[:, None] * np.arange(1, 13),
+        "ref": np.concatenate([base_pos + np.array([0.05, 0.0, 0.0]), np.zeros((n, 7))], axis=1),
+        "forces": np.tile([0.0, 0.0, 30.0], (n, 4)) * contact.repeat(3, axis=1),
+        "contact_scheduled": contact,
+        "contact_actual": contact,
+        "fsm": np.where(t < 0.5, 1, 2).astype(np.int8),
+        "fsm_damping": np.array(4),
+        "mpc_solve_time": np.where(np.arange(n) % 97 == 0, 0.004, 0.001),
+        "walk_start": np.array(0.5),
+        "plan_x": np.linspace(scenario.start[0], scenario.goal.center[0], 20),
+        "plan_y": np.linspace(scenario.start[1], scenario.goal.center[1], 20),
+        "est_pos": base_pos + np.array([0.01, -0.01, 0.0]),
+        "est_rpy": np.zeros((n, 3)),
+        "push_force": np.where((t > 1.0) & (t < 1.2), 1.0, 0.0)[:, None] * [0.0, 60.0, 0.0],
+    }
+    if online:
+        log["replan_t_apply"] = np.array([0.7, np.nan, 1.4])
+        log["replan_in_use"] = np.array([True, False, True])
+        log["replan_path_lengths"] = np.array([5, 3, 4])
+        log["replan_path_x"] = np.linspace(0.5, 2.5, 12)
+        log["replan_path_y"] = np.full(12, 1.0)
+        heights = scenario.terrain.heights.copy()
+        heights[:, 15:] = np.nan
+        log["map_heights_final"] = heights
+        log["map_variances_final"] = np.where(np.isfinite(heights), 0.01, np.inf)
+    return log
+
+
+def read_chunks(path: Path) -> dict[str, list[pa.RecordBatch]]:
+    """The recording's chunks by entity path, through Rerun's own reader."""
+    chunks: dict[str, list[pa.RecordBatch]] = {}
+    for chunk in RrdReader(path).store().stream():
+        chunks.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
+    return chunks
+
+
+def sim_times(batches: list[pa.RecordBatch]) -> np.ndarray:
+    times = [b.column("sim_time").cast(pa.int64()).to_numpy() for b in batches if "sim_time" in b.schema.names]
+    return np.sort(np.concatenate(times)) * 1e-9
+
+
+def column(batches: list[pa.RecordBatch], name: str) -> list:
+    return [value for b in batches if name in b.schema.names for value in b.column(name).to_pylist()]
+
+
+def test_recording_holds_the_run_on_the_simulation_clock(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot)
+    summary = write_recording(log, ramp_scenario, robot, tmp_path / "ramp_pf.rrd", "ramp_pf")
+    chunks = read_chunks(summary.path)
+    expected = {
+        "/world/terrain",
+        "/world/plan",
+        "/world/goal",
+        "/world/feet",
+        "/world/ground_reaction_forces",
+        "/world/pushes",
+        "/world/walked",
+        "/world/estimate/path",
+        "/world/estimate/pose",
+        "/robot/base_pose",
+        "/plots/tracking_error",
+        "/plots/mpc_solve_time",
+        "/plots/fsm_state",
+        "/plots/estimate_error",
+        "/notes",
+        *(f"/robot/joints/{name}" for name in robot.joint_names),
+        *(f"/plots/joint_torque/{label}" for label in LEG_LABELS),
+    }
+    assert expected <= set(chunks), sorted(expected - set(chunks))
+    # The URDF's own geometry, base link included.
+    assert any(path.startswith("/robot/") and f"/{robot.base_link}/" in path for path in chunks)
+    # No feedback field was given and the run was offline: nothing claims otherwise.
+    assert not {"/world/feedback_field", "/world/replans", "/world/sensed_map"} & set(chunks)
+
+    steps = frame_steps(log["t"], 50.0)
+    pose_times = sim_times(chunks["/robot/base_pose"])
+    np.testing.assert_allclose(pose_times, log["t"][steps], atol=1e-9)
+    assert pose_times[0] == pytest.approx(log["t"][0]) and pose_times[-1] == pytest.approx(log["t"][-1])
+    assert summary.t_first == pytest.approx(log["t"][0]) and summary.t_last == pytest.approx(log["t"][-1])
+    translations = np.array(column(chunks["/robot/base_pose"], "Transform3D:translation")).reshape(-1, 3)
+    np.testing.assert_allclose(translations, log["base_pos"][steps], atol=1e-5)
+    series_times = sim_times(chunks["/plots/tracking_error"])
+    assert series_times[0] == pytest.approx(0.0) and series_times[-1] == pytest.approx(log["t"][-1])
+    assert len(series_times) == len(frame_steps(log["t"], 100.0))
+    # Every MPC spike (4 ms every 97 steps) survives the thinning to 100 Hz.
+    solve_ms = np.array(column(chunks["/plots/mpc_solve_time"], "Scalars:scalars")).ravel()
+    assert np.count_nonzero(solve_ms > 3.9) == len(np.unique(np.arange(0, len(log["t"]), 97) // 10))
+
+    # Feet: four per frame, green exactly where the log says the foot touches, at the kinematics' points.
+    feet = np.array(column(chunks["/world/feet"], "Points3D:positions")).reshape(len(steps), 4, 3)
+    expected_feet = LegKinematics(robot).leg_chains(log["base_pos"][steps], log["base_quat"][steps], log["q"][steps])[:, :, -1]
+    np.testing.assert_allclose(feet, expected_feet, atol=1e-5)
+    colours = np.array(column(chunks["/world/feet"], "Points3D:colors")).reshape(len(steps), 4)
+    touching = log["contact_actual"][steps].astype(bool)
+    assert len(np.unique(colours[touching])) == 1 and len(np.unique(colours[~touching])) == 1
+    assert colours[touching][0] != colours[~touching][0]
+
+
+def test_recording_of_an_online_run_with_its_field(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot, online=True)
+    shape = ramp_scenario.terrain.shape
+    cost = np.linspace(0.0, 2.0, shape[0] * shape[1]).reshape(shape)
+    cost[0, 0] = -1.0
+    field = FeedbackField(
+        origin=ramp_scenario.origin,
+        resolution=ramp_scenario.resolution,
+        dir_x=np.ones(shape),
+        dir_y=np.zeros(shape),
+        speed=np.full(shape, 0.3),
+        cost_to_go=cost,
+        goal=(*ramp_scenario.goal.center, ramp_scenario.goal.radius),
+    )
+    summary = write_recording(log, ramp_scenario, robot, tmp_path / "ramp_pf-online.rrd", "ramp_pf-online", field)
+    chunks = read_chunks(summary.path)
+    arrows = np.array(column(chunks["/world/feedback_field"], "Arrows3D:vectors")).reshape(-1, 3)
+    # Every reachable cell of the (small) map has its arrow, along +x.
+    assert len(arrows) == shape[0] * shape[1] - 1
+    np.testing.assert_allclose(arrows[:, 1:], 0.0)
+    # The two replans put in use, each from the time it was applied.
+    np.testing.assert_allclose(sim_times(chunks["/world/replans"]), [0.7, 1.4])
+    # The sensed map: the triangles whose corners were all seen (columns 0..14 of 30).
+    triangles = np.array(column(chunks["/world/sensed_map"], "Mesh3D:triangle_indices")).reshape(-1, 3)
+    assert len(triangles) == 2 * (shape[0] - 1) * (15 - 1)
+    notes = column(chunks["/notes"], "TextDocument:text")[0][0]
+    assert "only its state at the end" in notes and "feedback fields are not in the log" in notes
+
+
+def test_replay_command_writes_the_recording_beside_the_logs(
+    tmp_path: Path, scenario_writer: Callable[..., Path], robot: RobotDescription, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    heights = np.tile(0.1 + 0.1 * np.arange(30) * 0.1, (20, 1))
+    scenario = load_scenario(scenario_writer(out / "scenarios", "slope_test", heights, 0.1, start=(0.5, 1.0), goal=(2.5, 1.0)))
+    log_file = out / "logs" / "slope_test_pf.npz"
+    log_file.parent.mkdir(parents=True)
+    np.savez_compressed(log_file, **synthetic_log(scenario, robot))
+    assert cli.main(["replay", str(log_file), "--robot", str(robot.config_path)]) == 0
+    recording = out / "recordings" / "slope_test_pf.rrd"
+    assert recording.is_file()
+    assert "rerun " in capsys.readouterr().err
+    times = sim_times(read_chunks(recording)["/robot/base_pose"])
+    assert times[-1] == pytest.approx(load_run_log(log_file)["t"][-1])
+
+
+def test_replay_refuses_a_log_without_its_scenario(
+    tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log_file = tmp_path / "logs" / "nowhere_pf.npz"
+    log_file.parent.mkdir()
+    np.savez_compressed(log_file, **synthetic_log(ramp_scenario, robot))
+    assert cli.main(["replay", str(log_file)]) == 2
+    assert "nowhere.json" in capsys.readouterr().err
