@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
@@ -15,6 +17,7 @@ from pfnav_harness.feedback_field import FeedbackField
 from pfnav_harness.replay.kinematics import LegKinematics
 from pfnav_harness.replay.recording import write_recording
 from pfnav_harness.replay.run_log import frame_steps, load_run_log
+from pfnav_harness.replay.video import FPS, HEIGHT, WIDTH, render_video
 from pfnav_harness.robot import LEG_LABELS, RobotDescription
 from pfnav_harness.scenario import Scenario, load_scenario
 
@@ -181,9 +184,11 @@ def test_replay_command_writes_the_recording_beside_the_logs(
     log_file = out / "logs" / "slope_test_pf.npz"
     log_file.parent.mkdir(parents=True)
     np.savez_compressed(log_file, **synthetic_log(scenario, robot))
-    assert cli.main(["replay", str(log_file), "--robot", str(robot.config_path)]) == 0
+    video = tmp_path / "slope_test_pf.mp4"
+    assert cli.main(["replay", str(log_file), "--robot", str(robot.config_path), "--video", str(video)]) == 0
     recording = out / "recordings" / "slope_test_pf.rrd"
     assert recording.is_file()
+    assert int(str(video_stream(video)["nb_read_frames"])) > 0
     assert "rerun " in capsys.readouterr().err
     times = sim_times(read_chunks(recording)["/robot/base_pose"])
     assert times[-1] == pytest.approx(load_run_log(log_file)["t"][-1])
@@ -197,3 +202,48 @@ def test_replay_refuses_a_log_without_its_scenario(
     np.savez_compressed(log_file, **synthetic_log(ramp_scenario, robot))
     assert cli.main(["replay", str(log_file)]) == 2
     assert "nowhere.json" in capsys.readouterr().err
+
+
+def video_stream(path: Path) -> dict[str, object]:
+    """Codec, size and decoded frame count of the video's stream (ffprobe decodes every frame)."""
+    probe = subprocess.run(
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-count_frames",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=codec_name,width,height,nb_read_frames,pix_fmt",
+            "-of",
+            "json",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(probe.stdout)["streams"][0]
+
+
+def test_video_has_a_frame_per_sampled_step(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot)
+    summary = render_video(log, ramp_scenario, robot, tmp_path / "ramp_pf.mp4", "ramp_pf")
+    # A 2 s run fits into the longest video: it plays in real time, one frame per 1/FPS s, plus the last step.
+    assert summary.speed == 1.0
+    assert summary.frames == len(frame_steps(log["t"], FPS)) == round(DURATION * FPS) + 1
+    stream = video_stream(summary.path)
+    assert stream["codec_name"] == "h264" and stream["pix_fmt"] == "yuv420p"
+    assert (stream["width"], stream["height"]) == (WIDTH, HEIGHT)
+    assert int(str(stream["nb_read_frames"])) == summary.frames
+
+
+def test_long_runs_play_faster_within_the_longest_video(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot)
+    # The same log on a 40× slower clock: 80 simulated seconds.
+    log["t"] = log["t"] * 40.0
+    summary = render_video(log, ramp_scenario, robot, tmp_path / "slow.mp4", "slow")
+    assert summary.speed == pytest.approx(log["t"][-1] / 10.0)
+    assert summary.frames / FPS <= 10.0 + 1.0 / FPS
+    assert int(str(video_stream(summary.path)["nb_read_frames"])) == summary.frames

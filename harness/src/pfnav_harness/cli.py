@@ -120,6 +120,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="after each run, write its Rerun recording OUT/recordings/SCENARIO_LABEL.rrd from the log (open with `rerun FILE.rrd`)",
     )
+    p.add_argument("--video", action="store_true", help="after each run, render its video OUT/videos/SCENARIO_LABEL.mp4 from the log (needs ffmpeg)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--jobs",
@@ -495,12 +496,12 @@ def _run_one(context: RunContext, job: RunJob) -> RunRecord:
             field,
             feedback_field=job.answer.field,
         )
-    if args.record:
+    if args.record or args.video:
         from .replay.run_media import write_run_media
 
-        # After the run, from its log: the co-simulation loop pays nothing for it.
+        # After the run, in its worker, from its log: the co-simulation loop pays nothing for it.
         field = job.answer.field if job.answer is not None else None
-        write_run_media(out, log_file.stem, outcome.result.log, job.scenario, context.robot, field, record=True)
+        write_run_media(out, log_file.stem, outcome.result.log, job.scenario, context.robot, field, args.record, args.video, context.show_progress)
     return outcome.record(str(log_file.relative_to(out)))
 
 

@@ -1,4 +1,4 @@
-"""`pfnav-demo replay LOG`: a Rerun recording of a run from its saved log."""
+"""`pfnav-demo replay LOG`: a Rerun recording (and optionally a video) of a run from its saved log."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from .run_media import recording_path
 
 
 def add_replay_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    replay = sub.add_parser("replay", help="a Rerun recording of a run from its log OUT/logs/SCENARIO_LABEL.npz")
+    replay = sub.add_parser("replay", help="a Rerun recording (and optionally a video) of a run from its log OUT/logs/SCENARIO_LABEL.npz")
     replay.add_argument("log", type=Path, help="the run's log, as pfnav-demo writes it (OUT/logs/SCENARIO_LABEL.npz)")
     replay.add_argument("--out", type=Path, default=None, help="the recording to write (default: OUT/recordings/SCENARIO_LABEL.rrd beside the log's folder)")
     replay.add_argument(
@@ -28,6 +28,7 @@ def add_replay_command(sub: argparse._SubParsersAction[argparse.ArgumentParser])
         help="the robot config the run walked (default $PFNAV_ROBOT, else robot/quadruped.toml; the report names it)",
     )
     replay.add_argument("--field", type=Path, default=None, help="a P-F feedback field to draw over the terrain (`pf-plan plan --field-out FILE.npz`)")
+    replay.add_argument("--video", type=Path, default=None, metavar="FILE.mp4", help="also render the run's video (isometric view, MP4) to this file")
     replay.add_argument("--pose-rate", type=float, default=50.0, help="poses per simulated second in the recording (default 50)")
 
 
@@ -51,4 +52,9 @@ def run_replay(args: argparse.Namespace) -> int:
         f"{summary.pose_frames} poses); open it with `rerun {summary.path}`",
         file=sys.stderr,
     )
+    if args.video is not None:
+        from .video import render_video
+
+        video = render_video(log, scenario, robot, args.video, run_name)
+        print(f"video: {video.path} ({video.frames} frames, {video.width}x{video.height}, {video.speed:.1f}× speed)", file=sys.stderr)
     return 0

@@ -1,7 +1,7 @@
-"""What `pfnav-demo run|demo --record` writes for each run, after the run.
+"""What `pfnav-demo run|demo --record --video` writes for each run, after the run.
 
-Names follow the run's log: OUT/logs/NAME.npz gives OUT/recordings/NAME.rrd (NAME =
-SCENARIO_LABEL), so a report finds them from the log's name.
+Names follow the run's log: OUT/logs/NAME.npz gives OUT/recordings/NAME.rrd and
+OUT/videos/NAME.mp4 (NAME = SCENARIO_LABEL), so the HTML report finds them from the log's name.
 """
 
 from __future__ import annotations
@@ -16,10 +16,15 @@ from ..scenario import Scenario
 from .run_log import RunLog
 
 RECORDINGS_DIR = "recordings"
+VIDEOS_DIR = "videos"
 
 
 def recording_path(out: Path, run_name: str) -> Path:
     return out / RECORDINGS_DIR / f"{run_name}.rrd"
+
+
+def video_path(out: Path, run_name: str) -> Path:
+    return out / VIDEOS_DIR / f"{run_name}.mp4"
 
 
 @dataclass(frozen=True)
@@ -28,6 +33,8 @@ class RunMedia:
 
     recording: Path | None = None
     recording_seconds: float = 0.0
+    video: Path | None = None
+    video_seconds: float = 0.0
 
 
 def write_run_media(
@@ -38,14 +45,22 @@ def write_run_media(
     robot: RobotDescription,
     field: FeedbackField | None,
     record: bool,
+    video: bool,
+    show_progress: bool = False,
 ) -> RunMedia:
-    """The recording of one finished run, from its log."""
-    recording_file = None
-    recording_seconds = 0.0
+    """The recording and/or the video of one finished run, from its log."""
+    recording_file = video_file = None
+    recording_seconds = video_seconds = 0.0
     if record:
         from .recording import write_recording
 
         started = time.perf_counter()
         recording_file = write_recording(log, scenario, robot, recording_path(out, run_name), run_name, field).path
         recording_seconds = time.perf_counter() - started
-    return RunMedia(recording_file, recording_seconds)
+    if video:
+        from .video import render_video
+
+        started = time.perf_counter()
+        video_file = render_video(log, scenario, robot, video_path(out, run_name), run_name, show_progress).path
+        video_seconds = time.perf_counter() - started
+    return RunMedia(recording_file, recording_seconds, video_file, video_seconds)
