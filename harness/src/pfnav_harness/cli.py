@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from .cosim import CoSimConfig
     from .online import OnlineConfig
     from .pushes import PushSchedule
+    from .replay.run_media import MediaQueue
     from .report import RunRecord
     from .results_page import Stamp
     from .robot import RobotDescription
@@ -496,22 +497,18 @@ def _run_one(context: RunContext, job: RunJob) -> RunRecord:
             field,
             feedback_field=job.answer.field,
         )
-    if args.record or args.video:
-        from .replay.run_media import write_run_media
-
-        # After the run, in its worker, from its log: the co-simulation loop pays nothing for it.
-        field = job.answer.field if job.answer is not None else None
-        write_run_media(out, log_file.stem, outcome.result.log, job.scenario, context.robot, field, args.record, args.video, context.show_progress)
     return outcome.record(str(log_file.relative_to(out)))
 
 
-def _run_all(context: RunContext, jobs: Sequence[RunJob], parallel: int) -> dict[int, RunRecord]:
-    """Every job's record by its index; `parallel` runs at once in worker processes (1: here)."""
+def _run_all(context: RunContext, jobs: Sequence[RunJob], parallel: int, media: MediaQueue | None = None) -> dict[int, RunRecord]:
+    """Every job's record by its index; `parallel` runs at once in worker processes (1: here); `media` gets each finished run's log."""
     records: dict[int, RunRecord] = {}
 
     def finished(job: RunJob, rec: RunRecord) -> None:
         records[job.index] = rec
         print(_summary_line(rec), file=sys.stderr, flush=True)
+        if media is not None and rec.log_file is not None:
+            media.submit(context.out / rec.log_file, job.scenario, job.answer.field if job.answer is not None else None)
 
     if parallel <= 1:
         for job in jobs:
@@ -604,7 +601,13 @@ def execute(args: argparse.Namespace) -> int:
     # An already running service (--connect) listens on one channel prefix: its online runs share it, one at a time.
     parallel = min(args.jobs, len(jobs)) if not (args.connect and online_config is not None) else 1
     context = RunContext(args, out, fmu, robot, config, online_config, show_progress=not args.no_progress and parallel == 1)
-    records = _run_all(context, jobs, parallel)
+    media = None
+    if args.record or args.video:
+        from .replay.run_media import MediaQueue
+
+        # After each run, from its log, beside the other runs: the co-simulation loop pays nothing for it.
+        media = MediaQueue(out, robot, args.record, args.video, workers=parallel)
+    records = _run_all(context, jobs, parallel, media)
     runs: dict[str, list[RunRecord]] = {name: [] for name in scenarios}
     for job in jobs:
         rec = records[job.index]
@@ -639,6 +642,11 @@ def execute(args: argparse.Namespace) -> int:
         f"{sim_seconds:.1f} simulated seconds in {sim_wall:.1f} s wall = {sim_wall / max(sim_seconds, 1e-9):.3f} wall s per simulated s.",
     ]
     report = write_report(out, scenarios, runs, header_lines=header)
+    if media is not None:
+        media.wait(show_progress=not args.no_progress)
+    from .replay.html_report import run_names, write_html_report
+
+    print(f"HTML report: {write_html_report(out, report, run_names(runs))}", file=sys.stderr)
     metrics_json = out / "metrics.json"
     metrics_json.write_text(
         json.dumps(

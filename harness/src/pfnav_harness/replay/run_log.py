@@ -44,11 +44,12 @@ def load_run_log(path: Path) -> RunLog:
 
 
 def frame_steps(t: NDArray[np.float64], rate: float) -> NDArray[np.int64]:
-    """Indices of the logged steps closest to a `rate` Hz clock from the first step; the last step is always one."""
+    """Indices of every n-th logged step from the first, n the smallest that gives at most `rate` steps per second; the last step is always one."""
     if not (math.isfinite(rate) and rate > 0.0):
         raise RunLogError(f"a replay rate must be positive, got {rate}")
     dt = float(t[1] - t[0])
-    every = max(1, round(1.0 / (rate * dt)))
+    # The tolerance keeps an exact ratio (50 Hz from 1 kHz) at its integer despite rounding in t.
+    every = max(1, math.ceil(1.0 / (rate * dt) - 1e-6))
     steps = np.arange(0, len(t), every, dtype=np.int64)
     if steps[-1] != len(t) - 1:
         steps = np.append(steps, len(t) - 1)
