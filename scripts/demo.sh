@@ -8,6 +8,9 @@
 #  3. online navigation: the three scenarios and `surprise`, the robot sensing the terrain as it
 #     walks, map updates and replans over LCM at 2 Hz, the P-F feedback field followed from the
 #     robot's own position -> out/online/report.md.
+# Steps 2 and 3 also write a Rerun recording and a video of every run (OUT/recordings/*.rrd,
+# OUT/videos/*.mp4; open a recording with `.venv/bin/rerun FILE.rrd`) and the report as one page
+# with the videos, out/report.html and out/online/report.html.
 # Extra arguments go to `pfnav-demo demo` (e.g. --scenario c_shape, --short, --duration 10,
 # --lcm-log, --comm-step 0.002; see `.venv/bin/pfnav-demo demo --help`).
 set -euo pipefail
@@ -25,11 +28,11 @@ target/release/pf-plan demo --out out/planner
 # co-simulation step writes out/cosim.log, shown when it ends.
 jobs=$(( ($(nproc) + 1) / 2 ))
 mkdir -p out
-bash scripts/netns.sh .venv/bin/pfnav-demo demo --out out --jobs "$jobs" --no-progress "$@" \
+bash scripts/netns.sh .venv/bin/pfnav-demo demo --out out --jobs "$jobs" --no-progress --record --video "$@" \
     > out/cosim.log 2>&1 &
 cosim=$!
 trap 'kill "$cosim" 2>/dev/null || true' EXIT
-bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online --jobs "$(nproc)" \
+bash scripts/netns.sh .venv/bin/pfnav-demo demo --online --out out/online --jobs "$(nproc)" --record --video \
     --scenario mountain_pass --scenario pits --scenario c_shape --scenario surprise "$@"
 cosim_status=0
 wait "$cosim" || cosim_status=$?
@@ -40,6 +43,7 @@ if ((cosim_status != 0)); then
     exit "$cosim_status"
 fi
 echo "planner report: $ROOT/out/planner/report.md"
-echo "co-simulation report: $ROOT/out/report.md"
-echo "online navigation report: $ROOT/out/online/report.md"
+echo "co-simulation report: $ROOT/out/report.md (with videos: $ROOT/out/report.html)"
+echo "online navigation report: $ROOT/out/online/report.md (with videos: $ROOT/out/online/report.html)"
+echo "recordings of every run: $ROOT/out/recordings/ and $ROOT/out/online/recordings/ (open one with .venv/bin/rerun FILE.rrd)"
 echo "whole demo: $((SECONDS - start)) s"

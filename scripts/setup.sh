@@ -22,10 +22,14 @@ log() { printf '\033[1;34m[setup %4ds]\033[0m %s\n' "$SECONDS" "$*"; }
 # gcc, patch, ca-certificates: the patched liblcm (scripts/build_liblcm.sh; its source comes from
 # Debian's deb-src index through apt, into a private apt directory under build/).
 # libfontconfig1-dev, libfreetype-dev, fonts-dejavu-core: pf-plan's plots. binutils: the linker
-# and `ar` of the Rust builds. (The MPC benchmark's OSQP comparison,
-# `cargo bench -p quad-controller --features osqp-comparison`, also needs cmake.)
+# and `ar` of the Rust builds. ffmpeg: the runs' videos (pfnav-demo --video). (The MPC
+# benchmark's OSQP comparison, `cargo bench -p quad-controller --features osqp-comparison`, also
+# needs cmake.) With --tests also chromium: the HTML report is checked in a headless browser.
 APT_PACKAGES=(libglib2.0-dev iproute2 util-linux pkg-config gcc ca-certificates patch
-              libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils)
+              libfontconfig1-dev libfreetype-dev fonts-dejavu-core binutils ffmpeg)
+if ((for_tests)); then
+    APT_PACKAGES+=(chromium)
+fi
 missing=()
 for pkg in "${APT_PACKAGES[@]}"; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -20,6 +20,7 @@ from .engine import DEFAULT_ENGINE, ENGINE_LABELS, ENGINE_NAMES
 from .errors import HarnessError
 from .fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
+from .replay.command import add_replay_command, run_replay
 from .robot_fmu import robot_and_fmu
 from .scenario import paper_scenario_names
 from .sensing import PLANNER_DEFAULT
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     from .cosim import CoSimConfig
     from .online import OnlineConfig
     from .pushes import PushSchedule
+    from .replay.run_media import MediaQueue
     from .report import RunRecord
     from .results_page import Stamp
     from .robot import RobotDescription
@@ -114,6 +116,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--service-timeout", type=float, default=15.0, help="seconds to wait for the started service's first status (default 15)")
     p.add_argument("--retries", type=int, default=2, help="plan request retries after a timeout (default 2)")
     p.add_argument("--lcm-log", action="store_true", help="also write OUT/logs/SCENARIO_METHOD.lcmlog (robot state, 100 Hz) for lcm-logplayer")
+    p.add_argument(
+        "--record",
+        action="store_true",
+        help="after each run, write its Rerun recording OUT/recordings/SCENARIO_LABEL.rrd from the log (open with `rerun FILE.rrd`)",
+    )
+    p.add_argument("--video", action="store_true", help="after each run, render its video OUT/videos/SCENARIO_LABEL.mp4 from the log (needs ffmpeg)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument(
         "--jobs",
@@ -221,6 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="also publish the report's tables as docs/results/NAME.md, stamped with commit, machine and date",
     )
     _add_common(demo)
+    add_replay_command(sub)
     return parser
 
 
@@ -491,13 +500,15 @@ def _run_one(context: RunContext, job: RunJob) -> RunRecord:
     return outcome.record(str(log_file.relative_to(out)))
 
 
-def _run_all(context: RunContext, jobs: Sequence[RunJob], parallel: int) -> dict[int, RunRecord]:
-    """Every job's record by its index; `parallel` runs at once in worker processes (1: here)."""
+def _run_all(context: RunContext, jobs: Sequence[RunJob], parallel: int, media: MediaQueue | None = None) -> dict[int, RunRecord]:
+    """Every job's record by its index; `parallel` runs at once in worker processes (1: here); `media` gets each finished run's log."""
     records: dict[int, RunRecord] = {}
 
     def finished(job: RunJob, rec: RunRecord) -> None:
         records[job.index] = rec
         print(_summary_line(rec), file=sys.stderr, flush=True)
+        if media is not None and rec.log_file is not None:
+            media.submit(context.out / rec.log_file, job.scenario, job.answer.field if job.answer is not None else None)
 
     if parallel <= 1:
         for job in jobs:
@@ -590,7 +601,13 @@ def execute(args: argparse.Namespace) -> int:
     # An already running service (--connect) listens on one channel prefix: its online runs share it, one at a time.
     parallel = min(args.jobs, len(jobs)) if not (args.connect and online_config is not None) else 1
     context = RunContext(args, out, fmu, robot, config, online_config, show_progress=not args.no_progress and parallel == 1)
-    records = _run_all(context, jobs, parallel)
+    media = None
+    if args.record or args.video:
+        from .replay.run_media import MediaQueue
+
+        # After each run, from its log, beside the other runs: the co-simulation loop pays nothing for it.
+        media = MediaQueue(out, robot, args.record, args.video, workers=parallel)
+    records = _run_all(context, jobs, parallel, media)
     runs: dict[str, list[RunRecord]] = {name: [] for name in scenarios}
     for job in jobs:
         rec = records[job.index]
@@ -625,6 +642,11 @@ def execute(args: argparse.Namespace) -> int:
         f"{sim_seconds:.1f} simulated seconds in {sim_wall:.1f} s wall = {sim_wall / max(sim_seconds, 1e-9):.3f} wall s per simulated s.",
     ]
     report = write_report(out, scenarios, runs, header_lines=header)
+    if media is not None:
+        media.wait(show_progress=not args.no_progress)
+    from .replay.html_report import run_names, write_html_report
+
+    print(f"HTML report: {write_html_report(out, report, run_names(runs))}", file=sys.stderr)
     metrics_json = out / "metrics.json"
     metrics_json.write_text(
         json.dumps(
@@ -676,7 +698,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(format="pfnav-demo: %(message)s")
     logging.getLogger("pfnav_harness").setLevel(logging.INFO)
     try:
-        return execute(args)
+        return run_replay(args) if args.command == "replay" else execute(args)
     except HarnessError as err:
         print(f"pfnav-demo: error: {err}", file=sys.stderr)
         return err.exit_code

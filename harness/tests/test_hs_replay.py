@@ -1,0 +1,203 @@
+"""Replays of a run from its log: the Rerun recording, read back with Rerun's own reader."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from replay_logs import DURATION, synthetic_log
+from rerun.chunk import RrdReader
+
+from pfnav_harness import cli, paths
+from pfnav_harness.feedback_field import FeedbackField
+from pfnav_harness.replay.kinematics import LegKinematics
+from pfnav_harness.replay.recording import write_recording
+from pfnav_harness.replay.run_log import frame_steps, load_run_log
+from pfnav_harness.replay.video import FPS, HEIGHT, WIDTH, render_video
+from pfnav_harness.robot import LEG_LABELS, RobotDescription
+from pfnav_harness.scenario import Scenario, load_scenario
+
+
+@pytest.fixture(scope="module")
+def robot() -> RobotDescription:
+    return RobotDescription.load(paths.default_robot_config_path())
+
+
+def read_chunks(path: Path) -> dict[str, list[pa.RecordBatch]]:
+    """The recording's chunks by entity path, through Rerun's own reader."""
+    chunks: dict[str, list[pa.RecordBatch]] = {}
+    for chunk in RrdReader(path).store().stream():
+        chunks.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
+    return chunks
+
+
+def sim_times(batches: list[pa.RecordBatch]) -> np.ndarray:
+    times = [b.column("sim_time").cast(pa.int64()).to_numpy() for b in batches if "sim_time" in b.schema.names]
+    return np.sort(np.concatenate(times)) * 1e-9
+
+
+def column(batches: list[pa.RecordBatch], name: str) -> list:
+    return [value for b in batches if name in b.schema.names for value in b.column(name).to_pylist()]
+
+
+def test_recording_holds_the_run_on_the_simulation_clock(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot)
+    summary = write_recording(log, ramp_scenario, robot, tmp_path / "ramp_pf.rrd", "ramp_pf")
+    chunks = read_chunks(summary.path)
+    expected = {
+        "/world/terrain",
+        "/world/plan",
+        "/world/goal",
+        "/world/feet",
+        "/world/ground_reaction_forces",
+        "/world/pushes",
+        "/world/walked",
+        "/world/estimate/path",
+        "/world/estimate/pose",
+        "/robot/base_pose",
+        "/plots/tracking_error",
+        "/plots/mpc_solve_time",
+        "/plots/fsm_state",
+        "/plots/estimate_error",
+        "/notes",
+        *(f"/robot/joints/{name}" for name in robot.joint_names),
+        *(f"/plots/joint_torque/{label}" for label in LEG_LABELS),
+    }
+    assert expected <= set(chunks), sorted(expected - set(chunks))
+    # The URDF's own geometry, base link included.
+    assert any(path.startswith("/robot/") and f"/{robot.base_link}/" in path for path in chunks)
+    # No feedback field was given and the run was offline: nothing claims otherwise.
+    assert not {"/world/feedback_field", "/world/replans", "/world/sensed_map"} & set(chunks)
+
+    steps = frame_steps(log["t"], 50.0)
+    pose_times = sim_times(chunks["/robot/base_pose"])
+    np.testing.assert_allclose(pose_times, log["t"][steps], atol=1e-9)
+    assert pose_times[0] == pytest.approx(log["t"][0]) and pose_times[-1] == pytest.approx(log["t"][-1])
+    assert summary.t_first == pytest.approx(log["t"][0]) and summary.t_last == pytest.approx(log["t"][-1])
+    translations = np.array(column(chunks["/robot/base_pose"], "Transform3D:translation")).reshape(-1, 3)
+    np.testing.assert_allclose(translations, log["base_pos"][steps], atol=1e-5)
+    series_times = sim_times(chunks["/plots/tracking_error"])
+    assert series_times[0] == pytest.approx(0.0) and series_times[-1] == pytest.approx(log["t"][-1])
+    assert len(series_times) == len(frame_steps(log["t"], 100.0))
+    # Every MPC spike (4 ms every 97 steps) survives the thinning to 100 Hz.
+    solve_ms = np.array(column(chunks["/plots/mpc_solve_time"], "Scalars:scalars")).ravel()
+    assert np.count_nonzero(solve_ms > 3.9) == len(np.unique(np.arange(0, len(log["t"]), 97) // 10))
+
+    # Feet: four per frame, green exactly where the log says the foot touches, at the kinematics' points.
+    feet = np.array(column(chunks["/world/feet"], "Points3D:positions")).reshape(len(steps), 4, 3)
+    expected_feet = LegKinematics(robot).leg_chains(log["base_pos"][steps], log["base_quat"][steps], log["q"][steps])[:, :, -1]
+    np.testing.assert_allclose(feet, expected_feet, atol=1e-5)
+    colours = np.array(column(chunks["/world/feet"], "Points3D:colors")).reshape(len(steps), 4)
+    touching = log["contact_actual"][steps].astype(bool)
+    assert len(np.unique(colours[touching])) == 1 and len(np.unique(colours[~touching])) == 1
+    assert colours[touching][0] != colours[~touching][0]
+
+
+def test_recording_of_an_online_run_with_its_field(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot, online=True)
+    shape = ramp_scenario.terrain.shape
+    cost = np.linspace(0.0, 2.0, shape[0] * shape[1]).reshape(shape)
+    cost[0, 0] = -1.0
+    field = FeedbackField(
+        origin=ramp_scenario.origin,
+        resolution=ramp_scenario.resolution,
+        dir_x=np.ones(shape),
+        dir_y=np.zeros(shape),
+        speed=np.full(shape, 0.3),
+        cost_to_go=cost,
+        goal=(*ramp_scenario.goal.center, ramp_scenario.goal.radius),
+    )
+    summary = write_recording(log, ramp_scenario, robot, tmp_path / "ramp_pf-online.rrd", "ramp_pf-online", field)
+    chunks = read_chunks(summary.path)
+    arrows = np.array(column(chunks["/world/feedback_field"], "Arrows3D:vectors")).reshape(-1, 3)
+    # Every reachable cell of the (small) map has its arrow, along +x.
+    assert len(arrows) == shape[0] * shape[1] - 1
+    np.testing.assert_allclose(arrows[:, 1:], 0.0)
+    # The two replans put in use, each from the time it was applied.
+    np.testing.assert_allclose(sim_times(chunks["/world/replans"]), [0.7, 1.4])
+    # The sensed map: the triangles whose corners were all seen (columns 0..14 of 30).
+    triangles = np.array(column(chunks["/world/sensed_map"], "Mesh3D:triangle_indices")).reshape(-1, 3)
+    assert len(triangles) == 2 * (shape[0] - 1) * (15 - 1)
+    notes = column(chunks["/notes"], "TextDocument:text")[0][0]
+    assert "only its state at the end" in notes and "feedback fields are not in the log" in notes
+
+
+def test_replay_command_writes_the_recording_beside_the_logs(
+    tmp_path: Path, scenario_writer: Callable[..., Path], robot: RobotDescription, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    heights = np.tile(0.1 + 0.1 * np.arange(30) * 0.1, (20, 1))
+    scenario = load_scenario(scenario_writer(out / "scenarios", "slope_test", heights, 0.1, start=(0.5, 1.0), goal=(2.5, 1.0)))
+    log_file = out / "logs" / "slope_test_pf.npz"
+    log_file.parent.mkdir(parents=True)
+    np.savez_compressed(log_file, **synthetic_log(scenario, robot))
+    video = tmp_path / "slope_test_pf.mp4"
+    assert cli.main(["replay", str(log_file), "--robot", str(robot.config_path), "--video", str(video)]) == 0
+    recording = out / "recordings" / "slope_test_pf.rrd"
+    assert recording.is_file()
+    assert int(str(video_stream(video)["nb_read_frames"])) > 0
+    assert "rerun " in capsys.readouterr().err
+    times = sim_times(read_chunks(recording)["/robot/base_pose"])
+    assert times[-1] == pytest.approx(load_run_log(log_file)["t"][-1])
+
+
+def test_replay_refuses_a_log_without_its_scenario(
+    tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log_file = tmp_path / "logs" / "nowhere_pf.npz"
+    log_file.parent.mkdir()
+    np.savez_compressed(log_file, **synthetic_log(ramp_scenario, robot))
+    assert cli.main(["replay", str(log_file)]) == 2
+    assert "nowhere.json" in capsys.readouterr().err
+
+
+def video_stream(path: Path) -> dict[str, object]:
+    """Codec, size and decoded frame count of the video's stream (ffprobe decodes every frame)."""
+    probe = subprocess.run(
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-count_frames",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=codec_name,width,height,nb_read_frames,pix_fmt",
+            "-of",
+            "json",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(probe.stdout)["streams"][0]
+
+
+def test_video_has_a_frame_per_sampled_step(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot)
+    summary = render_video(log, ramp_scenario, robot, tmp_path / "ramp_pf.mp4", "ramp_pf")
+    # A 2 s run fits into the longest video: it plays in real time (to a whole log step per frame), plus the last step.
+    assert summary.speed == pytest.approx(1.0, rel=0.01)
+    assert summary.frames == len(frame_steps(log["t"], FPS)) == round(DURATION * FPS) + 1
+    stream = video_stream(summary.path)
+    assert stream["codec_name"] == "h264" and stream["pix_fmt"] == "yuv420p"
+    assert (stream["width"], stream["height"]) == (WIDTH, HEIGHT)
+    assert int(str(stream["nb_read_frames"])) == summary.frames
+
+
+def test_long_runs_play_faster_within_the_longest_video(tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription) -> None:
+    log = synthetic_log(ramp_scenario, robot)
+    # The same log on a 40× slower clock: 80 simulated seconds.
+    log["t"] = log["t"] * 40.0
+    summary = render_video(log, ramp_scenario, robot, tmp_path / "slow.mp4", "slow")
+    # At most 10 s of video (plus the last step's frame), the clock running at the speed that takes.
+    assert summary.frames / FPS <= 10.0 + 1.0 / FPS
+    assert summary.speed >= log["t"][-1] / 10.0
+    assert summary.frames == len(frame_steps(log["t"], FPS / summary.speed))
+    assert int(str(video_stream(summary.path)["nb_read_frames"])) == summary.frames
