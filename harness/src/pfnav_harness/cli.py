@@ -72,6 +72,8 @@ def check_lcm_url(url: str, allow_host_network: bool) -> None:
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
+    from .planner_client import BASES, GENERATORS
+
     p.add_argument("--out", type=Path, default=Path("out"), help="output folder (default: out)")
     p.add_argument(
         "--robot",
@@ -110,6 +112,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         help="a field of the planner's traversability model for the started service and the ∫p ds metrics, e.g. "
         "slope_weight=1 or roughness_weight=0.5 (repeatable; field names as in `pf-plan scenario list --json`; "
         "--footprint-radius and --max-slope-deg set their own two)",
+    )
+    p.add_argument("--basis", choices=BASES, default=None, help="P-F basis: grid-cell indicators or Gaussian RBFs (default: the service's, indicator)")
+    p.add_argument(
+        "--generators",
+        choices=GENERATORS,
+        default=None,
+        help="P-F RBF generators: the Markov partition-of-unity transfer or the paper's least-squares ANSDMD (default: the service's, transfer)",
     )
     p.add_argument("--plan-timeout", type=float, default=300.0, help="seconds to wait for each plan reply (default 300)")
     p.add_argument("--max-solve-time", type=float, default=240.0, help="solver time limit asked of the service, s (default 240)")
@@ -318,7 +327,14 @@ def _online_config(args: argparse.Namespace) -> OnlineConfig:
 
 
 def _request_options(args: argparse.Namespace) -> RequestOptions:
-    return RequestOptions(speed=args.speed, max_solve_time=args.max_solve_time)
+    from .planner_client import option_code
+
+    return RequestOptions(
+        speed=args.speed,
+        max_solve_time=args.max_solve_time,
+        basis=0 if args.basis is None else option_code("BASIS", args.basis),
+        generators=0 if args.generators is None else option_code("GENERATORS", args.generators),
+    )
 
 
 def _client(args: argparse.Namespace, out: Path, prefix: str | None = None, log_name: str = "pf-planner-service.log") -> PlannerClient:

@@ -32,6 +32,10 @@ from .scenario import GoalRegion, Scenario, Terrain
 # Planning methods by name; the wire code of each is the schema's constant
 # plan_request_t.METHOD_<NAME> (upper case, '-' as '_'), looked up by `method_code`.
 METHODS = ("pf", "astar", "astar-admissible", "dijkstra")
+# P-F basis and RBF generator kinds by name; the wire code of each is the schema's constant
+# plan_options_t.BASIS_<NAME> / GENERATORS_<NAME>, looked up by `option_code`.
+BASES = ("indicator", "rbf")
+GENERATORS = ("transfer", "ansdmd")
 # Footprint radius the harness starts the service with (m). The robot's feet stand 0.13 m beside
 # its centre line and its controller keeps them 5 cm off edges; a path closer than ~0.25 m to the
 # foot of a steep flank makes it pull the uphill feet in under the body, and the narrowed trot
@@ -53,6 +57,17 @@ def method_code(method: str) -> int:
     if code is None:
         raise HarnessError(f"the generated LCM Python types have no code for '{method}': run `bash lcm_types/gen_python.sh`")
     return code
+
+
+def option_code(kind: str, name: str) -> int:
+    """`plan_options_t.<KIND>_<NAME>` (kind BASIS or GENERATORS) of a name of `BASES` / `GENERATORS`."""
+    names = {"BASIS": BASES, "GENERATORS": GENERATORS}[kind]
+    if name not in names:
+        raise PlannerError(f"unknown {kind.lower()} '{name}' (choose from {', '.join(names)})")
+    code = getattr(_import_types().plan_options_t, f"{kind}_{name.upper()}", None)
+    if code is None:
+        raise HarnessError(f"the generated LCM Python types have no {kind}_{name.upper()}: run `bash lcm_types/gen_python.sh`")
+    return int(code)
 
 
 def method_name(code: int) -> str:
@@ -148,6 +163,10 @@ class RequestOptions:
     confidence_sigmas: float = 0.0
     # P-F start density: one of plan_options_t.START_DENSITY_* (0: the service's default).
     start_density: int = 0
+    # P-F basis: one of plan_options_t.BASIS_* (0: the service's default, indicator).
+    basis: int = 0
+    # RBF generators: one of plan_options_t.GENERATORS_* (0: the service's default, transfer).
+    generators: int = 0
 
 
 @dataclass
@@ -459,6 +478,12 @@ class PlannerClient:
         req.options.max_solve_time = options.max_solve_time
         req.options.confidence_sigmas = options.confidence_sigmas
         req.options.start_density = options.start_density
+        req.options.basis = options.basis
+        if options.generators:
+            # Stale generated types lack the appended field; only a request that needs it fails.
+            if "generators" not in getattr(req.options, "__slots__", ("generators",)):
+                raise HarnessError("the generated LCM Python types have no plan_options_t.generators: run `bash lcm_types/gen_python.sh`")
+            req.options.generators = options.generators
         req.start_sigma = pose.sigma
         self.lc.publish(self.prefix + PLANNER.plan_request, req.encode())
         return request_id

@@ -20,6 +20,7 @@ mod report;
 use plot::{plot_feedback_field, plot_plans, PlotPath};
 use report::{markdown_table, ReportRow, RowData};
 
+use pf_planner::basis::RbfGenerators;
 use pf_planner::import::{
     counts, factor, import_map, numbers, scenario_from, stem_name, Crop, DemFormat, ImportOptions,
     Placement, Resolution,
@@ -220,6 +221,11 @@ struct PlanArgs {
     /// Snapshot samples per RBF.
     #[arg(long, default_value_t = 16)]
     rbf_samples: usize,
+    /// RBF generators: transfer (Markov partition-of-unity transfer, exact solver) or ansdmd
+    /// (the paper's least squares with row normalisation; negative entries, LP by Clarabel).
+    /// The indicator basis ignores it: Ulam's method is both.
+    #[arg(long, default_value = "transfer", value_parser = parse_generators)]
+    generators: RbfGenerators,
     /// Planning cells (or RBF centres) along the map's longer side.
     #[arg(long, default_value_t = 64)]
     grid: usize,
@@ -309,6 +315,12 @@ enum FormatArg {
 enum SolverArg {
     Exact,
     Clarabel,
+}
+
+/// `--generators`: the names of [`RbfGenerators`] (its `FromStr`, the one list of names).
+fn parse_generators(text: &str) -> Result<RbfGenerators, String> {
+    text.parse()
+        .map_err(|e: pf_planner::error::PlanError| e.to_string())
 }
 
 fn main() -> Result<()> {
@@ -482,6 +494,7 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
         BasisArg::Rbf => BasisKind::Rbf {
             sigma_over_spacing: args.rbf_sigma,
             samples_per_basis: args.rbf_samples,
+            generators: args.generators,
         },
     };
     let options = PlannerOptions {
@@ -617,7 +630,7 @@ fn label(method: Method, options: &PlannerOptions) -> String {
     match method {
         Method::Pf => match options.basis {
             BasisKind::Indicator => format!("P-F indicator {n}²"),
-            BasisKind::Rbf { .. } => format!("P-F RBF {n}²"),
+            BasisKind::Rbf { generators, .. } => format!("P-F RBF {generators} {n}²"),
         },
         Method::AStar => format!("A* paper heuristic {n}²"),
         Method::AStarAdmissible => format!("A* admissible {n}²"),
@@ -682,12 +695,17 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64, repeats: usize
         basis: BasisKind::DEFAULT_RBF,
         ..base.clone()
     };
+    let ansdmd = PlannerOptions {
+        basis: BasisKind::ANSDMD_RBF,
+        ..rbf.clone()
+    };
     let runs: Vec<(Method, &PlannerOptions)> = vec![
         (Method::AStar, &base),
         (Method::AStarAdmissible, &base),
         (Method::Dijkstra, &base),
         (Method::Pf, &base),
         (Method::Pf, &rbf),
+        (Method::Pf, &ansdmd),
     ];
     let bar = ProgressBar::new((SCENARIO_NAMES.len() * runs.len() * repeats) as u64);
     bar.set_style(
@@ -790,8 +808,11 @@ fn run_demo(out: &Path, grid: usize, rbf_grid: usize, speed: f64, repeats: usize
          the map with the same quadrature on every path (bilinear p, trapezoid rule, step ≤ \
          resolution/8); max slope is the steepest terrain inclination under the path. Grid {grid}² \
          for P-F indicator and the graph searches (8-connected), {rbf_grid}² RBF centres for P-F \
-         RBF (Shepard transfer generators), P-F with the exact solver and the uniform start \
-         density.\n\n\
+         RBF, P-F with the exact solver where its structure holds and the uniform start density.\n\n\
+         - P-F RBF transfer: the Shepard partition-of-unity Galerkin transfer, Markov by \
+         construction, solved exactly (policy iteration).\n\
+         - P-F RBF ansdmd: the paper's least squares G U = A on seeded random snapshot pairs, \
+         row-normalised; its negative entries leave the SSP structure, so Clarabel solves the LP.\n\
          - A* paper heuristic: Euclidean distance to the goal centre, as in the paper; it \
          over-estimates the cost-to-go where p < 1, so its path is not optimal.\n\
          - A* admissible: p_min × distance beyond the goal cells, consistent with the edge \

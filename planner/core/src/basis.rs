@@ -27,6 +27,52 @@ pub const INDICATOR_SAMPLES_PER_AXIS: usize = 3;
 /// Largest accepted number of samples per RBF centre (keeps the snapshot data bounded).
 pub const MAX_SAMPLES_PER_BASIS: usize = 400;
 
+/// How the generators of the RBF basis are estimated from the snapshot pairs (see
+/// [`crate::generators`]). The indicator basis has one estimate, Ulam's method, which both are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum RbfGenerators {
+    /// The Galerkin transfer in the partition of unity of the truncated Gaussians: Markov by
+    /// construction, so the exact SSP solver applies ([`crate::generators::rbf`]).
+    #[default]
+    Transfer,
+    /// The paper's ANSDMD: the least-squares solve `G U = A` with row normalisation; it has
+    /// negative transition mass, so the LP goes to Clarabel ([`crate::generators::ansdmd`]).
+    Ansdmd,
+}
+
+impl RbfGenerators {
+    /// Every kind, in the order of their names on the command line and the wire
+    /// (`plan_options_t.GENERATORS_*` = index + 1; 0 is the default, `Transfer`).
+    pub const ALL: [RbfGenerators; 2] = [RbfGenerators::Transfer, RbfGenerators::Ansdmd];
+
+    /// Name on the command line, in reports and (upper case) in the wire constants.
+    pub fn name(self) -> &'static str {
+        match self {
+            RbfGenerators::Transfer => "transfer",
+            RbfGenerators::Ansdmd => "ansdmd",
+        }
+    }
+}
+
+impl std::fmt::Display for RbfGenerators {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for RbfGenerators {
+    type Err = PlanError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|g| g.name() == s)
+            .ok_or_else(|| PlanError::InvalidOption {
+                name: "generators",
+                reason: format!("unknown RBF generators {s:?}; use transfer or ansdmd"),
+            })
+    }
+}
+
 /// Which basis the P-F planner uses.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum BasisKind {
@@ -36,8 +82,11 @@ pub enum BasisKind {
     Rbf {
         /// Gaussian width σ divided by the centre spacing; 0.5 is well conditioned, ≥ 1 is not.
         sigma_over_spacing: f64,
-        /// Snapshot samples per basis function (rounded up to a square sub-lattice per cell).
+        /// Snapshot samples per basis function (transfer: rounded up to a square sub-lattice
+        /// per cell; ANSDMD: this many seeded uniform samples in the function's cell).
         samples_per_basis: usize,
+        /// How the generators are estimated from the snapshot pairs.
+        generators: RbfGenerators,
     },
 }
 
@@ -46,6 +95,14 @@ impl BasisKind {
     pub const DEFAULT_RBF: BasisKind = BasisKind::Rbf {
         sigma_over_spacing: 0.5,
         samples_per_basis: 16,
+        generators: RbfGenerators::Transfer,
+    };
+
+    /// [`BasisKind::DEFAULT_RBF`] with the paper's ANSDMD generators.
+    pub const ANSDMD_RBF: BasisKind = BasisKind::Rbf {
+        sigma_over_spacing: 0.5,
+        samples_per_basis: 16,
+        generators: RbfGenerators::Ansdmd,
     };
 
     /// Checks the parameters; the error names the offending option.
@@ -53,6 +110,7 @@ impl BasisKind {
         if let BasisKind::Rbf {
             sigma_over_spacing,
             samples_per_basis,
+            ..
         } = *self
         {
             if !(sigma_over_spacing.is_finite() && (0.05..=3.0).contains(&sigma_over_spacing)) {
@@ -372,14 +430,17 @@ mod tests {
             BasisKind::Rbf {
                 sigma_over_spacing: f64::NAN,
                 samples_per_basis: 10,
+                generators: RbfGenerators::Transfer,
             },
             BasisKind::Rbf {
                 sigma_over_spacing: 0.5,
                 samples_per_basis: 0,
+                generators: RbfGenerators::Ansdmd,
             },
             BasisKind::Rbf {
                 sigma_over_spacing: -1.0,
                 samples_per_basis: 10,
+                generators: RbfGenerators::Transfer,
             },
         ] {
             assert!(matches!(

@@ -43,7 +43,7 @@ use clarabel::algebra::{BlockConcatenate, CscMatrix, MatrixMathMut};
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
-use tracing::{debug, warn};
+use tracing::{debug, info, warn};
 
 use crate::certificate::{certify, Certificate};
 use crate::deadline::Deadline;
@@ -332,7 +332,7 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
                 report,
             });
         }
-        debug!("generators are not Markov: solving the LP with Clarabel");
+        info!("generators are not Markov (e.g. ANSDMD): solving the LP with Clarabel");
     }
     let h = gens.basis.cell_size();
     let b_max = kept.iter().map(|&i| problem.cost[i]).fold(0.0f64, f64::max);
@@ -415,13 +415,21 @@ pub fn solve(problem: &LpProblem<'_>, settings: &LpSettings) -> Result<LpSolutio
             })
         }
         _ => {
+            // Neither solver applies when the exact one was asked for and fell back here: say
+            // why it did not take the problem.
+            let not_markov = match (settings.solver, ssp::structure(problem)) {
+                (LpSolver::Exact, ssp::Structure::General { reason }) => format!(
+                    "; the exact solver does not apply either: the generators are not Markov ({reason})"
+                ),
+                _ => String::new(),
+            };
             return Err(PlanError::LpFailed {
                 status: lp_status,
                 reason: format!(
-                    "after {} iterations (primal residual {:.2e}, dual residual {:.2e})",
+                    "after {} iterations (primal residual {:.2e}, dual residual {:.2e}){not_markov}",
                     sol.iterations, sol.r_prim, sol.r_dual
                 ),
-            })
+            });
         }
     }
     let z_hat: &[f64] = match settings.form {

@@ -5,7 +5,8 @@
 use std::sync::Arc;
 
 use lcm_types::pfnav::{PlanOptions, PlanReply, PlanRequest, TerrainMap};
-use pf_planner::basis::BasisKind;
+use pf_planner::basis::{BasisKind, RbfGenerators};
+use pf_planner::generators::MAX_ANSDMD_FUNCTIONS;
 use pf_planner::grid::GoalRegion;
 use pf_planner::lp::LpSolver;
 use pf_planner::map::{GridMap, MapKnowledge, Point};
@@ -288,9 +289,23 @@ pub fn resolve_options(
     map: &GridMap,
     defaults: &OptionDefaults,
 ) -> Result<ResolvedOptions, Rejection> {
+    let generators = match options.generators {
+        PlanOptions::GENERATORS_DEFAULT | PlanOptions::GENERATORS_TRANSFER => {
+            RbfGenerators::Transfer
+        }
+        PlanOptions::GENERATORS_ANSDMD => RbfGenerators::Ansdmd,
+        other => {
+            return Err(Rejection::invalid_request(format!(
+                "unknown options.generators {other} (0 default, 1 transfer, 2 ansdmd)"
+            )))
+        }
+    };
     let basis = match options.basis {
         PlanOptions::BASIS_DEFAULT | PlanOptions::BASIS_INDICATOR => BasisKind::Indicator,
-        PlanOptions::BASIS_RBF => BasisKind::DEFAULT_RBF,
+        PlanOptions::BASIS_RBF => match generators {
+            RbfGenerators::Transfer => BasisKind::DEFAULT_RBF,
+            RbfGenerators::Ansdmd => BasisKind::ANSDMD_RBF,
+        },
         other => {
             return Err(Rejection::invalid_request(format!(
                 "unknown options.basis {other} (0 default, 1 indicator, 2 rbf)"
@@ -350,6 +365,15 @@ pub fn resolve_options(
     if confidence_sigmas > MAX_CONFIDENCE_SIGMAS {
         return Err(Rejection::invalid_request(format!(
             "options.confidence_sigmas must be <= {MAX_CONFIDENCE_SIGMAS}, got {confidence_sigmas}"
+        )));
+    }
+    if generators == RbfGenerators::Ansdmd
+        && matches!(basis, BasisKind::Rbf { .. })
+        && grid_size * grid_size > MAX_ANSDMD_FUNCTIONS
+    {
+        // Refused before any work: its dense least squares is what the limit bounds.
+        return Err(Rejection::invalid_request(format!(
+            "options.generators = ansdmd is limited to {MAX_ANSDMD_FUNCTIONS} RBF functions (grid_size <= 64), got grid_size {grid_size}; use the transfer generators"
         )));
     }
     if solver == LpSolver::Clarabel && grid_size * grid_size > MAX_CLARABEL_FUNCTIONS {
@@ -610,6 +634,48 @@ mod tests {
         assert_eq!(v.method, Method::AStarAdmissible);
     }
 
+    /// `options.generators` selects the RBF generators; 0 is the transfer, and the indicator
+    /// basis is not affected by it.
+    #[test]
+    fn the_generators_field_selects_the_rbf_generators() {
+        let defaults = OptionDefaults::default();
+        let resolved = |basis: i8, generators: i8| {
+            let mut r = request();
+            r.options.basis = basis;
+            r.options.generators = generators;
+            validate_request(&r, &NoMaps, 100, &defaults)
+                .expect("valid")
+                .options
+                .basis
+        };
+        assert_eq!(
+            resolved(PlanOptions::BASIS_RBF, PlanOptions::GENERATORS_DEFAULT),
+            BasisKind::DEFAULT_RBF
+        );
+        assert_eq!(
+            resolved(PlanOptions::BASIS_RBF, PlanOptions::GENERATORS_TRANSFER),
+            BasisKind::DEFAULT_RBF
+        );
+        assert_eq!(
+            resolved(PlanOptions::BASIS_RBF, PlanOptions::GENERATORS_ANSDMD),
+            BasisKind::ANSDMD_RBF
+        );
+        assert_eq!(
+            resolved(PlanOptions::BASIS_INDICATOR, PlanOptions::GENERATORS_ANSDMD),
+            BasisKind::Indicator
+        );
+        // The wire names and the planner's names are the same list.
+        for (code, kind) in [
+            (PlanOptions::GENERATORS_TRANSFER, RbfGenerators::Transfer),
+            (PlanOptions::GENERATORS_ANSDMD, RbfGenerators::Ansdmd),
+        ] {
+            assert_eq!(
+                RbfGenerators::ALL.iter().position(|&g| g == kind),
+                Some(code as usize - 1)
+            );
+        }
+    }
+
     #[test]
     fn a_valid_request_resolves_defaults() {
         let v = validate_request(&request(), &NoMaps, 100, &OptionDefaults::default()).unwrap();
@@ -690,6 +756,20 @@ mod tests {
                 Box::new(|r| r.options.basis = 9),
                 PlanReply::STATUS_INVALID_REQUEST,
                 "basis",
+            ),
+            (
+                Box::new(|r| r.options.generators = 3),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "generators",
+            ),
+            (
+                Box::new(|r| {
+                    r.options.basis = PlanOptions::BASIS_RBF;
+                    r.options.generators = PlanOptions::GENERATORS_ANSDMD;
+                    r.options.grid_size = 65;
+                }),
+                PlanReply::STATUS_INVALID_REQUEST,
+                "ansdmd is limited",
             ),
             (
                 Box::new(|r| r.start_sigma = f64::NAN),

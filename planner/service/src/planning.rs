@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use lcm_types::pfnav::{FeedbackField, Header, PlanMetrics, PlanReply, TrajectorySample};
-use pf_planner::basis::BasisKind;
+use pf_planner::basis::{BasisKind, RbfGenerators};
 use pf_planner::deadline::Deadline;
 use pf_planner::error::PlanError;
 use pf_planner::feedback_grid::FeedbackGrid;
@@ -37,7 +37,11 @@ pub struct GeneratorKey {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum BasisKey {
     Indicator,
-    Rbf { sigma_bits: u64, samples: usize },
+    Rbf {
+        sigma_bits: u64,
+        samples: usize,
+        generators: RbfGenerators,
+    },
 }
 
 impl GeneratorKey {
@@ -52,9 +56,11 @@ impl GeneratorKey {
             BasisKind::Rbf {
                 sigma_over_spacing,
                 samples_per_basis,
+                generators,
             } => BasisKey::Rbf {
                 sigma_bits: sigma_over_spacing.to_bits(),
                 samples: samples_per_basis,
+                generators,
             },
         };
         Self {

@@ -7,12 +7,16 @@
 //! (row i: where the mass of function i goes) and stores `Lₖ = (Uᵀ − I)/Δtₖ` sparse:
 //! - indicators ([`ulam`]): Ulam's method, U = G⁻¹A with diagonal G, one deterministic move or
 //!   a wall per cell;
-//! - Gaussian RBFs ([`rbf`]): the Galerkin transfer in the partition of unity of the truncated
-//!   Gaussians, non-negative and row-stochastic (Markov) by construction.
+//! - Gaussian RBFs, [`RbfGenerators::Transfer`] ([`rbf`], the default): the Galerkin transfer in
+//!   the partition of unity of the truncated Gaussians, non-negative and row-stochastic (Markov)
+//!   by construction;
+//! - Gaussian RBFs, [`RbfGenerators::Ansdmd`] ([`ansdmd`]): the paper's least squares
+//!   U = G⁻¹A on seeded random samples, row-normalised.
 //!
-//! Every U is Markov: every row non-negative and summing to one, a row whose moves are all
-//! blocked the identity (a reflecting wall, never a free sink). So every Lₖ conserves mass and
-//! the LP is a stochastic shortest path (see [`crate::ssp`]).
+//! Ulam's and the transfer's U are Markov: every row non-negative and summing to one, a row whose
+//! moves are all blocked the identity (a reflecting wall, never a free sink). So their Lₖ conserve
+//! mass and the LP is a stochastic shortest path (see [`crate::ssp`]). ANSDMD's rows sum to one
+//! after the normalisation but keep negative entries: its LP goes to Clarabel.
 //!
 //! Δtₖ makes each displacement exactly one lattice vector (Δt = h axially, √2·h diagonally): the
 //! condition under which the indicator LP is exactly Dijkstra's problem and the sample images are
@@ -27,7 +31,7 @@ use std::time::Instant;
 use clarabel::algebra::CscMatrix;
 use tracing::debug;
 
-use crate::basis::{Basis, BasisKind};
+use crate::basis::{Basis, BasisKind, RbfGenerators};
 use crate::deadline::Deadline;
 use crate::error::PlanError;
 use crate::grid::PlanningGrid;
@@ -164,8 +168,14 @@ pub struct GeneratorStats {
     pub invalid_pairs: usize,
     /// Rows of U, summed over directions, that are the identity (every move blocked: a wall).
     pub wall_rows: usize,
-    /// Largest total negative mass of a row of U after normalisation (0 for indicators).
+    /// Largest total negative mass of a row of U after normalisation (0 for Ulam and the
+    /// transfer, which are non-negative by construction).
     pub max_negative_row_mass: f64,
+    /// Negative entries of U after normalisation, summed over directions (ANSDMD only).
+    pub negative_entries: usize,
+    /// Largest |row sum − 1| of U before the row normalisation: the mass the least-squares
+    /// estimate fails to conserve (ANSDMD only; the others conserve it by construction).
+    pub max_row_sum_error: f64,
     /// Non-zeros of all Lₖ together.
     pub nnz: usize,
     /// Wall-clock build time, seconds.
@@ -238,7 +248,7 @@ impl Generators {
     }
 
     /// [`Generators::build`], stopped with [`PlanError::TimeLimit`] once `deadline` passes
-    /// (checked inside Ulam's build; RBF builds are checked when they finish).
+    /// (checked inside the Ulam and ANSDMD builds; transfer builds are checked when they finish).
     pub fn build_until(
         grid: &PlanningGrid,
         kind: BasisKind,
@@ -253,7 +263,22 @@ impl Generators {
             BasisKind::Indicator => {
                 ulam::build_ulam(grid, &basis, &directions, deadline, &mut stats)?
             }
-            BasisKind::Rbf { .. } => {
+            BasisKind::Rbf {
+                generators: RbfGenerators::Ansdmd,
+                samples_per_basis,
+                ..
+            } => ansdmd::build_ansdmd(
+                grid,
+                &basis,
+                &directions,
+                samples_per_basis,
+                deadline,
+                &mut stats,
+            )?,
+            BasisKind::Rbf {
+                generators: RbfGenerators::Transfer,
+                ..
+            } => {
                 let points = sample_points(grid, kind.samples_per_axis());
                 stats.samples = points.len();
                 let built = rbf::build_rbf(grid, &basis, &directions, &points, &mut stats)?;
@@ -280,6 +305,7 @@ impl Generators {
     }
 }
 
+pub mod ansdmd;
 pub mod rbf;
 pub mod ulam;
 
@@ -309,6 +335,7 @@ fn per_direction<T: Send>(
     })
 }
 
+pub use ansdmd::MAX_ANSDMD_FUNCTIONS;
 pub use rbf::MAX_RBF_FUNCTIONS;
 
 #[cfg(test)]

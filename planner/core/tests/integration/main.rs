@@ -1,6 +1,7 @@
 //! The integration tests of `planner/core`, one test binary (each module was a test binary of its own).
 
 mod admissible_astar;
+mod ansdmd;
 mod bad_input;
 mod baselines;
 mod exact_solver;
