@@ -85,6 +85,7 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
             max_solve_time: 5.0,
             solver: PlanOptions::SOLVER_CLARABEL,
             confidence_sigmas: 2.5,
+            generators: PlanOptions::GENERATORS_ANSDMD,
         },
         start_sigma: 0.15,
     };
