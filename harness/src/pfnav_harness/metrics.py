@@ -204,6 +204,10 @@ class RunMetrics:
     # Largest horizontal distance of the walked path from the plan's path (in feedback mode the
     # reference is the robot's own position, so this, not the tracking error, says how far it strayed).
     max_path_deviation: float = 0.0
+    # The steepest terrain under the planned path, as the planner measures it, degrees.
+    planned_max_slope_deg: float = 0.0
+    # Wall-clock time the planner service spent on the plan, s (None: not from the service).
+    planner_solve_time: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -276,6 +280,7 @@ def compute_metrics(
     method: str,
     thresholds: FallThresholds | None = None,
     planner_cost: float | None = None,
+    planner_solve_time: float | None = None,
 ) -> RunMetrics:
     """Metrics of a run log (see `cosim.CoSimulation.log_arrays` for the keys)."""
     thresholds = thresholds or FallThresholds()
@@ -304,7 +309,8 @@ def compute_metrics(
     effort = float(np.sum(np.sum(tau**2, axis=1) * dt))
 
     executed_cost, executed_length = path_cost(field, pos[walking, 0], pos[walking, 1])
-    planned_cost, planned_length = path_cost(field, log["plan_x"], log["plan_y"])
+    planned = field.measure(log["plan_x"], log["plan_y"]) if len(log["plan_x"]) >= 2 else None
+    planned_cost, planned_length = (planned.cost_integral, planned.length) if planned is not None else (0.0, 0.0)
     walked = pos[walking][::10]
     deviation = distance_to_polyline(walked[:, 0], walked[:, 1], np.asarray(log["plan_x"]), np.asarray(log["plan_y"]))
     return RunMetrics(
@@ -329,6 +335,8 @@ def compute_metrics(
         planned_length=planned_length,
         planner_cost=planner_cost,
         max_path_deviation=float(deviation.max()) if len(deviation) else 0.0,
+        planned_max_slope_deg=planned.max_slope_deg if planned is not None else 0.0,
+        planner_solve_time=planner_solve_time,
     )
 
 

@@ -113,6 +113,7 @@ def simulate(
         label,
         config.fall,
         planner_cost=plan.metrics.get("cost"),
+        planner_solve_time=plan.metrics.get("solve_time"),
     )
     estimation = compute_estimation_metrics(result.log, until=metrics.fall_time) if has_estimate(result.log) else None
     if log_path is not None:
