@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-WALL_CLOCK_KEYS = {"wall_seconds", "timing_per_sim_second"}
+WALL_CLOCK_KEYS = {"wall_seconds", "timing_per_sim_second", "planner_solve_time"}
 # Logged arrays that measure the machine, not the robot.
 WALL_CLOCK_ARRAYS = {"mpc_solve_time"}
 
