@@ -43,7 +43,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from pfnav_harness import results_page
-from pfnav_harness.engine import DEFAULT_ENGINE, ENGINE_LABELS, ENGINE_NAMES
+from pfnav_harness.engine import (
+    DEFAULT_ENGINE,
+    ENGINE_LABELS,
+    ENGINE_NAMES,
+    ENGINE_TITLES,
+)
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.incline import (
     DIRECTIONS,
@@ -384,7 +389,8 @@ def main() -> int:
         page = results_page.write_results_page(
             args.results_page,
             f"Inclines: {robot.config_path.stem} on 10°, 20°, 30° planes"
-            + ("" if args.engine == DEFAULT_ENGINE else f", {args.engine}"),
+            # The DART pages keep their titles.
+            + ("" if args.engine == DEFAULT_ENGINE else f", in {ENGINE_TITLES[args.engine]}"),
             text,
             results_page.regenerate_command(
                 ".venv/bin/python scripts/bench_slopes.py", sys.argv[1:]
