@@ -205,7 +205,7 @@ def main() -> int:
     (out / "engines.md").write_text(text + "\n")
     print(text)
     if args.results_page:
-        command = results_page.regenerate_command("bash scripts/netns.sh .venv/bin/python scripts/bench_engines.py", sys.argv[1:])
+        command = results_page.regenerate_command(".venv/bin/python scripts/bench_engines.py", sys.argv[1:])
         title = "Cross-engine check: DART and MuJoCo under the same controller"
         print(f"results page: {results_page.write_results_page(args.results_page, title, text, command, stamp)}")
     return 0
