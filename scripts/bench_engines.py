@@ -27,6 +27,8 @@ ESTIMATORS = ("groundTruth", "kalman")
 METHODS = ("pf", "astar")
 # Third-party robots (robot/third_party/NAME.toml): P-F only, on the estimators `--third-party-estimators` names.
 THIRD_PARTY = ("go1", "a1")
+# The third-party robots walk on their own estimate (as a real robot does) unless told otherwise.
+THIRD_PARTY_ESTIMATORS = ("kalman",)
 # MuJoCo's RMS tracking may be at most this multiple of DART's (the target).
 RMS_RATIO_TARGET = 1.5
 # MuJoCo co-simulation speed against DART's, simulated seconds per wall second (the target).
@@ -129,8 +131,8 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=None, help="cap on simulated seconds per run (default: the whole plan)")
     parser.add_argument(
         "--third-party-estimators",
-        default="kalman",
-        help=f"estimators Go1 and A1 run with, comma-separated from {', '.join(ESTIMATORS)} (default kalman)",
+        default=",".join(THIRD_PARTY_ESTIMATORS),
+        help=f"estimators Go1 and A1 run with, comma-separated from {', '.join(ESTIMATORS)} (default {','.join(THIRD_PARTY_ESTIMATORS)})",
     )
     parser.add_argument("--only-robot", default=None, help="only this robot (quadruped, go1 or a1)")
     parser.add_argument("--save-logs", action="store_true", help="also save every run's log as OUT/logs/ROBOT_SCENARIO_METHOD_ESTIMATOR_ENGINE.npz")
