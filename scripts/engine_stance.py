@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from pfnav_harness.robot import RobotDescription
 
 # Seconds after a touch-down counted as the touch-down (the impact and the foot settling).
 TOUCHDOWN_WINDOW = 0.02
@@ -78,7 +79,14 @@ def steps_since(events: NDArray[np.bool_]) -> NDArray[np.float64]:
 
 
 def measure(
-    label: str, engine: str, fmu: Path, robot: object, cache: Path, seed: int, contact_time_constant: float | None = None, contact_sensor: bool = False
+    label: str,
+    engine: str,
+    fmu: Path,
+    robot: RobotDescription,
+    cache: Path,
+    seed: int,
+    contact_time_constant: float | None = None,
+    contact_sensor: bool = False,
 ) -> StanceFigures:
     """One walk in `engine` (MuJoCo: with contacts of `contact_time_constant`, None: MuJoCo's own), reported as `label`;
     `contact_sensor`: the estimator gets the physics' foot contacts."""
@@ -86,13 +94,16 @@ def measure(
     from pfnav_harness.cosim import CoSimConfig, CoSimulation
     from pfnav_harness.estimation_metrics import compute_estimation_metrics
     from pfnav_harness.incline import WorldProbe, incline_scenario, straight_plan
+    from pfnav_harness.mujoco_world import MujocoWorld
 
     scenario = incline_scenario(0.0, "up", WALK_DISTANCE)
     plan = straight_plan(scenario)
     config = CoSimConfig(engine=engine, estimator="kalman", body_sensors=BodySensorConfig(seed=seed, contact_sensor=contact_sensor))
-    with CoSimulation(scenario, plan, fmu, robot, cache, config) as sim:  # type: ignore[arg-type]
+    with CoSimulation(scenario, plan, fmu, robot, cache, config) as sim:
         if contact_time_constant is not None:
-            sim.world.set_contact_time_constant(contact_time_constant)  # type: ignore[attr-defined]
+            if not isinstance(sim.world, MujocoWorld):
+                raise SystemExit(f"engine_stance: a contact time constant is MuJoCo's, not {engine}'s")
+            sim.world.set_contact_time_constant(contact_time_constant)
         probe = WorldProbe(sim.world, round(sim.duration() / config.physics_dt) + 1)
         result = sim.run()
         radius = sim.world.foot_radius
