@@ -26,11 +26,15 @@ import pfnav
 from pfnav import (
     feedback_field_t,
     header_t,
+    low_cmd_t,
+    low_state_t,
+    nav_cmd_t,
     plan_metrics_t,
     plan_options_t,
     plan_reply_t,
     plan_request_t,
     robot_state_t,
+    robot_status_t,
     service_status_t,
     terrain_map_t,
     trajectory_sample_t,
@@ -232,8 +236,59 @@ def sample_messages() -> list[Any]:
     state.foot_contact = [True, False, False, True]
     state.fsm_state = 3
     state.reference = [1.02, -2.0, 0.0, 0.2, 0.5, 0.0, 0.1]
+
+    # Values exact in float32 (the motor and IMU fields are float), so both sides hold the same number.
+    low_state = low_state_t()
+    low_state.header = header(20)
+    low_state.tick = 987_654
+    low_state.imu_quaternion = [1.0, 0.0, 0.125, -0.25]
+    low_state.imu_gyroscope = [0.5, -0.25, 0.0]
+    low_state.imu_accelerometer = [0.0, 0.75, 9.75]
+    low_state.q = [0.125 * i - 0.5 for i in range(12)]
+    low_state.dq = [-1.5 + 0.25 * i for i in range(12)]
+    low_state.tau_est = [4.0 - 0.5 * i for i in range(12)]
+    low_state.foot_force = [40.0, 0.0, 38.5, 1.5]
+    low_state.foot_contact = [1, 0, -1, 1]
+
+    low_cmd = low_cmd_t()
+    low_cmd.header = header(21)
+    low_cmd.state_seq = 20
+    low_cmd.mode = [low_cmd_t.MODE_SERVO] * 11 + [low_cmd_t.MODE_IDLE]
+    low_cmd.q = [0.0] * 12
+    low_cmd.dq = [0.0] * 12
+    low_cmd.tau = [2.0 - 0.25 * i for i in range(12)]
+    low_cmd.kp = [0.0] * 12
+    low_cmd.kd = [0.0] * 11 + [2.5]
+
+    nav = nav_cmd_t()
+    nav.header = header(22)
+    nav.mode = nav_cmd_t.MODE_LOCOMOTION
+    nav.x, nav.y, nav.z, nav.yaw = 1.5, -0.25, 0.02, 0.3
+    nav.vx, nav.vy, nav.yaw_rate = 0.5, 0.05, -0.1
+    nav.body_height, nav.terrain_dzdx, nav.terrain_dzdy = 0.0, 0.1, -0.05
+
+    robot_status = robot_status_t()
+    robot_status.header = header(23)
+    robot_status.uptime, robot_status.period = 61.5, 1e-3
+    robot_status.window_cycles, robot_status.total_cycles = 500, 61_500
+    robot_status.window_misses, robot_status.total_misses = 1, 7
+    robot_status.period_p50, robot_status.period_p99, robot_status.period_max = 1.0e-3, 1.1e-3, 1.4e-3
+    robot_status.runtime_p50, robot_status.runtime_p99, robot_status.runtime_max = 6e-5, 4e-4, 6e-4
+    robot_status.latency_p99, robot_status.latency_max = 9.5e-4, 1.2e-3
+    robot_status.safety = robot_status_t.SAFETY_DAMPING
+    robot_status.safety_since = 60.25
+    robot_status.reason = "no low_state_t for 20 ms"
+    robot_status.damping_entries, robot_status.fsm_state = 2, 2
+    robot_status.states_received, robot_status.states_out_of_order = 61_000, 3
+    robot_status.states_non_finite, robot_status.nav_cmds_received = 1, 3_000
+    robot_status.malformed_messages = 12
+    robot_status.realtime_priority, robot_status.memory_locked = False, True
     return [
         state,
+        low_state,
+        low_cmd,
+        nav,
+        robot_status,
         terrain_map(16, 9, False),
         terrain_map(3, 3, True),
         terrain_map(6, 4, True, with_known=True),
@@ -269,6 +324,10 @@ def test_fingerprints_agree_for_every_type() -> None:
             "plan_reply_t",
             "service_status_t",
             "robot_state_t",
+            "low_state_t",
+            "low_cmd_t",
+            "nav_cmd_t",
+            "robot_status_t",
         )
     }
     assert rust == python

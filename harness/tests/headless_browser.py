@@ -6,10 +6,12 @@ uncaught exceptions, evaluates JavaScript and takes a screenshot.
 from __future__ import annotations
 
 import base64
+import contextlib
 import fcntl
 import json
 import os
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -39,7 +41,8 @@ class PageProblems:
 
 class HeadlessChromium:
     def __init__(self, binary: str, width: int = 1280, height: int = 900) -> None:
-        self.profile = tempfile.TemporaryDirectory(prefix="pfnav-chromium-")
+        # Chromium's helper processes may still write the profile while it is removed.
+        self.profile = tempfile.TemporaryDirectory(prefix="pfnav-chromium-", ignore_cleanup_errors=True)
         command_read, self._command_write = os.pipe()
         self._reply_read, reply_write = os.pipe()
         # The child's ends above the fds Chromium wants, so that putting them on 3 and 4 overwrites neither.
@@ -65,7 +68,12 @@ class HeadlessChromium:
         # bash puts the pipe ends on the fds Chromium expects (and closes the originals) before it becomes Chromium.
         redirect = f'exec "$0" "$@" {COMMAND_FD}<&{command_read} {REPLY_FD}>&{reply_write} {command_read}<&- {reply_write}>&-'
         self.process = subprocess.Popen(
-            ["bash", "-c", redirect, *args], pass_fds=(command_read, reply_write), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            ["bash", "-c", redirect, *args],
+            pass_fds=(command_read, reply_write),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            # Its own process group: closing stops Chromium's helper processes too.
+            start_new_session=True,
         )
         os.close(command_read)
         os.close(reply_write)
@@ -93,6 +101,8 @@ class HeadlessChromium:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(self.process.pid, signal.SIGKILL)
         self.profile.cleanup()
 
     def __enter__(self) -> HeadlessChromium:

@@ -11,8 +11,8 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
 use lcm_types::pfnav::{
-    FeedbackField, Header, PlanMetrics, PlanOptions, PlanReply, PlanRequest, ServiceStatus,
-    TerrainMap, TrajectorySample,
+    FeedbackField, Header, LowCmd, LowState, NavCmd, PlanMetrics, PlanOptions, PlanReply,
+    PlanRequest, RobotStatus, ServiceStatus, TerrainMap, TrajectorySample,
 };
 use lcm_types::{AnyMessage, Message};
 
@@ -174,6 +174,10 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
         goal_radius: 0.3,
     };
     let mut seeds = vec![
+        AnyMessage::LowState(low_state()),
+        AnyMessage::LowCmd(low_cmd()),
+        AnyMessage::NavCmd(nav_cmd()),
+        AnyMessage::RobotStatus(robot_status()),
         AnyMessage::TerrainMap(sample_map()),
         AnyMessage::FeedbackField(field),
         AnyMessage::PlanRequest(request),
@@ -185,6 +189,84 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
         seeds.push(AnyMessage::default_for(name).expect("every listed type has a default"));
     }
     seeds
+}
+
+fn low_state() -> LowState {
+    let joints: [f32; 12] = std::array::from_fn(|j| 0.1 * j as f32 - 0.55);
+    LowState {
+        header: header(13),
+        tick: 123_456,
+        imu_quaternion: [0.995, 0.0, 0.0998, 0.0],
+        imu_gyroscope: [0.01, -0.02, 0.3],
+        imu_accelerometer: [0.1, 0.0, 9.81],
+        q: joints,
+        dq: joints.map(|v| -2.0 * v),
+        tau_est: joints.map(|v| 10.0 * v),
+        foot_force: [40.0, 0.0, 38.5, 1.5],
+        foot_contact: [1, 0, -1, 1],
+    }
+}
+
+fn low_cmd() -> LowCmd {
+    LowCmd {
+        header: header(14),
+        state_seq: 13,
+        mode: [LowCmd::MODE_SERVO; 12],
+        q: [0.0; 12],
+        dq: [0.0; 12],
+        tau: std::array::from_fn(|j| 2.0 - 0.5 * j as f32),
+        kp: [0.0; 12],
+        kd: [f32::MIN_POSITIVE; 12],
+    }
+}
+
+fn nav_cmd() -> NavCmd {
+    NavCmd {
+        header: header(15),
+        mode: NavCmd::MODE_LOCOMOTION,
+        x: 1.5,
+        y: -0.25,
+        z: 0.02,
+        yaw: 0.3,
+        vx: 0.5,
+        vy: 0.05,
+        yaw_rate: -0.1,
+        body_height: 0.0,
+        terrain_dzdx: 0.1,
+        terrain_dzdy: -0.05,
+    }
+}
+
+fn robot_status() -> RobotStatus {
+    RobotStatus {
+        header: header(16),
+        uptime: 61.5,
+        period: 1e-3,
+        window_cycles: 500,
+        total_cycles: 61_500,
+        window_misses: 1,
+        total_misses: 7,
+        period_p50: 1.0e-3,
+        period_p99: 1.1e-3,
+        period_max: 1.4e-3,
+        runtime_p50: 6.0e-5,
+        runtime_p99: 4.0e-4,
+        runtime_max: 6.0e-4,
+        latency_p99: 9.5e-4,
+        latency_max: 1.2e-3,
+        safety: RobotStatus::SAFETY_DAMPING,
+        safety_since: 60.25,
+        reason: "no low_state_t for 20 ms".to_string(),
+        damping_entries: 2,
+        fsm_state: 2,
+        states_received: 61_000,
+        states_out_of_order: 3,
+        states_non_finite: 1,
+        nav_cmds_received: 3_000,
+        malformed_messages: 12,
+        realtime_priority: false,
+        memory_locked: true,
+    }
 }
 
 /// Valid, non-trivial messages of every codegen test type.

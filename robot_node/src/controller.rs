@@ -1,0 +1,191 @@
+//! The controller FMU as the node drives it: low_state_t and nav_cmd_t copied into the FMU's
+//! inputs, the joint torques and the FSM state read back. Every name is resolved against the
+//! FMU's modelDescription once, at start; the loop then uses value references and fixed-size
+//! buffers only. The FMU runs its own estimator (`estimator = kalman`): low_state_t carries
+//! what a robot measures (IMU, encoders), not the trunk's position and velocity.
+
+use std::path::Path;
+
+use anyhow::Context;
+use lcm_types::pfnav::NavCmd;
+
+use crate::fmu_host::{CoSimulation, Fmi2Library, UnpackedFmu};
+use crate::inbox::{BodyState, NavReference};
+use crate::model_description::{ModelDescription, ScalarKind};
+
+const JOINTS: usize = 12;
+/// base.quat (4), imu.gyro (3), imu.acc (3), joint.q (12), joint.dq (12), ref.* (8), terrain (2).
+const REAL_INPUTS: usize = 4 + 3 + 3 + JOINTS + JOINTS + 8 + 2;
+/// cmd.mode and contact[1..4].
+const INTEGER_INPUTS: usize = 1 + 4;
+
+/// What one controller step produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControllerOutput {
+    pub torques: [f64; JOINTS],
+    /// The FMU's `fsm.state`.
+    pub fsm_state: i32,
+}
+
+pub struct HostedController {
+    fmu: CoSimulation,
+    // Kept alive (the unpacked binary and resources) for as long as the instance.
+    _unpacked: UnpackedFmu,
+    real_inputs: [u32; REAL_INPUTS],
+    integer_inputs: [u32; INTEGER_INPUTS],
+    torques: [u32; JOINTS],
+    fsm_state: [u32; 1],
+    /// FMU ModeRequest codes of nav_cmd_t's MODE_PASSIVE, MODE_STAND, MODE_LOCOMOTION.
+    mode_codes: [i32; 3],
+    /// Steps taken: the communication point is steps × step, free of summed rounding.
+    steps: u64,
+    step: f64,
+}
+
+fn names() -> Vec<String> {
+    let mut names: Vec<String> = ["w", "x", "y", "z"]
+        .iter()
+        .map(|c| format!("base.quat.{c}"))
+        .collect();
+    names.extend((1..=3).map(|i| format!("imu.gyro[{i}]")));
+    names.extend((1..=3).map(|i| format!("imu.acc[{i}]")));
+    names.extend((1..=JOINTS).map(|i| format!("joint.q[{i}]")));
+    names.extend((1..=JOINTS).map(|i| format!("joint.dq[{i}]")));
+    names.extend(
+        ["x", "y", "z", "yaw", "vx", "vy", "yawRate", "bodyHeight"]
+            .iter()
+            .map(|r| format!("ref.{r}")),
+    );
+    names.extend(["terrain.dzdx".to_owned(), "terrain.dzdy".to_owned()]);
+    names
+}
+
+fn references<const N: usize>(
+    description: &ModelDescription,
+    names: impl IntoIterator<Item = String>,
+    kind: ScalarKind,
+    causality: &str,
+) -> anyhow::Result<[u32; N]> {
+    let found: Vec<u32> = names
+        .into_iter()
+        .map(|name| {
+            description
+                .variable(&name, kind, causality)
+                .map(|v| v.value_reference)
+        })
+        .collect::<Result<_, _>>()?;
+    found
+        .try_into()
+        .map_err(|v: Vec<u32>| anyhow::anyhow!("expected {N} variables, found {}", v.len()))
+}
+
+impl HostedController {
+    /// Unpacks the FMU at `archive`, instantiates it with the estimator on and initialises it
+    /// for steps of `step` seconds.
+    pub fn load(archive: &Path, step: f64) -> anyhow::Result<Self> {
+        let unpacked = UnpackedFmu::open(archive)?;
+        let library = Fmi2Library::load(&unpacked.binary_path())?;
+        let description = &unpacked.description;
+        let real_inputs = references(description, names(), ScalarKind::Real, "input")?;
+        let integer_inputs = references(
+            description,
+            std::iter::once("cmd.mode".to_owned()).chain((1..=4).map(|k| format!("contact[{k}]"))),
+            ScalarKind::Integer,
+            "input",
+        )?;
+        let torques = references(
+            description,
+            (1..=JOINTS).map(|i| format!("joint.tau[{i}]")),
+            ScalarKind::Real,
+            "output",
+        )?;
+        let fsm_state = references(
+            description,
+            ["fsm.state".to_owned()],
+            ScalarKind::Integer,
+            "output",
+        )?;
+        let estimator = description
+            .variable("estimator", ScalarKind::Integer, "parameter")?
+            .value_reference;
+        let kalman = description.enumeration_code("estimator", "kalman")?;
+        let mut mode_codes = [0; 3];
+        for (code, item) in mode_codes
+            .iter_mut()
+            .zip(["Passive", "Stand", "Locomotion"])
+        {
+            *code = description.enumeration_code("cmd.mode", item)?;
+        }
+
+        let mut fmu = CoSimulation::instantiate(library, &unpacked, "pfnav-robot")?;
+        fmu.enter_initialization(0.0)?;
+        fmu.set_integer(&[estimator], &[kalman])
+            .context("setting estimator = kalman")?;
+        fmu.exit_initialization()?;
+        Ok(Self {
+            fmu,
+            _unpacked: unpacked,
+            real_inputs,
+            integer_inputs,
+            torques,
+            fsm_state,
+            mode_codes,
+            steps: 0,
+            step,
+        })
+    }
+
+    /// Copies `state` and `nav` into the inputs, runs one `fmi2DoStep` of the step length and
+    /// reads the outputs. Allocation-free.
+    pub fn step(
+        &mut self,
+        state: &BodyState,
+        nav: &NavReference,
+    ) -> anyhow::Result<ControllerOutput> {
+        let mut values = [0.0f64; REAL_INPUTS];
+        let sensors = state
+            .imu_quaternion
+            .iter()
+            .chain(&state.imu_gyroscope)
+            .chain(&state.imu_accelerometer)
+            .chain(&state.q)
+            .chain(&state.dq)
+            .map(|&v| f64::from(v));
+        let reference = [
+            nav.x,
+            nav.y,
+            nav.z,
+            nav.yaw,
+            nav.vx,
+            nav.vy,
+            nav.yaw_rate,
+            nav.body_height,
+            nav.terrain_dzdx,
+            nav.terrain_dzdy,
+        ];
+        for (slot, value) in values.iter_mut().zip(sensors.chain(reference)) {
+            *slot = value;
+        }
+        let mode = match nav.mode {
+            NavCmd::MODE_PASSIVE => self.mode_codes[0],
+            NavCmd::MODE_STAND => self.mode_codes[1],
+            // The inbox only lets the three known modes through.
+            _ => self.mode_codes[2],
+        };
+        let contact = state.foot_contact.map(i32::from);
+        let integers = [mode, contact[0], contact[1], contact[2], contact[3]];
+        self.fmu.set_real(&self.real_inputs, &values)?;
+        self.fmu.set_integer(&self.integer_inputs, &integers)?;
+        self.fmu.do_step(self.steps as f64 * self.step, self.step)?;
+        self.steps += 1;
+        let mut output = ControllerOutput {
+            torques: [0.0; JOINTS],
+            fsm_state: 0,
+        };
+        self.fmu.get_real(&self.torques, &mut output.torques)?;
+        let mut fsm = [0i32; 1];
+        self.fmu.get_integer(&self.fsm_state, &mut fsm)?;
+        output.fsm_state = fsm[0];
+        Ok(output)
+    }
+}

@@ -1,0 +1,128 @@
+//! `pfnav-robot`: runs the controller FMU as a real-time LCM node until SIGINT or SIGTERM.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Parser;
+use lcm_transport::Lcm;
+use pfnav_robot::{NodeConfig, RobotChannels};
+use tracing_subscriber::EnvFilter;
+
+/// The controller FMU as a real-time LCM node: low_state_t in, low_cmd_t out every period on
+/// absolute deadlines, damping on faults, robot_status_t with timing statistics.
+///
+/// Channels: <prefix> followed by the names of `[robot]` in lcm_types/channels.toml.
+/// Logs go to stderr; set RUST_LOG (e.g. RUST_LOG=debug) for more.
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Args {
+    /// The controller FMU [default: $PFNAV_FMU_OUT, else target/fmu/QuadController.fmu].
+    #[arg(long)]
+    fmu: Option<PathBuf>,
+    /// LCM URL [default: $LCM_DEFAULT_URL, else the stack's default bus, lcm_types/channels.toml].
+    #[arg(long)]
+    lcm_url: Option<String>,
+    /// Prefix of the channel names.
+    #[arg(long, default_value = lcm_types::channels::DEFAULT_PREFIX)]
+    channel_prefix: String,
+    /// Control rate, Hz: 1000 or 500.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(500..=1000))]
+    rate: u32,
+    /// Damping after this long without a low_state_t, ms.
+    #[arg(long, default_value_t = 20.0)]
+    state_timeout_ms: f64,
+    /// Damping after this long without a nav_cmd_t, ms.
+    #[arg(long, default_value_t = 500.0)]
+    nav_timeout_ms: f64,
+    /// Fault-free cycles in a row before damping ends.
+    #[arg(long, default_value_t = 20)]
+    recover_cycles: u32,
+    /// Velocity gain of the damping command, N m s/rad.
+    #[arg(long, default_value_t = 2.0)]
+    damping_kd: f32,
+    /// Seconds between two robot_status_t messages.
+    #[arg(long, default_value_t = 0.5)]
+    status_period: f64,
+    /// SCHED_FIFO priority of the control thread (1..=99); 0 keeps ordinary scheduling and
+    /// does not lock memory.
+    #[arg(long, default_value_t = 80)]
+    priority: i32,
+    /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
+    #[arg(long)]
+    duration: Option<f64>,
+}
+
+fn milliseconds(value: f64, flag: &str) -> anyhow::Result<u64> {
+    anyhow::ensure!(
+        value.is_finite() && value > 0.0 && value <= 60_000.0,
+        "{flag} must be in (0, 60000] ms"
+    );
+    Ok((value * 1e6) as u64)
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let args = Args::parse();
+    let fmu = args.fmu.clone().unwrap_or_else(|| {
+        std::env::var_os("PFNAV_FMU_OUT")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from("target/fmu/QuadController.fmu"))
+    });
+    let mut config = NodeConfig::new(fmu, RobotChannels::with_prefix(&args.channel_prefix)?);
+    anyhow::ensure!(
+        args.rate == 1000 || args.rate == 500,
+        "--rate must be 1000 or 500 (the controller ticks every 1 ms: a period of whole ticks)"
+    );
+    config.period = Duration::from_secs_f64(1.0 / f64::from(args.rate));
+    config.safety.state_timeout_ns = milliseconds(args.state_timeout_ms, "--state-timeout-ms")?;
+    config.safety.nav_timeout_ns = milliseconds(args.nav_timeout_ms, "--nav-timeout-ms")?;
+    config.safety.recover_cycles = args.recover_cycles;
+    config.damping_kd = args.damping_kd;
+    anyhow::ensure!(
+        args.status_period.is_finite() && args.status_period > 0.0 && args.status_period <= 3600.0,
+        "--status-period must be in (0, 3600] s"
+    );
+    config.status_period = Duration::from_secs_f64(args.status_period);
+    anyhow::ensure!(
+        (0..=99).contains(&args.priority),
+        "--priority must be 0 (ordinary scheduling) or 1..=99"
+    );
+    config.realtime_priority = (args.priority > 0).then_some(args.priority);
+    if let Some(seconds) = args.duration {
+        anyhow::ensure!(
+            seconds.is_finite() && seconds > 0.0 && seconds < 1e7,
+            "--duration must be a positive number of seconds"
+        );
+        config.duration = Some(Duration::from_secs_f64(seconds));
+    }
+
+    let url = args
+        .lcm_url
+        .unwrap_or_else(|| lcm_transport::url_from_env_or(lcm_types::channels::DEFAULT_URL));
+    let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);
+    let shutdown = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&shutdown))
+            .with_context(|| format!("installing the handler of signal {signal}"))?;
+    }
+    let report = pfnav_robot::run(lcm, config, shutdown)?;
+    let timing = &report.timing;
+    tracing::info!(
+        cycles = report.cycles,
+        misses = timing.misses,
+        period_p99_us = timing.period.percentile_ns(0.99) as f64 * 1e-3,
+        period_max_us = timing.period.max_ns() as f64 * 1e-3,
+        latency_p99_us = timing.latency.percentile_ns(0.99) as f64 * 1e-3,
+        damping_entries = report.damping_entries,
+        "stopped"
+    );
+    Ok(())
+}

@@ -1,0 +1,389 @@
+//! The node: an LCM thread fills the inbox; the control loop wakes on absolute deadlines,
+//! takes the newest state and navigator command, asks the safety monitor, steps the controller
+//! (or damps), sends low_cmd_t, and every status period sends robot_status_t.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context;
+use lcm_transport::Lcm;
+use lcm_types::pfnav::{Header, LowCmd, RobotStatus};
+use lcm_types::Message;
+
+use crate::clock::{self, RealtimeSettings};
+use crate::controller::HostedController;
+use crate::inbox::{Counters, Inbox};
+use crate::safety::{Mode, SafetyConfig, SafetyMonitor};
+use crate::stats::LoopTiming;
+
+/// A cycle is missed when its period exceeds this many nominal periods (Cheetah-Software's
+/// PeriodicTask criterion).
+pub const MISS_FACTOR: f64 = 1.3;
+
+/// The node's channels: `<prefix>` + the names of `[robot]` in channels.toml.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RobotChannels {
+    pub low_state: String,
+    pub low_cmd: String,
+    pub nav_cmd: String,
+    pub status: String,
+}
+
+impl RobotChannels {
+    pub fn with_prefix(prefix: &str) -> anyhow::Result<Self> {
+        use lcm_types::channels::robot;
+        let channels = Self {
+            low_state: format!("{prefix}{}", robot::LOW_STATE),
+            low_cmd: format!("{prefix}{}", robot::LOW_CMD),
+            nav_cmd: format!("{prefix}{}", robot::NAV_CMD),
+            status: format!("{prefix}{}", robot::ROBOT_STATUS),
+        };
+        let plain = prefix
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '/');
+        anyhow::ensure!(
+            plain,
+            "channel prefix {prefix:?} may only contain ASCII letters, digits, '_', '-' and '/' (subscriptions are regular expressions)"
+        );
+        for name in [
+            &channels.low_state,
+            &channels.low_cmd,
+            &channels.nav_cmd,
+            &channels.status,
+        ] {
+            anyhow::ensure!(
+                name.len() <= lcm_transport::MAX_CHANNEL_LEN,
+                "channel {name:?} is longer than LCM's {} bytes",
+                lcm_transport::MAX_CHANNEL_LEN
+            );
+        }
+        Ok(channels)
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct NodeConfig {
+    pub channels: RobotChannels,
+    /// The controller FMU (`QuadController.fmu`).
+    pub fmu: std::path::PathBuf,
+    /// Control period (1 ms at 1 kHz, 2 ms at 500 Hz); also the FMU's step.
+    pub period: Duration,
+    pub safety: SafetyConfig,
+    /// Velocity gain of the damping command, N m s/rad.
+    pub damping_kd: f32,
+    pub status_period: Duration,
+    /// Try SCHED_FIFO at this priority and mlockall (None: ordinary scheduling).
+    pub realtime_priority: Option<i32>,
+    /// Stop after this long (None: until the shutdown flag is set).
+    pub duration: Option<Duration>,
+}
+
+impl NodeConfig {
+    /// The documented defaults: 1 kHz, 20 ms state timeout, 500 ms navigator timeout,
+    /// 20 good cycles to recover, damping kd 2 N m s/rad, status every 0.5 s, SCHED_FIFO 80.
+    pub fn new(fmu: std::path::PathBuf, channels: RobotChannels) -> Self {
+        Self {
+            channels,
+            fmu,
+            period: Duration::from_millis(1),
+            safety: SafetyConfig {
+                state_timeout_ns: 20_000_000,
+                nav_timeout_ns: 500_000_000,
+                recover_cycles: 20,
+            },
+            damping_kd: 2.0,
+            status_period: Duration::from_millis(500),
+            realtime_priority: Some(80),
+            duration: None,
+        }
+    }
+
+    fn check(&self) -> anyhow::Result<()> {
+        let period = self.period.as_secs_f64();
+        anyhow::ensure!(
+            (1e-4..=0.1).contains(&period),
+            "period {period} s is outside 0.1 ms ..= 100 ms"
+        );
+        anyhow::ensure!(
+            self.damping_kd.is_finite() && self.damping_kd >= 0.0,
+            "damping kd must be finite and >= 0"
+        );
+        anyhow::ensure!(!self.status_period.is_zero(), "status period must be > 0");
+        anyhow::ensure!(
+            self.safety.state_timeout_ns > 0 && self.safety.nav_timeout_ns > 0,
+            "timeouts must be > 0"
+        );
+        Ok(())
+    }
+}
+
+/// How a run went (the whole run's timing, for the benchmark and the log at exit).
+#[derive(Debug, Clone)]
+pub struct RunReport {
+    pub timing: LoopTiming,
+    pub cycles: u64,
+    pub damping_entries: i64,
+    pub counters: Counters,
+    pub realtime: RealtimeSettings,
+    pub final_mode: Mode,
+    pub final_reason: String,
+}
+
+fn wall_utime() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_micros()).unwrap_or(i64::MAX))
+}
+
+fn header(seq: i64) -> Header {
+    Header {
+        utime: wall_utime(),
+        seq,
+        frame_id: "body".to_owned(),
+    }
+}
+
+fn seconds(ns: u64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+/// Runs the node on `lcm` until `shutdown` is set (or the configured duration has passed).
+/// The calling thread becomes the control thread; an LCM thread is started beside it.
+pub fn run(
+    lcm: Arc<Lcm>,
+    config: NodeConfig,
+    shutdown: Arc<AtomicBool>,
+) -> anyhow::Result<RunReport> {
+    config.check()?;
+    let period_ns = u64::try_from(config.period.as_nanos()).unwrap_or(u64::MAX);
+    let mut controller = HostedController::load(&config.fmu, config.period.as_secs_f64())
+        .with_context(|| format!("loading the controller FMU {}", config.fmu.display()))?;
+
+    let inbox = Arc::new(Inbox::new(config.safety.state_timeout_ns));
+    let state_inbox = Arc::clone(&inbox);
+    let _state_sub = lcm.subscribe(&config.channels.low_state, move |_, bytes| {
+        state_inbox.on_low_state(bytes, clock::now_ns());
+    })?;
+    let nav_inbox = Arc::clone(&inbox);
+    let _nav_sub = lcm.subscribe(&config.channels.nav_cmd, move |_, bytes| {
+        nav_inbox.on_nav_cmd(bytes, clock::now_ns());
+    })?;
+
+    let receiver_stop = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let receiver = std::thread::Builder::new()
+            .name("pfnav-robot-lcm".to_owned())
+            .spawn_scoped(scope, || {
+                while !receiver_stop.load(Ordering::Relaxed) {
+                    if let Err(error) = lcm.handle_timeout(Duration::from_millis(10)) {
+                        tracing::error!(%error, "LCM receive failed");
+                        // Bounded retry rate while the bus is broken.
+                        std::thread::sleep(Duration::from_millis(10));
+                    }
+                }
+            })
+            .context("starting the LCM thread")?;
+        let report = control_loop(&lcm, &config, period_ns, &mut controller, &inbox, &shutdown);
+        receiver_stop.store(true, Ordering::Relaxed);
+        if receiver.join().is_err() {
+            tracing::error!("the LCM thread panicked");
+        }
+        report
+    })
+}
+
+fn control_loop(
+    lcm: &Lcm,
+    config: &NodeConfig,
+    period_ns: u64,
+    controller: &mut HostedController,
+    inbox: &Inbox,
+    shutdown: &AtomicBool,
+) -> anyhow::Result<RunReport> {
+    let realtime = match config.realtime_priority {
+        Some(priority) => clock::apply_realtime(priority),
+        None => RealtimeSettings::default(),
+    };
+    let mut safety = SafetyMonitor::new(config.safety);
+    let miss_ns = (period_ns as f64 * MISS_FACTOR) as u64;
+    let status_ns = u64::try_from(config.status_period.as_nanos()).unwrap_or(u64::MAX);
+    let end_ns = config
+        .duration
+        .map(|d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+
+    let mut window = LoopTiming::default();
+    let mut total = LoopTiming::default();
+    let mut window_cycles = 0i64;
+    let mut cycles = 0u64;
+    let mut command_seq = 0i64;
+    let mut status_seq = 0i64;
+    let mut fsm_state = -1i8;
+    let mut last_used_state_seq: Option<i64> = None;
+    let mut counters = Counters::default();
+    let mut command = LowCmd {
+        header: header(0),
+        state_seq: -1,
+        mode: [LowCmd::MODE_SERVO; 12],
+        ..LowCmd::default()
+    };
+
+    let start_ns = clock::now_ns();
+    let mut deadline = start_ns + period_ns;
+    let mut next_status = start_ns + status_ns;
+    let mut previous_cycle_start: Option<u64> = None;
+    tracing::info!(
+        period_ms = config.period.as_secs_f64() * 1e3,
+        low_state = %config.channels.low_state,
+        low_cmd = %config.channels.low_cmd,
+        "control loop started"
+    );
+
+    while !shutdown.load(Ordering::Relaxed) {
+        clock::sleep_until_ns(deadline);
+        let cycle_start = clock::now_ns();
+        if end_ns.is_some_and(|end| cycle_start - start_ns >= end) {
+            break;
+        }
+        if let Some(previous) = previous_cycle_start {
+            let period = cycle_start.saturating_sub(previous);
+            window.period.record(period);
+            total.period.record(period);
+            if period > miss_ns {
+                window.misses += 1;
+                total.misses += 1;
+            }
+        }
+        previous_cycle_start = Some(cycle_start);
+
+        let snapshot = inbox.take();
+        counters = snapshot.counters;
+        let mut mode = safety.update(&snapshot, cycle_start);
+        let mut fresh_state_arrival = None;
+        if mode == Mode::Torque {
+            // The monitor's torque mode implies both are present.
+            if let (Some((state, arrived)), Some((nav, _))) = (snapshot.state, snapshot.nav) {
+                match controller.step(&state, &nav) {
+                    Ok(output) if output.torques.iter().all(|t| t.is_finite()) => {
+                        for (slot, torque) in command.tau.iter_mut().zip(output.torques) {
+                            *slot = torque as f32;
+                        }
+                        command.kd = [0.0; 12];
+                        fsm_state = i8::try_from(output.fsm_state).unwrap_or(-1);
+                        command.state_seq = state.seq;
+                        if last_used_state_seq != Some(state.seq) {
+                            fresh_state_arrival = Some(arrived);
+                            last_used_state_seq = Some(state.seq);
+                        }
+                    }
+                    Ok(output) => {
+                        safety.controller_failed(
+                            format!("non-finite torque {:?}", output.torques),
+                            cycle_start,
+                        );
+                        mode = Mode::Damping;
+                    }
+                    Err(error) => {
+                        safety.controller_failed(format!("{error:#}"), cycle_start);
+                        mode = Mode::Damping;
+                    }
+                }
+            }
+        }
+        if mode == Mode::Damping {
+            command.tau = [0.0; 12];
+            command.kd = [config.damping_kd; 12];
+            command.state_seq = snapshot.state.map_or(-1, |(s, _)| s.seq);
+        }
+        command.header.seq = command_seq;
+        command.header.utime = wall_utime();
+        command_seq += 1;
+        match command.encode() {
+            Ok(bytes) => {
+                if let Err(error) = lcm.publish(&config.channels.low_cmd, &bytes) {
+                    tracing::error!(%error, "could not send low_cmd_t");
+                }
+            }
+            Err(error) => tracing::error!(%error, "could not encode low_cmd_t"),
+        }
+        let sent = clock::now_ns();
+        let runtime = sent.saturating_sub(cycle_start);
+        window.runtime.record(runtime);
+        total.runtime.record(runtime);
+        if let Some(arrived) = fresh_state_arrival {
+            let latency = sent.saturating_sub(arrived);
+            window.latency.record(latency);
+            total.latency.record(latency);
+        }
+        window_cycles += 1;
+        cycles += 1;
+
+        if sent >= next_status {
+            let status = RobotStatus {
+                header: header(status_seq),
+                uptime: seconds(sent - start_ns),
+                period: config.period.as_secs_f64(),
+                window_cycles,
+                total_cycles: i64::try_from(cycles).unwrap_or(i64::MAX),
+                window_misses: i64::try_from(window.misses).unwrap_or(i64::MAX),
+                total_misses: i64::try_from(total.misses).unwrap_or(i64::MAX),
+                period_p50: seconds(window.period.percentile_ns(0.5)),
+                period_p99: seconds(window.period.percentile_ns(0.99)),
+                period_max: seconds(window.period.max_ns()),
+                runtime_p50: seconds(window.runtime.percentile_ns(0.5)),
+                runtime_p99: seconds(window.runtime.percentile_ns(0.99)),
+                runtime_max: seconds(window.runtime.max_ns()),
+                latency_p99: seconds(window.latency.percentile_ns(0.99)),
+                latency_max: seconds(window.latency.max_ns()),
+                safety: match safety.mode() {
+                    Mode::Torque => RobotStatus::SAFETY_OK,
+                    Mode::Damping => RobotStatus::SAFETY_DAMPING,
+                },
+                safety_since: seconds(safety.since_ns().saturating_sub(start_ns)),
+                reason: safety.reason().to_owned(),
+                damping_entries: safety.damping_entries(),
+                fsm_state,
+                states_received: counters.states_received,
+                states_out_of_order: counters.states_out_of_order,
+                states_non_finite: counters.states_non_finite,
+                nav_cmds_received: counters.nav_cmds_received,
+                malformed_messages: counters.malformed_messages,
+                realtime_priority: realtime.fifo_priority,
+                memory_locked: realtime.memory_locked,
+            };
+            status_seq += 1;
+            match status.encode() {
+                Ok(bytes) => {
+                    if let Err(error) = lcm.publish(&config.channels.status, &bytes) {
+                        tracing::error!(%error, "could not send robot_status_t");
+                    }
+                }
+                Err(error) => tracing::error!(%error, "could not encode robot_status_t"),
+            }
+            window.clear();
+            window_cycles = 0;
+            next_status += status_ns;
+            if next_status <= sent {
+                next_status = sent + status_ns;
+            }
+        }
+
+        deadline += period_ns;
+        let now = clock::now_ns();
+        if deadline <= now {
+            // Overran by at least a whole period: start again on the grid after now rather
+            // than running the missed cycles back to back (their states are stale anyway).
+            let behind = (now - deadline) / period_ns + 1;
+            deadline += behind * period_ns;
+        }
+    }
+    Ok(RunReport {
+        timing: total,
+        cycles,
+        damping_entries: safety.damping_entries(),
+        counters,
+        realtime,
+        final_mode: safety.mode(),
+        final_reason: safety.reason().to_owned(),
+    })
+}

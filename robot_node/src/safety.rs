@@ -1,0 +1,256 @@
+//! The safety monitor: decides every cycle whether the controller's torques may go to the
+//! motors or the motors are damped, and why. Faults: no state for the state timeout, a state
+//! with a non-finite value, an out-of-order or repeated state seq, no navigator command for the
+//! navigator timeout, a failed controller step. Damping ends after `recover_cycles` cycles in a
+//! row without a fault (a flapping link does not toggle the motors every cycle); a controller
+//! failure is final (the FMU instance is in its error state).
+
+use crate::inbox::Snapshot;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SafetyConfig {
+    pub state_timeout_ns: u64,
+    pub nav_timeout_ns: u64,
+    pub recover_cycles: u32,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    Torque,
+    Damping,
+}
+
+#[derive(Debug)]
+pub struct SafetyMonitor {
+    config: SafetyConfig,
+    mode: Mode,
+    reason: String,
+    /// CLOCK_MONOTONIC ns of the last change of mode (0: never changed).
+    since_ns: u64,
+    damping_entries: i64,
+    good_cycles: u32,
+    controller_failure: Option<String>,
+}
+
+impl SafetyMonitor {
+    /// Starts in damping: nothing has been heard from the body or the navigator yet.
+    pub fn new(config: SafetyConfig) -> Self {
+        Self {
+            config,
+            mode: Mode::Damping,
+            reason: "starting: no low_state_t and nav_cmd_t yet".to_owned(),
+            since_ns: 0,
+            damping_entries: 0,
+            good_cycles: 0,
+            controller_failure: None,
+        }
+    }
+
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Why the motors are damped; empty in torque mode.
+    pub fn reason(&self) -> &str {
+        &self.reason
+    }
+
+    pub fn since_ns(&self) -> u64 {
+        self.since_ns
+    }
+
+    pub fn damping_entries(&self) -> i64 {
+        self.damping_entries
+    }
+
+    /// The controller failed: damping from now on, with `reason`.
+    pub fn controller_failed(&mut self, reason: String, now_ns: u64) {
+        let reason = format!("controller failed: {reason}");
+        self.controller_failure = Some(reason.clone());
+        self.enter_damping(reason, now_ns);
+    }
+
+    fn fault(&self, snapshot: &Snapshot, now_ns: u64) -> Option<String> {
+        if let Some(failure) = &self.controller_failure {
+            return Some(failure.clone());
+        }
+        let age_ms = |at: u64| now_ns.saturating_sub(at) as f64 * 1e-6;
+        match snapshot.state {
+            None => return Some("no low_state_t received yet".to_owned()),
+            Some((_, at)) if now_ns.saturating_sub(at) > self.config.state_timeout_ns => {
+                return Some(format!(
+                    "no low_state_t for {:.1} ms (timeout {:.1} ms)",
+                    age_ms(at),
+                    self.config.state_timeout_ns as f64 * 1e-6
+                ))
+            }
+            Some(_) => {}
+        }
+        if snapshot.non_finite_state {
+            return Some("non-finite value in low_state_t".to_owned());
+        }
+        if let Some((seq, last)) = snapshot.out_of_order {
+            return Some(format!("out-of-order low_state_t seq {seq} after {last}"));
+        }
+        match snapshot.nav {
+            None => Some("no nav_cmd_t received yet".to_owned()),
+            Some((_, at)) if now_ns.saturating_sub(at) > self.config.nav_timeout_ns => {
+                Some(format!(
+                    "no nav_cmd_t for {:.0} ms (timeout {:.0} ms)",
+                    age_ms(at),
+                    self.config.nav_timeout_ns as f64 * 1e-6
+                ))
+            }
+            Some(_) => None,
+        }
+    }
+
+    fn enter_damping(&mut self, reason: String, now_ns: u64) {
+        self.good_cycles = 0;
+        if self.mode == Mode::Torque {
+            self.mode = Mode::Damping;
+            self.since_ns = now_ns;
+            self.damping_entries += 1;
+            tracing::warn!(%reason, "damping");
+        }
+        self.reason = reason;
+    }
+
+    /// The mode of this cycle, given the inbox's snapshot at `now_ns`.
+    pub fn update(&mut self, snapshot: &Snapshot, now_ns: u64) -> Mode {
+        match self.fault(snapshot, now_ns) {
+            Some(reason) => self.enter_damping(reason, now_ns),
+            None if self.mode == Mode::Damping => {
+                self.good_cycles += 1;
+                if self.good_cycles >= self.config.recover_cycles {
+                    tracing::info!(after = %self.reason, "torque control");
+                    self.mode = Mode::Torque;
+                    self.since_ns = now_ns;
+                    self.reason.clear();
+                }
+            }
+            None => {}
+        }
+        self.mode
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::inbox::{BodyState, NavReference};
+
+    const MS: u64 = 1_000_000;
+
+    /// A fault's expected reason and the snapshot that shows it at a time.
+    type FaultCase = (&'static str, Box<dyn Fn(u64) -> Snapshot>);
+
+    fn config() -> SafetyConfig {
+        SafetyConfig {
+            state_timeout_ns: 20 * MS,
+            nav_timeout_ns: 500 * MS,
+            recover_cycles: 3,
+        }
+    }
+
+    fn healthy(now: u64) -> Snapshot {
+        Snapshot {
+            state: Some((BodyState::default(), now)),
+            nav: Some((NavReference::default(), now)),
+            ..Snapshot::default()
+        }
+    }
+
+    fn run_healthy(monitor: &mut SafetyMonitor, from: u64, cycles: u64) -> Mode {
+        let mut mode = monitor.mode();
+        for k in 0..cycles {
+            mode = monitor.update(&healthy(from + k * MS), from + k * MS);
+        }
+        mode
+    }
+
+    #[test]
+    fn starts_damped_and_enters_torque_after_the_recovery_cycles() {
+        let mut monitor = SafetyMonitor::new(config());
+        assert_eq!(monitor.update(&Snapshot::default(), 0), Mode::Damping);
+        assert!(
+            monitor.reason().contains("no low_state_t"),
+            "{}",
+            monitor.reason()
+        );
+        assert_eq!(run_healthy(&mut monitor, MS, 2), Mode::Damping);
+        assert_eq!(run_healthy(&mut monitor, 3 * MS, 1), Mode::Torque);
+        assert_eq!(monitor.reason(), "");
+        assert_eq!(monitor.damping_entries(), 0, "the start is no entry");
+    }
+
+    #[test]
+    fn each_fault_damps_with_its_reason_and_clears() {
+        let faults: Vec<FaultCase> = vec![
+            (
+                "no low_state_t for 21.0 ms",
+                Box::new(|now| Snapshot {
+                    state: Some((BodyState::default(), now - 21 * MS)),
+                    ..healthy(now)
+                }),
+            ),
+            (
+                "non-finite value",
+                Box::new(|now| Snapshot {
+                    non_finite_state: true,
+                    ..healthy(now)
+                }),
+            ),
+            (
+                "out-of-order low_state_t seq 3 after 9",
+                Box::new(|now| Snapshot {
+                    out_of_order: Some((3, 9)),
+                    ..healthy(now)
+                }),
+            ),
+            (
+                "no nav_cmd_t for 501 ms",
+                Box::new(|now| Snapshot {
+                    nav: Some((NavReference::default(), now - 501 * MS)),
+                    ..healthy(now)
+                }),
+            ),
+        ];
+        let mut monitor = SafetyMonitor::new(config());
+        let mut now = 1_000 * MS;
+        assert_eq!(run_healthy(&mut monitor, now, 3), Mode::Torque);
+        for (entries, (reason, snapshot)) in faults.iter().enumerate() {
+            now += 10 * MS;
+            assert_eq!(
+                monitor.update(&snapshot(now), now),
+                Mode::Damping,
+                "{reason}"
+            );
+            assert!(
+                monitor.reason().contains(reason),
+                "{reason} vs {}",
+                monitor.reason()
+            );
+            assert_eq!(monitor.since_ns(), now);
+            assert_eq!(monitor.damping_entries(), entries as i64 + 1);
+            // A fault in the middle of the recovery restarts the count.
+            assert_eq!(run_healthy(&mut monitor, now + MS, 2), Mode::Damping);
+            assert_eq!(
+                monitor.update(&snapshot(now + 3 * MS), now + 3 * MS),
+                Mode::Damping
+            );
+            assert_eq!(run_healthy(&mut monitor, now + 4 * MS, 2), Mode::Damping);
+            assert_eq!(run_healthy(&mut monitor, now + 6 * MS, 1), Mode::Torque);
+            now += 10 * MS;
+        }
+    }
+
+    #[test]
+    fn a_controller_failure_is_final() {
+        let mut monitor = SafetyMonitor::new(config());
+        assert_eq!(run_healthy(&mut monitor, 0, 3), Mode::Torque);
+        monitor.controller_failed("fmi2DoStep returned fmi2Error".to_owned(), 5 * MS);
+        assert_eq!(run_healthy(&mut monitor, 6 * MS, 100), Mode::Damping);
+        assert!(monitor.reason().contains("fmi2DoStep"));
+    }
+}
