@@ -19,6 +19,7 @@ Usage:
     .venv/bin/python scripts/bench_slopes.py --angles 20 --directions across --set stand.kp[1]=200
     .venv/bin/python scripts/bench_slopes.py --robot robot/third_party/go1.toml   # another robot (PFNAV_PACKAGE_PATH)
     .venv/bin/python scripts/bench_slopes.py --results-page slopes-quadruped      # also docs/results/slopes-quadruped.md
+    .venv/bin/python scripts/bench_slopes.py --engine mujoco --results-page slopes-quadruped-mujoco   # in MuJoCo
 
 Another robot than ours runs on an FMU bundled for it by bundle-fmu (cached in OUT/cache).
 """
@@ -42,6 +43,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from pfnav_harness import results_page
+from pfnav_harness.engine import (
+    DEFAULT_ENGINE,
+    ENGINE_LABELS,
+    ENGINE_NAMES,
+    ENGINE_TITLES,
+)
 from pfnav_harness.errors import HarnessError
 from pfnav_harness.incline import (
     DIRECTIONS,
@@ -292,6 +299,12 @@ def main() -> int:
         help="robot config (default $PFNAV_ROBOT, else robot/quadruped.toml)",
     )
     parser.add_argument(
+        "--engine",
+        choices=ENGINE_NAMES,
+        default=DEFAULT_ENGINE,
+        help=f"physics engine the robot walks in (default {DEFAULT_ENGINE})",
+    )
+    parser.add_argument(
         "--results-page",
         default=None,
         metavar="NAME",
@@ -327,6 +340,7 @@ def main() -> int:
                         distance=args.distance,
                         speed=args.speed,
                         parameters=parameters,
+                        engine=args.engine,
                     )
                 )
                 bar.update(1)
@@ -346,6 +360,7 @@ def main() -> int:
         f"- machine: {machine()}",
         f"- robot: {robot.config_path} (URDF {robot.urdf_path})",
         f"- controller: {fmu} (sha256 {file_digest(fmu)}), parameters changed: {changed}",
+        f"- physics: {ENGINE_LABELS[args.engine]}, 1 kHz",
         f"- friction μ = {args.friction:g} (feet and ground), walk {args.distance:g} m (horizontal) at {args.speed:g} m/s after the harness's stand-up",
         f"- passed: {sum(o.passed for o in outcomes)} of {len(outcomes)} (stood up, no fall, ≥ {MIN_WALKED:g} m walked, only the feet on the ground while walking); wall {sum(o.wall_time for o in outcomes):.1f} s",
         "",
@@ -360,6 +375,7 @@ def main() -> int:
                 "machine": machine(),
                 "parameters": parameters,
                 "friction": args.friction,
+                "engine": args.engine,
                 "runs": [o.as_dict() for o in outcomes],
             },
             indent=1,
@@ -372,7 +388,9 @@ def main() -> int:
     if args.results_page:
         page = results_page.write_results_page(
             args.results_page,
-            f"Inclines: {robot.config_path.stem} on 10°, 20°, 30° planes",
+            f"Inclines: {robot.config_path.stem} on 10°, 20°, 30° planes"
+            # The DART pages keep their titles.
+            + ("" if args.engine == DEFAULT_ENGINE else f", in {ENGINE_TITLES[args.engine]}"),
             text,
             results_page.regenerate_command(
                 ".venv/bin/python scripts/bench_slopes.py", sys.argv[1:]

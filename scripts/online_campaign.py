@@ -34,9 +34,9 @@ DEMO = Path(sys.executable).parent / "pfnav-demo"
 PAPER = ("mountain_pass", "pits", "c_shape")
 
 
-def run(out: Path, args: list[str]) -> dict[str, Any]:
-    """One `pfnav-demo run`; returns its single run's metrics (or the failure)."""
-    command = [str(DEMO), "run", "--out", str(out), "--no-progress", *args]
+def run(out: Path, args: list[str], engine: str) -> dict[str, Any]:
+    """One `pfnav-demo run` in the physics engine `engine`; returns its single run's metrics (or the failure)."""
+    command = [str(DEMO), "run", "--out", str(out), "--no-progress", "--engine", engine, *args]
     started = time.perf_counter()
     proc = subprocess.run(command, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - started
@@ -100,6 +100,10 @@ def push_rows(results: dict[tuple[str, int], tuple[float | None, dict[str, Any]]
 
 
 def main() -> int:
+    sys.path.insert(0, str(ROOT / "harness" / "src"))
+    from pfnav_harness import results_page
+    from pfnav_harness.engine import DEFAULT_ENGINE, ENGINE_NAMES
+
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "online")
     parser.add_argument("--scenarios", default=",".join((*PAPER, "surprise")), help="online runs (comma-separated)")
@@ -109,11 +113,11 @@ def main() -> int:
     parser.add_argument("--push-duration", type=float, default=0.2)
     parser.add_argument("--push-window", default="2,12", help="walk-clock window of the push times, s (default 2,12)")
     parser.add_argument("--bad-map-updates", default="nan,shape,stale", help="broken updates sent in the first online run (empty: none)")
+    parser.add_argument(
+        "--engine", choices=ENGINE_NAMES, default=DEFAULT_ENGINE, help=f"physics engine of every run (pfnav-demo --engine; default {DEFAULT_ENGINE})"
+    )
     parser.add_argument("--results-page", default=None, metavar="NAME", help="also publish the tables as docs/results/NAME.md")
     args = parser.parse_args()
-    sys.path.insert(0, str(ROOT / "harness" / "src"))
-    from pfnav_harness import results_page
-
     if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
         parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
     # Taken before the runs: the commit that ran and the load it ran under.
@@ -122,13 +126,19 @@ def main() -> int:
     scenarios = [s for s in args.scenarios.split(",") if s]
     push_scenarios = [s for s in args.push_scenarios.split(",") if s]
     first, last = (float(v) for v in args.push_window.split(","))
-    lines = [f"Machine: {platform.node()} ({platform.machine()}, {platform.processor() or 'cpu'}), {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", ""]
+    lines = [
+        (
+            f"Machine: {platform.node()} ({platform.machine()}, {platform.processor() or 'cpu'}), {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
+            f"physics engine {args.engine}"
+        ),
+        "",
+    ]
 
     online: dict[str, dict[str, Any]] = {}
     for k, name in enumerate(scenarios):
         extra = ["--bad-map-updates", args.bad_map_updates] if k == 0 and args.bad_map_updates else []
         print(f"online {name} ...", file=sys.stderr, flush=True)
-        online[name] = run(args.out / f"online_{name}", ["--scenario", name, "--online", *extra])
+        online[name] = run(args.out / f"online_{name}", ["--scenario", name, "--online", *extra], args.engine)
     lines += ["## Online navigation (sensing + replanning + feedback field)", "", *online_rows(online), ""]
     for name, m in online.items():
         for reason in (m.get("online") or {}).get("rejected", []):
@@ -139,13 +149,13 @@ def main() -> int:
     for name in push_scenarios:
         baseline = args.out / f"push_{name}_0"
         print(f"push {name}: unpushed baseline ...", file=sys.stderr, flush=True)
-        pushes[(name, 0)] = (None, run(baseline, ["--scenario", name, "--follow", "feedback"]))
+        pushes[(name, 0)] = (None, run(baseline, ["--scenario", name, "--follow", "feedback"], args.engine))
         for seed in range(1, args.seeds + 1):
             at = float(np.round(np.random.default_rng(seed).uniform(first, last), 3))
             print(f"push {name} seed {seed} at {at:.2f} s ...", file=sys.stderr, flush=True)
             spec = f"{args.push}:{at}+{args.push_duration}"
             folder = args.out / f"push_{name}_{seed}"
-            metrics = run(folder, ["--scenario", name, "--follow", "feedback", "--push", spec])
+            metrics = run(folder, ["--scenario", name, "--follow", "feedback", "--push", spec], args.engine)
             metrics["displacement"] = displacement(folder, baseline)
             pushes[(name, seed)] = (at, metrics)
     if pushes:

@@ -255,3 +255,29 @@ def test_a_snapshot_of_another_engine_is_refused(tmp_path: Path) -> None:
 def test_an_unknown_engine_is_refused(tmp_path: Path) -> None:
     with pytest.raises(SimulationError, match="unknown physics engine 'bullet'"):
         make_engine("bullet", bumpy_terrain(), ROBOT, tmp_path)
+
+
+def test_a_stiffer_mujoco_ground_lets_the_standing_feet_sink_less(tmp_path: Path) -> None:
+    """MuJoCo's contacts are soft (time constant `DEFAULT_CONTACT_TIME_CONSTANT`, MuJoCo's own): a robot held on
+    its crouch sinks its feet millimetres into flat ground; a 5 ms constant holds them within a quarter of that."""
+    from pfnav_harness.mujoco_world import DEFAULT_CONTACT_TIME_CONSTANT, MujocoWorld
+
+    # Flat: the foot sphere's depth is then the gap below its centre.
+    terrain = Terrain((0.0, 0.0), 0.1, np.full((30, 40), 0.2))
+    depths = []
+    for constant in (None, 0.005):
+        world = make_engine("mujoco", terrain, ROBOT, tmp_path)
+        assert isinstance(world, MujocoWorld)
+        np.testing.assert_array_equal(world.model.geom_solref[:, 0], DEFAULT_CONTACT_TIME_CONSTANT)
+        if constant is not None:
+            world.set_contact_time_constant(constant)
+        world.place(2.0, 1.5, 0.3)
+        for _ in range(1000):
+            s = world.state()
+            world.apply_torques(120.0 * (CROUCH - s.joint_positions) - 3.0 * s.joint_velocities)
+            world.step()
+        feet = world.foot_positions()
+        depths.append(float(np.mean(world.foot_radius + terrain.height(feet[:, 0], feet[:, 1]) - feet[:, 2])))
+    assert depths[0] > 0.0015 and 0.0 < depths[1] < 0.25 * depths[0]
+    with pytest.raises(SimulationError, match="at least two physics steps"):
+        world.set_contact_time_constant(0.001)

@@ -90,3 +90,13 @@ def test_named_vectors_address_entries_by_name(model_description: Any) -> None:
         v.index("terrain.height")
     with pytest.raises(KeyError, match="not consecutive"):
         v.span(("base.pos.x", "base.pos.z"))
+
+
+def test_the_estimator_status_flags_are_named_from_the_fmu_s_documentation(model_description: Any) -> None:
+    """`est.status`'s bits by the names the FMU documents (controller/src/estimator/status.rs writes them): nine flags, one bit each."""
+    contract = fr.FmuContract(model_description, "bundled FMU")
+    flags = contract.status_flags
+    assert len(flags) == 9 and sorted(flags) == [1 << k for k in range(9)]
+    assert flags[0x80] == "footSlip" and flags[0x100] == "odometryDoubtful"
+    assert contract.status_flag_names(0x80 | 0x1 | 0x400) == ["gyroInvalid", "footSlip", "bit 0x400"]
+    assert contract.status_flag_names(0) == []

@@ -36,6 +36,7 @@ def spec_with(**changes: Any) -> dict[str, Any]:
         (spec_with(factors={"terrain_seed": {"values": [1.5]}}), "must be integers"),
         (spec_with(estimator="groundTruth", factors={"sensor_noise_seed": {"values": [1, 2]}}), 'only acts with `estimator = "kalman"`'),
         (spec_with(estimator="particle"), "`estimator` must be one of groundTruth, kalman"),
+        (spec_with(engine="bullet"), "`engine` (physics engine) must be one of dart, mujoco, got 'bullet'"),
         (spec_with(runs=-3), "`runs` must be an integer >= 1, got -3"),
         (spec_with(runs=0), "`runs` must be an integer >= 1"),
         (spec_with(duration=0), "`duration`"),
@@ -188,3 +189,40 @@ def test_the_estimator_can_be_chosen_at_load_time_and_is_checked_like_the_spec_s
         load_spec(spec_file, "groundTruth")
     with pytest.raises(SpecError, match="`estimator` must be one of"):
         load_spec(spec_file, "particle")
+
+
+def test_the_engine_is_part_of_the_spec_and_a_dart_spec_keeps_its_hash(tmp_path: Path) -> None:
+    """`engine` defaults to DART; naming DART changes nothing (stores written before the key existed resume),
+    MuJoCo is another spec; `--engine` at load time replaces the spec's own."""
+    plain = parse_spec(BASE)
+    assert plain.engine == "dart" and "engine" not in plain.as_json()
+    assert parse_spec(spec_with(engine="dart")).hash == plain.hash
+    mujoco = parse_spec(spec_with(engine="mujoco"))
+    assert mujoco.engine == "mujoco" and mujoco.as_json()["engine"] == "mujoco" and mujoco.hash != plain.hash
+    assert {run_config(t).engine for t in run_tasks(mujoco, set())} == {"mujoco"}
+    assert {run_config(t).engine for t in run_tasks(plain, set())} == {"dart"}
+    spec_file = tmp_path / "spec.toml"
+    spec_file.write_text('scenario = "mountain_pass"\nduration = 4.0\nseed = 3\nruns = 20\nengine = "mujoco"\n')
+    assert load_spec(spec_file).hash == mujoco.hash
+    assert load_spec(spec_file, engine="dart").hash == plain.hash
+    with pytest.raises(SpecError, match="`engine`"):
+        load_spec(spec_file, engine="bullet")
+
+
+def test_rows_stored_before_the_engine_column_read_back_without_an_engine(tmp_path: Path) -> None:
+    """A store written before rows recorded their engine still reads: those rows (DART runs) have none."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pfnav_harness.sweep.runner import Course, result_row
+    from pfnav_harness.sweep.store import ROW_SCHEMA
+
+    spec = parse_spec(spec_with(runs=2))
+    store = SweepStore.create(tmp_path / "store", spec)
+    course = Course(0, None, None)  # type: ignore[arg-type]
+    old, new = (result_row(task, course) for task in run_tasks(spec, set()))
+    old_schema = pa.schema([f for f in ROW_SCHEMA if f.name != "engine"])
+    del old["engine"]
+    pq.write_table(pa.Table.from_pylist([old], schema=old_schema), store.rows_dir / "part-00000000-0001-old.parquet")
+    store.append([new])
+    assert store.table()["engine"].to_pylist() == [None, "dart"]

@@ -680,6 +680,7 @@ def execute(args: argparse.Namespace) -> int:
                     for r in rs
                 ],
                 "total_wall_seconds": total,
+                "engine": config.engine,
             },
             indent=2,
         )

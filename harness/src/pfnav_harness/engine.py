@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 
 ENGINE_NAMES = ("dart", "mujoco")
 DEFAULT_ENGINE = "dart"
+# How titles name each engine.
+ENGINE_TITLES = {"dart": "DART", "mujoco": "MuJoCo"}
 # How reports name each engine's physics.
 ENGINE_LABELS = {"dart": "DART, ODE collision on the terrain mesh", "mujoco": "MuJoCo, terrain height field"}
 # Coulomb friction of feet and ground unless a run sets its own: rubber feet on dry ground, above

@@ -217,6 +217,12 @@ class FmuContract:
             missing = [m for m in ESTIMATOR_MODES if m not in self.estimator_codes]
             if missing:
                 self.estimation_problems.append(f"parameter {ESTIMATOR_PARAMETER} has no item {', '.join(missing)}")
+        # Bit → name of the estimator's status flags, as the FMU documents `est.status` (none without the estimator).
+        self.status_flags: dict[int, str] = _status_flags(variables[EST_STATUS]) if EST_STATUS in variables else {}
+
+    def status_flag_names(self, bits: int) -> list[str]:
+        """The names of the flags set in an `est.status` bit mask (an unnamed bit by its value)."""
+        return [self.status_flags.get(1 << k, f"bit {1 << k:#x}") for k in range(bits.bit_length()) if bits >> k & 1]
 
     @property
     def has_estimation(self) -> bool:
@@ -233,6 +239,12 @@ class FmuContract:
 
     def vrs(self, names: Sequence[str]) -> list[int]:
         return [self.value_references[n] for n in names]
+
+
+def _status_flags(variable: Any) -> dict[int, str]:
+    """`est.status`'s flags from its description ("... bits: 1 gyroInvalid: what it means; 2 ...")."""
+    _, _, bits = str(getattr(variable, "description", "") or "").partition("bits:")
+    return {int(value): name for value, name in re.findall(r"(?:^|;)\s*(\d+)\s+(\w+):", bits)}
 
 
 def _variable_problems(variables: dict[str, Any], expected: dict[str, str]) -> list[str]:

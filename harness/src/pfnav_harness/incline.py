@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from . import fmu_runner as fr
 from .cosim import CoSimConfig, CoSimulation, RunResult
-from .engine import PhysicsEngine
+from .engine import DEFAULT_ENGINE, PhysicsEngine
 from .errors import ScenarioError, SimulationError
 from .metrics import FallThresholds, judge_fall, rms_tracking_error, roll_pitch_yaw, terrain_pitch_roll
 from .planner_client import Plan
@@ -236,6 +236,8 @@ class InclineOutcome:
     """The same from the walk start on (up to a fall): a link other than a foot on the ground while
     walking, which the stand-up from lying does not excuse."""
     wall_time: float = 0.0
+    engine: str = DEFAULT_ENGINE
+    """The physics engine the run walked in (the world's own name)."""
 
     @property
     def passed(self) -> bool:
@@ -435,13 +437,16 @@ def run_incline(
     parameters: dict[str, float] | None = None,
     config: CoSimConfig | None = None,
     progress: Callable[[float], None] | None = None,
+    engine: str = DEFAULT_ENGINE,
 ) -> InclineRun:
-    """One incline run with the controller FMU (optionally with FMU `parameters` changed from their defaults)."""
+    """One incline run with the controller FMU (optionally with FMU `parameters` changed from their defaults)
+    in the physics engine `engine` (it and `friction` replace those of `config`)."""
     if not (math.isfinite(friction) and friction > 0.0):
         raise SimulationError(f"friction coefficient must be positive, got {friction}")
     scenario = incline_scenario(angle_deg, direction, distance)
     plan = straight_plan(scenario, speed)
-    config = dataclasses.replace(config or CoSimConfig(settle_time=1.0, estimator="groundTruth"), friction=friction)
+    config = dataclasses.replace(config or CoSimConfig(settle_time=1.0, estimator="groundTruth"), friction=friction, engine=engine)
+    config.validate()
     controller = fr.ControllerFmu(fmu_path)
     try:
         if parameters:
@@ -463,4 +468,5 @@ def run_incline(
         wall = time.perf_counter() - begin
         outcome = evaluate(scenario, result, probe, sim.world, nominal_height, stand_code, friction, angle_deg, direction, placed_margin, config.fall)
     outcome.wall_time = wall
+    outcome.engine = sim.world.name
     return InclineRun(outcome, result, scenario, plan)

@@ -70,6 +70,9 @@ ROLLING_FRICTION = 0.0001
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 1, 0
 GROUND_CONTYPE, GROUND_CONAFFINITY = 0, 1
 STATE_SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
+# MuJoCo's default contact softness (`solref` = time constant, damping ratio), which the worlds keep.
+DEFAULT_CONTACT_TIME_CONSTANT = 0.02
+CRITICAL_DAMPING_RATIO = 1.0
 # Friction-to-normal impedance ratio: at MuJoCo's default (1) its soft friction lets a standing
 # robot creep (a PD-held stance on a bumpy slope turned 0.18 rad in 3 s, 0.002 rad in DART); 100,
 # as MuJoCo Menagerie's quadruped scenes use with the elliptic cone, leaves 0.02 rad.
@@ -400,19 +403,19 @@ class MujocoWorld:
 
     def state_reader(self, out: NDArray[np.float64]) -> Callable[[], None]:
         qpos, qvel = self.data.qpos, self.data.qvel
-        joint_qpos, joint_dof = self._joint_qpos, self._joint_dof
-        position, velocity, omega = out[0:3], out[7:10], out[10:13]
+        # A slice where the model keeps the joints in the controller's order (a copy without the
+        # index array: the read-out runs every physics step), else the index arrays.
+        joint_qpos, joint_dof = _as_slice(self._joint_qpos), _as_slice(self._joint_dof)
+        pose, quaternion, velocity, omega = out[0:7], out[3:7], out[7:10], out[10:13]
         joint_q, joint_dq = out[13:25], out[25:37]
-        quaternion = np.zeros(4)
         rotate = mujoco.mju_rotVecQuat
 
         def read() -> None:
-            position[:] = qpos[0:3]
-            quaternion[:] = qpos[3:7]
-            # Same sign convention as the DART world: w ≥ 0.
+            # Position and quaternion lie side by side in both.
+            pose[:] = qpos[0:7]
+            # Same sign convention as the DART world: w ≥ 0 (either sign rotates alike, bit for bit).
             if quaternion[0] < 0.0:
                 np.negative(quaternion, out=quaternion)
-            out[3:7] = quaternion
             velocity[:] = qvel[0:3]
             rotate(omega, qvel[3:6], quaternion)
             joint_q[:] = qpos[joint_qpos]
@@ -474,6 +477,17 @@ class MujocoWorld:
             raise SimulationError(f"friction coefficient must be > 0, got {mu}")
         self.model.geom_friction[:] = [mu, TORSIONAL_FRICTION, ROLLING_FRICTION]
 
+    def set_contact_time_constant(self, seconds: float) -> None:
+        """Time constant of every contact's soft constraint from now on (MuJoCo's `solref[0]`, critically damped).
+
+        MuJoCo's default, `DEFAULT_CONTACT_TIME_CONSTANT`, lets a standing foot sink a few millimetres
+        and bob while its load changes (docs/engines.md); a smaller constant makes the ground stiffer.
+        MuJoCo needs at least two physics steps.
+        """
+        if not (math.isfinite(seconds) and seconds >= 2.0 * self.time_step):
+            raise SimulationError(f"contact time constant must be at least two physics steps ({2.0 * self.time_step:g} s), got {seconds}")
+        self.model.geom_solref[:] = [seconds, CRITICAL_DAMPING_RATIO]
+
     def _com_quantities(self) -> None:
         model, data = self.model, self.data
         mujoco.mj_kinematics(model, data)
@@ -510,8 +524,8 @@ class MujocoWorld:
         out[:] = 0
         if self.data.ncon == 0:
             return
-        contact = self.data.contact
-        legs = np.concatenate([self._geom_leg[contact.geom1], self._geom_leg[contact.geom2]])
+        # Both geoms of every contact at once (one accessor call: they cost more than the indexing).
+        legs = self._geom_leg[self.data.contact.geom]
         out[legs[legs >= 0]] = 1
 
     def touching_links(self) -> list[str]:
@@ -537,6 +551,13 @@ class MujocoWorld:
         top = float(self.model.geom_pos[geom][2] + self.model.hfield_size[0][2]) + 1.0
         distance = mujoco.mj_rayHfield(self.model, self.data, geom, np.array([x, y, top]), np.array([0.0, 0.0, -1.0]))
         return top - distance if distance >= 0.0 else math.nan
+
+
+def _as_slice(indices: NDArray[np.int64]) -> slice | NDArray[np.int64]:
+    """`indices` as the equal slice when they are consecutive and ascending, else unchanged."""
+    if len(indices) and np.array_equal(indices, np.arange(indices[0], indices[0] + len(indices))):
+        return slice(int(indices[0]), int(indices[0]) + len(indices))
+    return indices
 
 
 def _rotation_zyx(yaw: float, pitch: float, roll: float) -> NDArray[np.float64]:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .. import paths
+from ..engine import ENGINE_NAMES
 from ..errors import HarnessError
 from ..fmu_runner import ESTIMATOR_MODES
 from ..planner_client import DEFAULT_LCM_URL, Plan, plan_scenario
@@ -56,7 +57,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     seeds = spec.terrain_seeds()
     print(f"{args.spec}: {spec.runs} runs of '{spec.scenario}' ({spec.sampling} sampling, seed {spec.seed}), {spec.duration:g} simulated s each")
     forks = "on (runs continue their group's post-stand-up state)" if spec.fork else "off"
-    print(f"spec hash {spec.hash}; forks {forks}")
+    print(f"spec hash {spec.hash}; engine {spec.engine}; forks {forks}")
     print(f"terrain seeds: {', '.join('scenario default' if s is None else str(s) for s in seeds)}")
     varied = [name for name in FACTORS if name in spec.factors]
     print(f"factors: {', '.join(varied) or 'none (every run the same)'}")
@@ -67,7 +68,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    spec = load_spec(args.spec, args.estimator)
+    spec = load_spec(args.spec, args.estimator, args.engine)
     store = SweepStore.create(args.out, spec)
     with tempfile.TemporaryDirectory(prefix="pfnav_sweep_plan_") as tmp:
         courses = _courses(spec, store, args, Path(tmp))
@@ -93,7 +94,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     # Taken before the runs: the commit that ran and the load it ran under.
     stamp = collect_stamp() if args.results_page else None
-    spec = load_spec(args.spec, args.estimator)
+    spec = load_spec(args.spec, args.estimator, args.engine)
     if args.no_fork:
         spec = dataclasses.replace(spec, fork=False)
     store = SweepStore.create(args.out, spec)
@@ -150,6 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(
             "--estimator", choices=ESTIMATOR_MODES, default=None, help="run on this estimator instead of the spec's `estimator` (a store of its own)"
         )
+        p.add_argument("--engine", choices=ENGINE_NAMES, default=None, help="walk in this physics engine instead of the spec's `engine` (a store of its own)")
         if name == "run":
             p.add_argument("--workers", type=int, default=None, help="local Dask worker processes (default: one per core)")
             p.add_argument(

@@ -69,7 +69,7 @@ def prepare_courses(spec: SweepSpec, store: SweepStore, pf_plan: Path, planner: 
 
 def run_tasks(spec: SweepSpec, done: set[int]) -> list[RunTask]:
     return [
-        RunTask(run_id, spec.run_factors(run_id), spec.duration, spec.stand_time, spec.hash, spec.estimator, spec.fork)
+        RunTask(run_id, spec.run_factors(run_id), spec.duration, spec.stand_time, spec.hash, spec.estimator, spec.fork, spec.engine)
         for run_id in range(spec.runs)
         if run_id not in done
     ]

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pyarrow as pa
 
+from ..engine import DEFAULT_ENGINE
 from .stats import FACTOR_COLUMNS, FallRate, factor_breakdown, fall_rate, outcome_counts
 from .store import SweepStore
 
@@ -96,7 +97,8 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         f"# Robustness sweep: {spec.get('scenario', '?')}",
         "",
         f"Spec hash `{stored.get('hash', '?')}`: {spec.get('runs', '?')} runs ({spec.get('sampling', '?')} sampling, seed {spec.get('seed', '?')}), "
-        f"{spec.get('duration', '?')} simulated s each, method {spec.get('method', '?')}. Stored rows: {table.num_rows}.",
+        f"{spec.get('duration', '?')} simulated s each, method {spec.get('method', '?')}, estimator {spec.get('estimator') or '?'}, "
+        f"physics engine {spec.get('engine', DEFAULT_ENGINE)}. Stored rows: {table.num_rows}.",
         "",
         _fork_note(table),
         "",

@@ -1,7 +1,7 @@
 """One sweep run on a worker: a row of factor values in, a result row out.
 
 Workers only co-simulate: the scenario and its plan arrive ready-made from the driver (planned once
-per terrain seed). Each run builds its own DART world and FMU instance and closes them at its end;
+per terrain seed). Each run builds its own physics world (the spec's engine) and FMU instance and closes them at its end;
 with one thread per worker process no two runs ever share an FMU (FMUs are not thread-safe). Any
 exception in a run becomes a row with outcome "error" and the reason; the sweep goes on.
 
@@ -26,6 +26,7 @@ import numpy as np
 
 from ..body_sensors import BodySensorConfig
 from ..cosim import CoSimConfig, CoSimulation, ForkPoint, prefix_config, prefix_signature, walk_start_step
+from ..engine import DEFAULT_ENGINE
 from ..fmu_runner import DEFAULT_ESTIMATOR
 from ..metrics import RunMetrics, TraversabilityField, compute_metrics
 from ..planner_client import Plan
@@ -65,6 +66,7 @@ class RunTask:
     estimator: str = DEFAULT_ESTIMATOR
     # Start from the group's fork when the run is long enough to have one (`forkable`).
     fork: bool = False
+    engine: str = DEFAULT_ENGINE
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,7 @@ def run_config(task: RunTask) -> CoSimConfig:
         payload=None if payload == Payload() else payload,
         estimator=task.estimator,
         body_sensors=BodySensorConfig(seed=int(f["sensor_noise_seed"])),
+        engine=task.engine,
     )
 
 
@@ -183,6 +186,7 @@ def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
         "friction": float(f["friction"]),
         "comm_step": float(f["comm_step"]),
         "sensor_noise_seed": int(f["sensor_noise_seed"]),
+        "engine": task.engine,
         "forked": forkable(task),
         "outcome": "error",
         "fall_time": math.nan,

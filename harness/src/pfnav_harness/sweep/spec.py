@@ -1,7 +1,7 @@
 """Sweep specs (TOML): the scenario, the factors and how runs sample them.
 
-A spec names the scenario, the simulated duration of each run, a seed, the number of runs and the
-sampling ("random": every run draws each factor independently; "grid": every combination once).
+A spec names the scenario, the simulated duration of each run, a seed, the number of runs, the
+physics engine (`engine`, default "dart") and the sampling ("random": every run draws each factor independently; "grid": every combination once).
 Each factor is a fixed value, a list (`{ values = [...] }`: random picks one, the grid takes each)
 or a range (`{ range = [low, high] }`: random draws uniformly, the grid takes `steps` evenly spaced
 points). Factors left out keep their default (`FACTORS`). Example: sweeps/tiny.toml.
@@ -22,13 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from ..engine import DEFAULT_ENGINE, DEFAULT_FRICTION, ENGINE_NAMES
 from ..errors import HarnessError
 from ..fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from ..pushes import HEADING_DIRECTIONS
-from ..world import DEFAULT_FRICTION
 
 SAMPLINGS = ("random", "grid")
-SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "fork", "factors")
+SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "engine", "fork", "factors")
 
 
 class SpecError(HarnessError, ValueError):
@@ -127,6 +127,8 @@ class SweepSpec:
     estimator: str = DEFAULT_ESTIMATOR
     # Start runs from their group's saved post-stand-up state (docs/sweeps.md, "Forks"); off: every run stands up itself.
     fork: bool = True
+    # The physics engine every run walks in (engine.ENGINE_NAMES).
+    engine: str = DEFAULT_ENGINE
 
     def as_json(self) -> dict[str, Any]:
         """The spec's content (what the hash covers): no file name, no comments, factors in canonical order."""
@@ -144,6 +146,8 @@ class SweepSpec:
             # ones. Only a forking spec says so, so an unforked spec keeps the hash it had before forks
             # existed and resumes the stores written then.
             **({"fork": True} if self.fork else {}),
+            # Likewise the engine: a DART spec keeps the hash it had before the engine was a choice.
+            **({"engine": self.engine} if self.engine != DEFAULT_ENGINE else {}),
         }
 
     @property
@@ -279,6 +283,9 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     estimator = data.get("estimator", DEFAULT_ESTIMATOR)
     if estimator not in ESTIMATOR_MODES:
         raise SpecError(f"{where}`estimator` must be one of {', '.join(ESTIMATOR_MODES)}, got {estimator!r}")
+    engine = data.get("engine", DEFAULT_ENGINE)
+    if engine not in ENGINE_NAMES:
+        raise SpecError(f"{where}`engine` (physics engine) must be one of {', '.join(ENGINE_NAMES)}, got {engine!r}")
     fork = data.get("fork", True)
     if not isinstance(fork, bool):
         raise SpecError(f"{where}`fork` must be true or false, got {fork!r}")
@@ -295,7 +302,7 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
                 f"{where}factor '{name}' only acts with `estimator = \"kalman\"` (on ground truth the controller never reads the sensors); "
                 "set it, or leave the factor out"
             )
-    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source, estimator, fork)
+    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source, estimator, fork, engine)
     runs = data.get("runs")
     if sampling == "grid":
         size = spec_without_runs.grid_size()
@@ -306,12 +313,12 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
         raise SpecError(f"{where}missing `runs` (random sampling)")
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise SpecError(f"{where}`runs` must be an integer >= 1, got {runs!r}")
-    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator, fork)
+    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator, fork, engine)
 
 
-def load_spec(path: Path, estimator: str | None = None) -> SweepSpec:
-    """The spec in the TOML file `path`; `estimator` (if given) replaces its `estimator` before the
-    checks, so that one spec measures both estimators (the store hash differs)."""
+def load_spec(path: Path, estimator: str | None = None, engine: str | None = None) -> SweepSpec:
+    """The spec in the TOML file `path`; `estimator` and `engine` (if given) replace its own before
+    the checks, so that one spec measures both estimators or both engines (the store hash differs)."""
     try:
         data = tomllib.loads(Path(path).read_text())
     except OSError as err:
@@ -320,4 +327,6 @@ def load_spec(path: Path, estimator: str | None = None) -> SweepSpec:
         raise SpecError(f"{path}: not valid TOML: {err}") from err
     if estimator is not None:
         data["estimator"] = estimator
+    if engine is not None:
+        data["engine"] = engine
     return parse_spec(data, Path(path))

@@ -45,6 +45,8 @@ ROW_SCHEMA = pa.schema(
         ("friction", pa.float64()),
         ("comm_step", pa.float64()),
         ("sensor_noise_seed", pa.int64()),
+        # The physics engine (null in rows stored before it was recorded: those ran in DART).
+        ("engine", pa.string()),
         # Started from its group's saved post-stand-up state (payload and friction from there on).
         ("forked", pa.bool_()),
         ("outcome", pa.string()),
