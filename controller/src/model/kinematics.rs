@@ -63,10 +63,10 @@ impl RobotModel {
         }
     }
 
-    /// Rotation of the knee's link (and of the foot link welded to it) at `q_leg` relative to its
-    /// orientation with the leg's joints at zero, in the base frame.
-    pub(crate) fn knee_link_rotation(&self, leg: Leg, q_leg: [f64; 3]) -> Matrix3<f64> {
-        self.frames(leg, q_leg).link_rotation[2]
+    /// Orientation of the URDF's foot link frame at `q_leg`, in the base frame (maps vectors
+    /// given in the foot link's frame, e.g. its collision meshes, to the base frame).
+    pub(crate) fn foot_link_rotation(&self, leg: Leg, q_leg: [f64; 3]) -> Matrix3<f64> {
+        self.frames(leg, q_leg).link_rotation[2] * self.legs[leg.index()].foot.rotation
     }
 
     /// Forward kinematics: foot (sphere centre) position in the base frame, m.

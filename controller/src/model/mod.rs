@@ -21,8 +21,8 @@ mod kinematics;
 
 pub use kinematics::FootKinematics;
 mod urdf;
-pub(crate) use urdf::foot_sphere_radius;
 pub(crate) use urdf::unusable_inertials;
+pub(crate) use urdf::{foot_sphere_radius, is_massless_frame};
 
 #[cfg(test)]
 mod tests;
@@ -155,7 +155,7 @@ impl LegGeometry {
 #[derive(Clone, Debug)]
 struct LegChain {
     joints: [ChainJoint; 3],
-    /// Foot frame (sphere centre) in the knee's moving frame.
+    /// Foot point (sphere centre) and the foot link's orientation in the knee's moving frame.
     foot: Transform,
     geometry: LegGeometry,
 }

@@ -32,6 +32,15 @@ fn finite3(v: &[f64; 3], what: &str) -> Result<(), ModelError> {
     }
 }
 
+/// A link with zero mass and zero inertia (what a link without `<inertial>` reads as): a frame.
+pub(crate) fn is_massless_frame(link: &urdf_rs::Link) -> bool {
+    let i = &link.inertial.inertia;
+    link.inertial.mass.value == 0.0
+        && [i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz]
+            .iter()
+            .all(|v| *v == 0.0)
+}
+
 /// Mass properties of one link. A link with zero mass and zero inertia (or no `<inertial>`) is a
 /// massless frame; a link listed in `massless_links` is made one. Anything else needs a positive
 /// mass and a positive-definite inertia whose principal moments satisfy the triangle inequality.
@@ -74,7 +83,7 @@ fn link_mass_properties(
         )));
     }
     if mass == 0.0 {
-        if inertia.iter().any(|x| *x != 0.0) {
+        if !is_massless_frame(link) {
             return Err(ModelError::InvalidValue(format!(
                 "link `{}` has zero mass but a non-zero inertia",
                 link.name
@@ -471,8 +480,10 @@ fn build_leg(
         translation = Vector3::zeros();
     }
     let offset = Vector3::from(leg_config.foot_offset.unwrap_or([0.0; 3]));
+    // The foot link's own frame at q = 0 (the rotation the chain's frames were folded by):
+    // what its collision meshes are given in.
     let foot = Transform {
-        rotation: Matrix3::identity(),
+        rotation: orientation,
         translation: translation + orientation * offset,
     };
     let joints: [ChainJoint; 3] = joints

@@ -7,11 +7,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use super::package_path::PACKAGE_SCHEME;
 use super::{KneeDirection, PackagePath, RobotConfig};
 use crate::api::{Leg, ModelError};
-use crate::model::{foot_sphere_radius, RobotModel};
-
-const PACKAGE_SCHEME: &str = "package://";
+use crate::model::{foot_sphere_radius, is_massless_frame, RobotModel};
 
 /// One leg under the controller's leg name, in the URDF's own names.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -140,16 +139,6 @@ pub fn describe_robot_config(
         package_dirs,
         mesh_files: meshes.into_iter().collect(),
     })
-}
-
-/// A link the model treats as a frame: zero mass and zero inertia (also what a link without
-/// `<inertial>` reads as).
-fn is_massless_frame(link: &urdf_rs::Link) -> bool {
-    let i = &link.inertial.inertia;
-    link.inertial.mass.value == 0.0
-        && [i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz]
-            .iter()
-            .all(|v| *v == 0.0)
 }
 
 /// Every mesh file name of the URDF's visuals and collisions, in document order.

@@ -93,11 +93,10 @@ pub fn measure_foot_radius(
             ));
         }
         let foot_point = Vector3::from(leg_config.foot_offset.unwrap_or([0.0; 3]));
-        let at_zero = rotation_at_zero(robot, &config.base_link, &leg_config.foot_link)?;
         let q = stand[leg.index()];
         let depth_at = |pitch: f64| {
             let pitched = Rotation3::from_axis_angle(&Vector3::y_axis(), pitch);
-            let rotation = pitched * model.knee_link_rotation(leg, q) * at_zero;
+            let rotation = pitched * model.foot_link_rotation(leg, q);
             vertices
                 .iter()
                 .map(|v| -(rotation * (v - foot_point))[2])
@@ -127,30 +126,6 @@ pub fn measure_foot_radius(
 
 fn pose_rotation(pose: &urdf_rs::Pose) -> Matrix3<f64> {
     *Rotation3::from_euler_angles(pose.rpy[0], pose.rpy[1], pose.rpy[2]).matrix()
-}
-
-/// Orientation of `link`'s frame in the base frame with every joint at zero: the product of the
-/// joint origins' rotations from the base down.
-fn rotation_at_zero(
-    robot: &urdf_rs::Robot,
-    base: &str,
-    link: &str,
-) -> Result<Matrix3<f64>, String> {
-    let mut rotation = Matrix3::identity();
-    let mut current = link;
-    for _ in 0..robot.joints.len() + 1 {
-        if current == base {
-            return Ok(rotation);
-        }
-        let joint = robot
-            .joints
-            .iter()
-            .find(|j| j.child.link == current)
-            .ok_or_else(|| format!("link `{current}` hangs from no joint below `{base}`"))?;
-        rotation = pose_rotation(&joint.origin) * rotation;
-        current = &joint.parent.link;
-    }
-    Err(format!("the joints above `{link}` form a loop"))
 }
 
 /// Every vertex of an STL or OBJ mesh, in the mesh's own units and frame.

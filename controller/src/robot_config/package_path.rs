@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 /// Environment variable read by [`PackagePath::from_env`]: package roots separated by `:`.
 pub const PACKAGE_PATH_ENV: &str = "PFNAV_PACKAGE_PATH";
 
-const PACKAGE_SCHEME: &str = "package://";
+pub(crate) const PACKAGE_SCHEME: &str = "package://";
 
 /// Ordered list of package roots.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
