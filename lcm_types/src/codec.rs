@@ -126,10 +126,18 @@ pub trait Message: Sized {
 
     /// Fingerprint followed by the encoding: the payload to publish.
     fn encode(&self) -> Result<Vec<u8>, EncodeError> {
-        let mut out = Vec::with_capacity(8 + self.encoded_len_one());
-        out.extend_from_slice(&Self::FINGERPRINT.to_be_bytes());
-        self.encode_one(&mut out)?;
+        let mut out = Vec::new();
+        self.encode_into(&mut out)?;
         Ok(out)
+    }
+
+    /// [`Message::encode`] into `out`, replacing its contents and reusing its allocation: a
+    /// sender on a fixed period allocates nothing once the buffer has grown.
+    fn encode_into(&self, out: &mut Vec<u8>) -> Result<(), EncodeError> {
+        out.clear();
+        out.reserve(8 + self.encoded_len_one());
+        out.extend_from_slice(&Self::FINGERPRINT.to_be_bytes());
+        self.encode_one(out)
     }
 
     /// Decodes a published payload: checks the fingerprint, every length and that nothing is

@@ -217,6 +217,8 @@ fn control_loop(
     let mut window_cycles = 0i64;
     let mut cycles = 0u64;
     let mut command_seq = 0i64;
+    // The command's bytes, reused every cycle: the loop allocates nothing once it has run.
+    let mut command_bytes = Vec::new();
     let mut status_seq = 0i64;
     let mut fsm_state = -1i8;
     let mut last_used_state_seq: Option<i64> = None;
@@ -298,9 +300,9 @@ fn control_loop(
         command.header.seq = command_seq;
         command.header.utime = wall_utime();
         command_seq += 1;
-        match command.encode() {
-            Ok(bytes) => {
-                if let Err(error) = lcm.publish(&config.channels.low_cmd, &bytes) {
+        match command.encode_into(&mut command_bytes) {
+            Ok(()) => {
+                if let Err(error) = lcm.publish(&config.channels.low_cmd, &command_bytes) {
                     tracing::error!(%error, "could not send low_cmd_t");
                 }
             }

@@ -354,8 +354,8 @@ impl MeshFeet<'_> {
         model: &mut RobotModel,
         config: &mut RobotConfig,
     ) -> Result<FootMeshRadius, String> {
-        let mut measured = None;
-        for _ in 0..FOOT_RADIUS_ROUNDS {
+        let mut round = 1;
+        loop {
             let stand = stand_angles(model, config, self.standing);
             let feet = measure_foot_radius(
                 &self.urdf.robot,
@@ -372,12 +372,11 @@ impl MeshFeet<'_> {
             if let Ok(reloaded) = self.urdf.load(config) {
                 *model = reloaded;
             }
-            measured = Some(feet);
-            if settled {
-                break;
+            if settled || round == FOOT_RADIUS_ROUNDS {
+                return Ok(feet);
             }
+            round += 1;
         }
-        measured.ok_or_else(|| "no measurement".to_string())
     }
 }
 

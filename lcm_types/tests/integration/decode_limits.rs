@@ -207,3 +207,21 @@ fn encoding_layout_is_the_documented_one() {
     assert_eq!(header.encode().expect("encodes"), expected);
     assert_eq!(header.encoded_len_one(), expected.len() - 8);
 }
+
+#[test]
+fn encode_into_matches_encode_and_keeps_its_buffer() {
+    use lcm_types::codec::Message;
+    use lcm_types::pfnav::Header;
+    let mut buffer = Vec::with_capacity(4096);
+    let first = buffer.as_ptr();
+    for seq in [1, 2] {
+        let header = Header {
+            seq,
+            utime: 77,
+            frame_id: "world".into(),
+        };
+        header.encode_into(&mut buffer).expect("encodes");
+        assert_eq!(buffer, header.encode().expect("encodes"));
+    }
+    assert_eq!(buffer.as_ptr(), first, "the buffer was reallocated");
+}
