@@ -53,6 +53,7 @@ def test_our_robot_is_described_by_its_config() -> None:
     assert robot.foot_radius == 0.02 and all(leg.has_foot_sphere for leg in robot.legs)
     assert robot.stand_height == 0.28 and robot.massless_links == () and robot.effort_limits is None
     assert robot.package_dirs == () and robot.mesh_files == ()
+    assert robot.mass == pytest.approx(12.0, abs=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -275,6 +276,8 @@ def test_trunk_mass_is_the_base_and_the_links_welded_to_it(name: str, tmp_path: 
     assert world.trunk_mass == pytest.approx(welded_mass(robot.urdf_path, robot.base_link, robot.massless_links), abs=1e-9)
     # The whole robot weighs what the URDF says, without DART's 1 kg for a link without <inertial>.
     assert world.mass == pytest.approx(welded_mass_total(robot), abs=1e-9)
+    # ... and what the controller's model (the description) says.
+    assert robot.mass == pytest.approx(world.mass, abs=1e-9)
     heaviest = max(world.trunk_bodies, key=lambda body: body.getMass())
     loaded = QuadrupedWorld(flat_terrain(), robot, tmp_path, payload=Payload(0.2, (0.02, 0.0, 0.0)))
     assert loaded.trunk_body.getName() == heaviest.getName()

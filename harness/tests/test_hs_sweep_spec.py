@@ -6,6 +6,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from pfnav_harness import paths
@@ -184,7 +185,7 @@ def test_the_estimator_can_be_chosen_at_load_time_and_is_checked_like_the_spec_s
     assert (own.estimator, truth.estimator) == ("kalman", "groundTruth")
     assert dataclasses.replace(truth, estimator="kalman") == own
     assert truth.hash != own.hash
-    spec_file.write_text(spec_file.read_text() + '[factors]\nsensor_noise_seed = { values = [1, 2] }\n')
+    spec_file.write_text(spec_file.read_text() + "[factors]\nsensor_noise_seed = { values = [1, 2] }\n")
     with pytest.raises(SpecError, match='only acts with `estimator = "kalman"`'):
         load_spec(spec_file, "groundTruth")
     with pytest.raises(SpecError, match="`estimator` must be one of"):
@@ -226,3 +227,44 @@ def test_rows_stored_before_the_engine_column_read_back_without_an_engine(tmp_pa
     pq.write_table(pa.Table.from_pylist([old], schema=old_schema), store.rows_dir / "part-00000000-0001-old.parquet")
     store.append([new])
     assert store.table()["engine"].to_pylist() == [None, "dart"]
+
+
+def test_the_robot_and_the_push_scaling_are_part_of_the_spec(tmp_path: Path) -> None:
+    """Without `robot` and `push_scaling` a spec keeps its hash; with them it is another spec, and
+    `--robot` at load time replaces the spec's robot."""
+    plain = parse_spec(BASE)
+    assert plain.robot is None and plain.push_scaling == "force" and plain.hash == parse_spec(spec_with(push_scaling="force")).hash
+    go1 = parse_spec(spec_with(robot="robot/third_party/go1.toml", push_scaling="mass"))
+    assert go1.as_json()["robot"] == "robot/third_party/go1.toml" and go1.as_json()["push_scaling"] == "mass"
+    assert len({plain.hash, go1.hash, parse_spec(spec_with(robot="robot/third_party/go1.toml")).hash}) == 3
+    spec_file = tmp_path / "spec.toml"
+    spec_file.write_text('scenario = "mountain_pass"\nduration = 4.0\nseed = 3\nruns = 20\npush_scaling = "mass"\n')
+    assert load_spec(spec_file, robot="robot/third_party/go1.toml").hash == go1.hash
+    with pytest.raises(SpecError, match="`push_scaling` must be one of force, mass"):
+        parse_spec(spec_with(push_scaling="weight"))
+    with pytest.raises(SpecError, match="`robot` must be the path of a robot config"):
+        parse_spec(spec_with(robot=3))
+
+
+def test_mass_scaling_pushes_every_robot_to_the_same_velocity_change() -> None:
+    """With `push_scaling = "mass"` the force applied is the magnitude times the robot's mass over
+    ours (the same impulse per kg); with "force" it is the magnitude; rows record both and the mass."""
+    from pfnav_harness import paths
+    from pfnav_harness.robot import RobotDescription
+    from pfnav_harness.sweep.runner import Course, result_row
+
+    ours = RobotDescription.load(paths.default_robot_config_path())
+    go1 = RobotDescription.load(paths.repo_root() / "robot" / "third_party" / "go1.toml")
+    factors = {"push_magnitude": {"values": [100.0]}, "push_direction": "left", "push_time": 3.0}
+    scaled = parse_spec(spec_with(runs=1, factors=factors, push_scaling="mass"))
+    forces = {}
+    for robot in (ours, go1):
+        (task,) = run_tasks(scaled, set(), robot)
+        (push,) = run_config(task).pushes.pushes  # type: ignore[union-attr]
+        forces[robot.mass] = float(np.hypot(*push.force[:2]))
+        row = result_row(task, Course(0, None, None))  # type: ignore[arg-type]
+        assert row["push_magnitude"] == 100.0 and row["push_force"] == pytest.approx(forces[robot.mass]) and row["robot_mass"] == robot.mass
+    assert forces[ours.mass] == pytest.approx(100.0)
+    assert forces[go1.mass] / go1.mass == pytest.approx(100.0 / ours.mass) and go1.mass != ours.mass
+    (unscaled,) = run_tasks(parse_spec(spec_with(runs=1, factors=factors)), set(), go1)
+    assert float(np.hypot(*run_config(unscaled).pushes.pushes[0].force[:2])) == pytest.approx(100.0)  # type: ignore[union-attr]

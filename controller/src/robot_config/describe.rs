@@ -44,6 +44,8 @@ pub struct RobotDescription {
     pub stand_height: f64,
     /// The feet's radius (their sphere collisions, else the config's `foot_radius`), m.
     pub foot_radius: f64,
+    /// The whole robot's mass as the controller models it (links with mass), kg.
+    pub mass: f64,
     /// Frames without mass: the config's `massless_links`, then the URDF's links without
     /// `<inertial>`.
     pub massless_links: Vec<String>,
@@ -133,6 +135,7 @@ pub fn describe_robot_config(
         base_link: config.base_link.clone(),
         stand_height: config.stand_height,
         foot_radius: model.foot_radius(),
+        mass: model.total_mass(),
         massless_links,
         effort_limits: config.limits.effort,
         legs,

@@ -83,6 +83,8 @@ class RobotDescription:
     base_link: str
     stand_height: float
     foot_radius: float
+    # The whole robot's mass as the controller models it, kg.
+    mass: float
     # The config's `massless_links` and the URDF's links without `<inertial>`: frames without mass.
     massless_links: tuple[str, ...]
     legs: tuple[LegDescription, ...]
@@ -130,6 +132,7 @@ class RobotDescription:
             base_link=described["base_link"],
             stand_height=float(described["stand_height"]),
             foot_radius=float(described["foot_radius"]),
+            mass=float(described["mass"]),
             massless_links=tuple(described["massless_links"]),
             legs=tuple(legs),
             effort_limits=tuple(float(v) for v in effort) if effort is not None else None,  # type: ignore[arg-type]

@@ -4,6 +4,7 @@
     pfnav-sweep plan SPEC.toml --out DIR        export and plan each terrain seed (LCM planner service)
     pfnav-sweep run SPEC.toml --out DIR         plan what is missing, run every run not yet stored, report
     pfnav-sweep report DIR                      write DIR/REPORT.md and plots from the stored rows
+    pfnav-sweep compare DIR... --out DIR        fall rates of several stores by push impulse (robots of other mass)
 
 `run` and `report` take --results-page NAME to publish the report as docs/results/NAME.md.
 
@@ -52,12 +53,37 @@ def _courses(spec: SweepSpec, store: SweepStore, args: argparse.Namespace, work:
     return prepare_courses(spec, store, paths.pf_plan_path(), _lcm_planner(args.lcm_url, args.allow_host_network), work)
 
 
+def _robot_override(text: str | None) -> str | None:
+    """`--robot PATH` as a spec writes it: relative to the repository root when inside it."""
+    if text is None:
+        return None
+    path = Path(text).absolute()
+    try:
+        return str(path.relative_to(paths.repo_root()))
+    except ValueError:
+        return str(path)
+
+
+def _robot_config(spec: SweepSpec) -> Path | None:
+    """The spec's robot config file (None: `$PFNAV_ROBOT`, else ours)."""
+    if spec.robot is None:
+        return None
+    path = Path(spec.robot)
+    return path if path.is_absolute() else paths.repo_root() / path
+
+
+def _load(args: argparse.Namespace) -> SweepSpec:
+    return load_spec(args.spec, args.estimator, args.engine, _robot_override(args.robot))
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     spec = load_spec(args.spec)
     seeds = spec.terrain_seeds()
     print(f"{args.spec}: {spec.runs} runs of '{spec.scenario}' ({spec.sampling} sampling, seed {spec.seed}), {spec.duration:g} simulated s each")
     forks = "on (runs continue their group's post-stand-up state)" if spec.fork else "off"
     print(f"spec hash {spec.hash}; engine {spec.engine}; forks {forks}")
+    scaling = "scaled by the robot's mass over ours" if spec.push_scaling == "mass" else "as given"
+    print(f"robot {spec.robot or 'of $PFNAV_ROBOT, else ours'}; push magnitudes {scaling}")
     print(f"terrain seeds: {', '.join('scenario default' if s is None else str(s) for s in seeds)}")
     varied = [name for name in FACTORS if name in spec.factors]
     print(f"factors: {', '.join(varied) or 'none (every run the same)'}")
@@ -68,7 +94,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    spec = load_spec(args.spec, args.estimator, args.engine)
+    spec = _load(args)
     store = SweepStore.create(args.out, spec)
     with tempfile.TemporaryDirectory(prefix="pfnav_sweep_plan_") as tmp:
         courses = _courses(spec, store, args, Path(tmp))
@@ -94,14 +120,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     # Taken before the runs: the commit that ran and the load it ran under.
     stamp = collect_stamp() if args.results_page else None
-    spec = load_spec(args.spec, args.estimator, args.engine)
+    spec = _load(args)
     if args.no_fork:
         spec = dataclasses.replace(spec, fork=False)
     store = SweepStore.create(args.out, spec)
     from ..robot_fmu import robot_and_fmu
 
-    # The robot of $PFNAV_ROBOT (default ours), on the FMU for it.
-    robot, fmu = robot_and_fmu(None, args.out / "cache")
+    # The spec's robot (else $PFNAV_ROBOT, else ours), on the FMU for it.
+    robot, fmu = robot_and_fmu(_robot_config(spec), args.out / "cache")
     artifacts = Artifacts(fmu, robot, paths.pf_plan_path())
     # The exported scenarios live on while the workers run (a shared folder for remote workers).
     work = args.out / "scenarios"
@@ -136,6 +162,18 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    from .report import write_comparison
+
+    stores = [SweepStore.open_existing(folder) for folder in args.stores]
+    report = write_comparison(stores, args.out)
+    print(f"comparison: {report}")
+    if args.results_page:
+        note = "The stamp is when this comparison was written from the stored rows; `pfnav-sweep run` measured them, possibly on another commit."
+        print(f"results page: {_publish(args.results_page, report, args.argv, None, note)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pfnav-sweep", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -152,6 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
             "--estimator", choices=ESTIMATOR_MODES, default=None, help="run on this estimator instead of the spec's `estimator` (a store of its own)"
         )
         p.add_argument("--engine", choices=ENGINE_NAMES, default=None, help="walk in this physics engine instead of the spec's `engine` (a store of its own)")
+        p.add_argument("--robot", default=None, metavar="CONFIG", help="walk this robot config instead of the spec's `robot` (a store of its own)")
         if name == "run":
             p.add_argument("--workers", type=int, default=None, help="local Dask worker processes (default: one per core)")
             p.add_argument(
@@ -164,6 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
     report = sub.add_parser("report", help="write the report of a store folder")
     report.add_argument("store", type=Path)
     _add_results_page(report)
+    compare = sub.add_parser("compare", help="compare the fall rates of several stores by push impulse")
+    compare.add_argument("stores", type=Path, nargs="+")
+    compare.add_argument("--out", type=Path, required=True, help="folder for COMPARE.md and its plot")
+    _add_results_page(compare)
     return parser
 
 
@@ -195,7 +238,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "run" and args.workers is not None and args.scheduler is not None:
         print("pfnav-sweep: error: --workers starts a local cluster; with --scheduler the cluster's own workers run the sweep", file=sys.stderr)
         return 2
-    commands = {"check": cmd_check, "plan": cmd_plan, "run": cmd_run, "report": cmd_report}
+    commands = {"check": cmd_check, "plan": cmd_plan, "run": cmd_run, "report": cmd_report, "compare": cmd_compare}
     try:
         return commands[args.command](args)
     except HarnessError as err:

@@ -7,6 +7,7 @@ co-simulate. A resumed sweep reuses the stored plans and needs no planner at all
 
 from __future__ import annotations
 
+import math
 import time
 import uuid
 from collections.abc import Callable
@@ -18,8 +19,9 @@ from tqdm import tqdm
 
 from ..pipeline import export_scenario
 from ..planner_client import METHODS, Plan
+from ..robot import RobotDescription
 from ..scenario import Scenario
-from .runner import Artifacts, Course, RunTask, fork_group, forkable, make_fork, result_row, run_one
+from .runner import Artifacts, Course, RunTask, fork_group, forkable, make_fork, push_scale_for, result_row, run_one
 from .spec import SpecError, SweepSpec
 from .store import SweepStore
 
@@ -67,9 +69,12 @@ def prepare_courses(spec: SweepSpec, store: SweepStore, pf_plan: Path, planner: 
     return courses
 
 
-def run_tasks(spec: SweepSpec, done: set[int]) -> list[RunTask]:
+def run_tasks(spec: SweepSpec, done: set[int], robot: RobotDescription | None = None) -> list[RunTask]:
+    """The runs of `spec` not in `done`, for `robot` (its mass scales the pushes when the spec says so)."""
+    push_scale = push_scale_for(spec.push_scaling, robot) if robot is not None else 1.0
+    mass = robot.mass if robot is not None else math.nan
     return [
-        RunTask(run_id, spec.run_factors(run_id), spec.duration, spec.stand_time, spec.hash, spec.estimator, spec.fork, spec.engine)
+        RunTask(run_id, spec.run_factors(run_id), spec.duration, spec.stand_time, spec.hash, spec.estimator, spec.fork, spec.engine, push_scale, mass)
         for run_id in range(spec.runs)
         if run_id not in done
     ]
@@ -88,7 +93,7 @@ def run_sweep(
     from distributed import as_completed
 
     begin = time.perf_counter()
-    tasks = run_tasks(spec, store.done_ids())
+    tasks = run_tasks(spec, store.done_ids(), artifacts.robot)
     skipped = spec.runs - len(tasks)
     if not tasks:
         return SweepSummary(spec.runs, skipped, 0, 0, 0.0)

@@ -14,7 +14,19 @@ import numpy as np
 import pyarrow as pa
 
 from ..engine import DEFAULT_ENGINE
-from .stats import FACTOR_COLUMNS, FallRate, factor_breakdown, fall_rate, outcome_counts
+from .stats import (
+    FACTOR_COLUMNS,
+    IMPULSE_EDGES,
+    VELOCITY_CHANGE_EDGES,
+    FallRate,
+    binned_fall_rates,
+    factor_breakdown,
+    fall_rate,
+    falls_up_to,
+    outcome_counts,
+    push_impulses,
+    velocity_changes,
+)
 from .store import SweepStore
 
 # Fall rate plots the issue asks for, when the factor varies.
@@ -32,23 +44,41 @@ def _rate_row(rate: FallRate) -> str:
 RATE_HEADER = "| level | trials | falls | fall rate | 95 % Wilson interval | errors |\n| --- | ---: | ---: | ---: | --- | ---: |"
 
 
-def plot_fall_rate(rates: list[FallRate], column: str, path: Path) -> None:
-    xs = np.array([r.x for r in rates])
-    ys = np.array([r.rate for r in rates])
-    lower = np.array([r.rate - r.low if r.runs else 0.0 for r in rates])
-    upper = np.array([r.high - r.rate if r.runs else 0.0 for r in rates])
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.errorbar(xs, 100 * ys, yerr=100 * np.vstack([lower, upper]), fmt="o-", capsize=4)
-    for x, y, r in zip(xs, ys, rates, strict=True):
-        if r.runs:
-            ax.annotate(f"n={r.runs}", (x, 100 * y), textcoords="offset points", xytext=(4, 6), fontsize=7)
-    ax.set_xlabel(FACTOR_COLUMNS.get(column, column))
+def draw_fall_rates(ax: plt.Axes, rates: list[FallRate], label: str | None = None) -> None:
+    """Fall rate per level with its 95 % Wilson interval, each point annotated with its trials."""
+    shown = [r for r in rates if r.runs]
+    xs = np.array([r.x for r in shown])
+    ys = np.array([r.rate for r in shown])
+    lower = np.array([r.rate - r.low for r in shown])
+    upper = np.array([r.high - r.rate for r in shown])
+    ax.errorbar(xs, 100 * ys, yerr=100 * np.vstack([lower, upper]).reshape(2, -1), fmt="o-", capsize=4, label=label)
+    for x, y, r in zip(xs, ys, shown, strict=True):
+        ax.annotate(f"n={r.runs}", (x, 100 * y), textcoords="offset points", xytext=(4, 6), fontsize=7)
     ax.set_ylabel("fall rate (%), 95 % Wilson interval")
     ax.set_ylim(-5, 105)
     ax.grid(alpha=0.3)
+
+
+def plot_fall_rate(rates: list[FallRate], xlabel: str, path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(6, 4))
+    draw_fall_rates(ax, rates)
+    ax.set_xlabel(xlabel)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def impulse_rates(table: pa.Table) -> list[FallRate]:
+    """Fall rate per push-impulse bin (`IMPULSE_EDGES`, N·s)."""
+    return binned_fall_rates(push_impulses(table), np.asarray(table["outcome"].to_pylist(), dtype=object), IMPULSE_EDGES, "N·s")
+
+
+def velocity_change_rates(table: pa.Table) -> list[FallRate]:
+    """Fall rate per bin of impulse over mass (m/s), empty when the rows have no robot mass."""
+    changes = velocity_changes(table)
+    if not np.isfinite(changes).any():
+        return []
+    return binned_fall_rates(changes, np.asarray(table["outcome"].to_pylist(), dtype=object), VELOCITY_CHANGE_EDGES, "m/s")
 
 
 def plot_tracking_errors(table: pa.Table, path: Path) -> bool:
@@ -84,6 +114,11 @@ def _fork_note(table: pa.Table) -> str:
     )
 
 
+def _impulse_line(table: pa.Table) -> str:
+    small = falls_up_to(table)
+    return f"Runs pushed with at most 18 N·s (90 N for 0.2 s, no push included): {small.falls} fell of {small.runs}."
+
+
 def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
     """Writes REPORT.md and its PNG plots into `out_dir` (default: the store folder); returns the markdown path."""
     out_dir = out_dir or store.folder
@@ -98,7 +133,8 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         "",
         f"Spec hash `{stored.get('hash', '?')}`: {spec.get('runs', '?')} runs ({spec.get('sampling', '?')} sampling, seed {spec.get('seed', '?')}), "
         f"{spec.get('duration', '?')} simulated s each, method {spec.get('method', '?')}, estimator {spec.get('estimator') or '?'}, "
-        f"physics engine {spec.get('engine', DEFAULT_ENGINE)}. Stored rows: {table.num_rows}.",
+        f"physics engine {spec.get('engine', DEFAULT_ENGINE)}, robot {spec.get('robot', 'ours (or $PFNAV_ROBOT)')}"
+        f"{', push magnitudes scaled by its mass over ours' if spec.get('push_scaling') == 'mass' else ''}. Stored rows: {table.num_rows}.",
         "",
         _fork_note(table),
         "",
@@ -106,6 +142,8 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         "A run is a trial unless it ended in an error; 'timeout' = neither fell nor reached the goal within the duration.",
         "",
         f"**Fall rate {_percent(overall.rate)}** ({overall.falls} of {overall.runs}), 95 % Wilson interval {_percent(overall.low)} – {_percent(overall.high)}.",
+        "",
+        _impulse_line(table),
         "",
         "| factor | drawn from |",
         "| --- | --- |",
@@ -115,6 +153,14 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         "",
     ]
     plots: list[str] = []
+    by_impulse = impulse_rates(table)
+    if len(by_impulse) > 1:
+        lines += ["### push impulse (force × duration, N·s)", "", RATE_HEADER, *(_rate_row(r) for r in by_impulse), ""]
+        plot_fall_rate(by_impulse, "push impulse (N·s)", out_dir / "fall_rate_push_impulse.png")
+        plots.append("![fall rate against the push impulse](fall_rate_push_impulse.png)")
+    by_velocity = velocity_change_rates(table)
+    if len(by_velocity) > 1:
+        lines += ["### push impulse over the robot's mass (m/s)", "", RATE_HEADER, *(_rate_row(r) for r in by_velocity), ""]
     for column in FACTOR_COLUMNS:
         rates = factor_breakdown(table, column)
         if not rates:
@@ -122,7 +168,7 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         lines += [f"### {FACTOR_COLUMNS[column]}", "", RATE_HEADER, *(_rate_row(r) for r in rates), ""]
         if column in PLOTTED_FACTORS:
             name = f"fall_rate_{column}.png"
-            plot_fall_rate(rates, column, out_dir / name)
+            plot_fall_rate(rates, FACTOR_COLUMNS[column], out_dir / name)
             plots.append(f"![fall rate against {FACTOR_COLUMNS[column]}]({name})")
     if plot_tracking_errors(table, out_dir / "tracking_error.png"):
         plots.append("![RMS tracking error per outcome](tracking_error.png)")
@@ -138,5 +184,56 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
     if len(wall):
         lines += [f"Wall time per run: median {np.median(wall):.1f} s, total {wall.sum() / 60:.1f} worker-minutes.", ""]
     path = out_dir / "REPORT.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def store_label(store: SweepStore) -> str:
+    """A store's robot, estimator and engine, for legends and table rows."""
+    spec = (store.stored_spec() or {}).get("spec", {})
+    robot = Path(spec["robot"]).stem if spec.get("robot") else "ours"
+    return f"{robot}, {spec.get('estimator', '?')}, {spec.get('engine', DEFAULT_ENGINE)}"
+
+
+def write_comparison(stores: list[SweepStore], out_dir: Path) -> Path:
+    """COMPARE.md and compare_push.png in `out_dir`: the fall rate of each store overall, by push
+    impulse (N·s) and by impulse over the robot's mass (m/s), so that robots of different mass compare."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lines = [
+        "# Robustness sweeps compared: fall rate by push impulse",
+        "",
+        "| sweep | store | spec hash | robot mass [kg] | trials | falls | fall rate | 95 % Wilson interval | falls at ≤ 18 N·s |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | --- | ---: |",
+    ]
+    fig, (by_impulse, by_velocity) = plt.subplots(1, 2, figsize=(11, 4))
+    sections: list[str] = []
+    for store in stores:
+        table = store.table()
+        label = store_label(store)
+        overall = fall_rate(np.asarray(table["outcome"].to_pylist(), dtype=object))
+        small = falls_up_to(table)
+        masses = {m for m in table["robot_mass"].to_pylist() if m is not None and math.isfinite(m)}
+        mass = ", ".join(f"{m:.3f}" for m in sorted(masses)) or "–"
+        lines.append(
+            f"| {label} | `{store.folder.name}` | `{(store.stored_spec() or {}).get('hash', '?')}` | {mass} | {overall.runs} | {overall.falls} | "
+            f"{_percent(overall.rate)} | {_percent(overall.low)} – {_percent(overall.high)} | {small.falls} of {small.runs} |"
+        )
+        impulses = impulse_rates(table)
+        velocities = velocity_change_rates(table)
+        sections += [f"## {label}", "", RATE_HEADER, *(_rate_row(r) for r in impulses), ""]
+        if velocities:
+            sections += [RATE_HEADER, *(_rate_row(r) for r in velocities), ""]
+            draw_fall_rates(by_velocity, velocities, label)
+        draw_fall_rates(by_impulse, impulses, label)
+    by_impulse.set_xlabel("push impulse (N·s)")
+    by_velocity.set_xlabel("push impulse over the robot's mass (m/s)")
+    for ax in (by_impulse, by_velocity):
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out_dir / "compare_push.png", dpi=110)
+    plt.close(fig)
+    lines += ["", *sections, "![fall rate by push impulse and by impulse over mass](compare_push.png)", ""]
+    path = out_dir / "COMPARE.md"
     path.write_text("\n".join(lines))
     return path

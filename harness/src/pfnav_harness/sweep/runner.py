@@ -67,6 +67,21 @@ class RunTask:
     # Start from the group's fork when the run is long enough to have one (`forkable`).
     fork: bool = False
     engine: str = DEFAULT_ENGINE
+    # Push magnitudes are multiplied by this (`push_scale_for`); the robot's mass, kg (NaN: not recorded).
+    push_scale: float = 1.0
+    robot_mass: float = math.nan
+
+
+def push_scale_for(push_scaling: str, robot: RobotDescription) -> float:
+    """What the spec's push magnitudes are multiplied by for `robot`: 1 ("force"), or its mass over
+    our robot's ("mass": the same velocity change for every robot)."""
+    if push_scaling == "force":
+        return 1.0
+    if push_scaling == "mass":
+        from .. import paths
+
+        return robot.mass / RobotDescription.load(paths.default_robot_config_path()).mass
+    raise ValueError(f"unknown push scaling {push_scaling!r}")
 
 
 @dataclass(frozen=True)
@@ -76,9 +91,9 @@ class PrefixFailure:
     reason: str
 
 
-def push_schedule(factors: dict[str, float | str]) -> PushSchedule | None:
-    """The run's push (None without one): a magnitude of 0 N means no push."""
-    magnitude = float(factors["push_magnitude"])
+def push_schedule(factors: dict[str, float | str], scale: float = 1.0) -> PushSchedule | None:
+    """The run's push (None without one), its magnitude times `scale`: a magnitude of 0 N means no push."""
+    magnitude = float(factors["push_magnitude"]) * scale
     if magnitude <= 0.0:
         return None
     direction = factors["push_direction"]
@@ -97,7 +112,7 @@ def run_config(task: RunTask) -> CoSimConfig:
         stand_time=task.stand_time,
         max_duration=task.duration,
         friction=float(f["friction"]),
-        pushes=push_schedule(f),
+        pushes=push_schedule(f, task.push_scale),
         payload=None if payload == Payload() else payload,
         estimator=task.estimator,
         body_sensors=BodySensorConfig(seed=int(f["sensor_noise_seed"])),
@@ -175,6 +190,7 @@ def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
         "spec_hash": task.spec_hash,
         "terrain_seed": course.terrain_seed,
         "push_magnitude": float(f["push_magnitude"]),
+        "push_force": float(f["push_magnitude"]) * task.push_scale,
         "push_direction_deg": HEADING_DIRECTIONS[direction] if isinstance(direction, str) else float(direction),
         "push_heading_relative": relative,
         "push_time": float(f["push_time"]),
@@ -187,6 +203,7 @@ def result_row(task: RunTask, course: Course, **results: Any) -> dict[str, Any]:
         "comm_step": float(f["comm_step"]),
         "sensor_noise_seed": int(f["sensor_noise_seed"]),
         "engine": task.engine,
+        "robot_mass": task.robot_mass,
         "forked": forkable(task),
         "outcome": "error",
         "fall_time": math.nan,

@@ -1,7 +1,11 @@
 """Sweep specs (TOML): the scenario, the factors and how runs sample them.
 
 A spec names the scenario, the simulated duration of each run, a seed, the number of runs, the
-physics engine (`engine`, default "dart") and the sampling ("random": every run draws each factor independently; "grid": every combination once).
+physics engine (`engine`, default "dart"), the robot (`robot`: a robot config, relative to the repository root; default
+`$PFNAV_ROBOT`, else ours), how pushes scale with the robot (`push_scaling`: "force", the magnitudes as given, or
+"mass", magnitudes meant for our robot's mass and scaled by the robot's mass over it, so that every robot gets the
+same velocity change) and the sampling ("random": every run draws each factor independently; "grid": every
+combination once).
 Each factor is a fixed value, a list (`{ values = [...] }`: random picks one, the grid takes each)
 or a range (`{ range = [low, high] }`: random draws uniformly, the grid takes `steps` evenly spaced
 points). Factors left out keep their default (`FACTORS`). Example: sweeps/tiny.toml.
@@ -28,7 +32,22 @@ from ..fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from ..pushes import HEADING_DIRECTIONS
 
 SAMPLINGS = ("random", "grid")
-SPEC_KEYS = ("scenario", "duration", "seed", "runs", "sampling", "method", "stand_time", "estimator", "engine", "fork", "factors")
+PUSH_SCALINGS = ("force", "mass")
+SPEC_KEYS = (
+    "scenario",
+    "duration",
+    "seed",
+    "runs",
+    "sampling",
+    "method",
+    "stand_time",
+    "estimator",
+    "engine",
+    "robot",
+    "push_scaling",
+    "fork",
+    "factors",
+)
 
 
 class SpecError(HarnessError, ValueError):
@@ -129,6 +148,10 @@ class SweepSpec:
     fork: bool = True
     # The physics engine every run walks in (engine.ENGINE_NAMES).
     engine: str = DEFAULT_ENGINE
+    # The robot config (as written, relative to the repository root); None: `$PFNAV_ROBOT`, else ours.
+    robot: str | None = None
+    # "force": push magnitudes as given; "mass": for our robot's mass, scaled by the robot's mass over it.
+    push_scaling: str = "force"
 
     def as_json(self) -> dict[str, Any]:
         """The spec's content (what the hash covers): no file name, no comments, factors in canonical order."""
@@ -148,6 +171,9 @@ class SweepSpec:
             **({"fork": True} if self.fork else {}),
             # Likewise the engine: a DART spec keeps the hash it had before the engine was a choice.
             **({"engine": self.engine} if self.engine != DEFAULT_ENGINE else {}),
+            # And the robot and the push scaling: a spec without them keeps its hash.
+            **({"robot": self.robot} if self.robot is not None else {}),
+            **({"push_scaling": self.push_scaling} if self.push_scaling != "force" else {}),
         }
 
     @property
@@ -286,6 +312,12 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     engine = data.get("engine", DEFAULT_ENGINE)
     if engine not in ENGINE_NAMES:
         raise SpecError(f"{where}`engine` (physics engine) must be one of {', '.join(ENGINE_NAMES)}, got {engine!r}")
+    robot = data.get("robot")
+    if robot is not None and (not isinstance(robot, str) or not robot.endswith(".toml")):
+        raise SpecError(f"{where}`robot` must be the path of a robot config (.toml, relative to the repository root), got {robot!r}")
+    push_scaling = data.get("push_scaling", "force")
+    if push_scaling not in PUSH_SCALINGS:
+        raise SpecError(f"{where}`push_scaling` must be one of {', '.join(PUSH_SCALINGS)}, got {push_scaling!r}")
     fork = data.get("fork", True)
     if not isinstance(fork, bool):
         raise SpecError(f"{where}`fork` must be true or false, got {fork!r}")
@@ -302,7 +334,13 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
                 f"{where}factor '{name}' only acts with `estimator = \"kalman\"` (on ground truth the controller never reads the sensors); "
                 "set it, or leave the factor out"
             )
-    spec_without_runs = SweepSpec(scenario, float(duration), seed, 1, sampling, method, float(stand_time), factors, source, estimator, fork, engine)
+
+    def spec_with(runs: int) -> SweepSpec:
+        return SweepSpec(
+            scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator, fork, engine, robot, push_scaling
+        )
+
+    spec_without_runs = spec_with(1)
     runs = data.get("runs")
     if sampling == "grid":
         size = spec_without_runs.grid_size()
@@ -313,12 +351,13 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
         raise SpecError(f"{where}missing `runs` (random sampling)")
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
         raise SpecError(f"{where}`runs` must be an integer >= 1, got {runs!r}")
-    return SweepSpec(scenario, float(duration), seed, runs, sampling, method, float(stand_time), factors, source, estimator, fork, engine)
+    return spec_with(runs)
 
 
-def load_spec(path: Path, estimator: str | None = None, engine: str | None = None) -> SweepSpec:
-    """The spec in the TOML file `path`; `estimator` and `engine` (if given) replace its own before
-    the checks, so that one spec measures both estimators or both engines (the store hash differs)."""
+def load_spec(path: Path, estimator: str | None = None, engine: str | None = None, robot: str | None = None) -> SweepSpec:
+    """The spec in the TOML file `path`; `estimator`, `engine` and `robot` (if given) replace its own
+    before the checks, so that one spec measures both estimators, both engines or several robots
+    (the store hash differs)."""
     try:
         data = tomllib.loads(Path(path).read_text())
     except OSError as err:
@@ -329,4 +368,6 @@ def load_spec(path: Path, estimator: str | None = None, engine: str | None = Non
         data["estimator"] = estimator
     if engine is not None:
         data["engine"] = engine
+    if robot is not None:
+        data["robot"] = robot
     return parse_spec(data, Path(path))

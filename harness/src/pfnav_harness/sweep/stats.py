@@ -7,6 +7,7 @@ sampling over a range) into `BINS` equal-width bins over the values drawn.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -86,10 +87,7 @@ def factor_breakdown(table: pa.Table, column: str) -> list[FallRate]:
     if len(distinct) <= 1:
         return []
     if len(distinct) <= MAX_LEVELS or isinstance(distinct[0], bool):
-        return [
-            fall_rate(outcomes[values == level], f"{column} = {_format(level) if isinstance(level, float) else level}", float(level))
-            for level in distinct
-        ]
+        return [fall_rate(outcomes[values == level], f"{column} = {_format(level) if isinstance(level, float) else level}", float(level)) for level in distinct]
     numbers = values.astype(np.float64)
     edges = np.linspace(numbers.min(), numbers.max(), BINS + 1)
     index = np.clip(np.searchsorted(edges, numbers, side="right") - 1, 0, BINS - 1)
@@ -107,3 +105,49 @@ def outcome_counts(table: pa.Table) -> dict[str, int]:
 
     outcomes = table["outcome"].to_pylist()
     return {name: outcomes.count(name) for name in OUTCOMES}
+
+
+# Impulse bins (N·s), closed on the right so that "≤ 18 N·s" (90 N for 0.2 s, the issue's bound) is a bin edge.
+IMPULSE_EDGES = (0.0, 6.0, 12.0, 18.0, 24.0, 30.0)
+# The same bins as velocity changes (impulse over mass, m/s) for our 12 kg robot: robots of other mass compare here.
+VELOCITY_CHANGE_EDGES = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5)
+# The impulse below which no run may fall (docs/push-recovery.md).
+NO_FALL_IMPULSE = 18.0
+
+
+def push_impulses(table: pa.Table) -> np.ndarray:
+    """Each run's push impulse, N·s: the force applied (`push_force`; the magnitude in rows stored
+    before forces were recorded) times the duration."""
+    magnitude = np.asarray(table["push_magnitude"].to_pylist(), dtype=np.float64)
+    force = np.asarray([math.nan if f is None else f for f in table["push_force"].to_pylist()], dtype=np.float64)
+    force = np.where(np.isnan(force), magnitude, force)
+    return force * np.asarray(table["push_duration"].to_pylist(), dtype=np.float64)
+
+
+def velocity_changes(table: pa.Table) -> np.ndarray:
+    """Each run's push impulse over the robot's mass, m/s (NaN where the mass was not recorded)."""
+    mass = np.asarray([math.nan if m is None else m for m in table["robot_mass"].to_pylist()], dtype=np.float64)
+    return push_impulses(table) / mass
+
+
+def binned_fall_rates(values: np.ndarray, outcomes: np.ndarray, edges: tuple[float, ...] | np.ndarray, unit: str) -> list[FallRate]:
+    """Fall rate per bin (low, high] of `values` (the first bin also takes `edges[0]`, the last one everything above)."""
+    outcomes = np.asarray(outcomes, dtype=object)
+    rates = []
+    bounds = [*itertools.pairwise(edges), (edges[-1], math.inf)]
+    for i, (low, high) in enumerate(bounds):
+        inside = (values > low) & (values <= high) if i else (values >= low) & (values <= high)
+        if math.isinf(high):
+            if not inside.any():
+                continue
+            label, centre = f"> {_format(low)} {unit}", float(np.median(values[inside]))
+        else:
+            label, centre = f"{'[' if i == 0 else '('}{_format(low)}, {_format(high)}] {unit}", 0.5 * (low + high)
+        rates.append(fall_rate(outcomes[inside], label, centre))
+    return rates
+
+
+def falls_up_to(table: pa.Table, impulse: float = NO_FALL_IMPULSE) -> FallRate:
+    """The fall rate of the runs pushed with at most `impulse` N·s (no push included)."""
+    outcomes = np.asarray(table["outcome"].to_pylist(), dtype=object)
+    return fall_rate(outcomes[push_impulses(table) <= impulse + 1e-9], f"impulse ≤ {_format(impulse)} N·s")

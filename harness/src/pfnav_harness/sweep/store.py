@@ -34,6 +34,8 @@ ROW_SCHEMA = pa.schema(
         ("spec_hash", pa.string()),
         ("terrain_seed", pa.int64()),
         ("push_magnitude", pa.float64()),
+        # The force applied, N: the magnitude times the spec's push scaling (null in older rows: the magnitude).
+        ("push_force", pa.float64()),
         ("push_direction_deg", pa.float64()),
         ("push_heading_relative", pa.bool_()),
         ("push_time", pa.float64()),
@@ -47,6 +49,8 @@ ROW_SCHEMA = pa.schema(
         ("sensor_noise_seed", pa.int64()),
         # The physics engine (null in rows stored before it was recorded: those ran in DART).
         ("engine", pa.string()),
+        # The robot's mass, kg (null in rows stored before it was recorded).
+        ("robot_mass", pa.float64()),
         # Started from its group's saved post-stand-up state (payload and friction from there on).
         ("forked", pa.bool_()),
         ("outcome", pa.string()),
