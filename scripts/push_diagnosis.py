@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Why pushes knock the robot over: a grid of pushes on mountain_pass, each run taken apart.
+"""Why pushes knock the robot over: a grid of pushes on a scenario (mountain_pass by default), each run taken apart.
 
 Every combination of push magnitude × direction (relative to the heading) × walk time, for 0.2 s,
-on the P-F plan of mountain_pass, per variant (estimator, and optionally a Raibert foothold gain
+on the P-F plan of the scenario (`--scenario`), at the ground friction of `--friction`, per variant (estimator, and optionally a Raibert foothold gain
 other than the FMU's own). Each run lasts until 3 s after its push. Per run, in the window from the
 push to the fall (or 2 s after the push), from the co-simulation log:
 
@@ -104,6 +104,9 @@ class Shared:
     fmu: Path
     robot: Any
     cache: Path
+    friction: float
+    follow: str
+    field: Any
 
 
 def run_one(shared: Shared, task: Task) -> dict[str, Any]:
@@ -121,9 +124,17 @@ def run_one(shared: Shared, task: Task) -> dict[str, Any]:
         max_duration=CoSimConfig().stand_time + task.walk_time + AFTER_PUSH,
         pushes=PushSchedule([push]),
         estimator=task.variant.estimator,
+        friction=shared.friction,
+        follow=shared.follow,
     )
     with CoSimulation(
-        shared.scenario, shared.plan, shared.fmu, shared.robot, shared.cache, config
+        shared.scenario,
+        shared.plan,
+        shared.fmu,
+        shared.robot,
+        shared.cache,
+        config,
+        field=shared.field,
     ) as sim:
         if task.variant.parameters:
             sim.fmu.set_parameters(dict(task.variant.parameters))
@@ -280,6 +291,7 @@ def plot(
     rows: list[dict[str, Any]],
     variants: list[Variant],
     magnitudes: list[float],
+    scenario: str,
     path: Path,
 ) -> None:
     import matplotlib
@@ -300,7 +312,7 @@ def plot(
     left.set_ylim(-0.05, 1.05)
     left.grid(alpha=0.3)
     left.legend(fontsize=8)
-    left.set_title("falls by impulse, mountain_pass")
+    left.set_title(f"falls by impulse, {scenario}")
     for v, marker in zip(variants, "os^vD", strict=False):
         mine = [r for r in rows if r["variant"] == v.label]
         for fell, colour in ((False, "tab:green"), (True, "tab:red")):
@@ -347,6 +359,23 @@ def main() -> int:
         metavar="NAME=VALUE[,NAME=VALUE…]",
         help="an extra kalman variant with these FMU parameters, e.g. gait.period=0.2 (repeatable)",
     )
+    parser.add_argument(
+        "--friction",
+        type=float,
+        default=None,
+        help="ground and foot friction coefficient (default: the simulation's)",
+    )
+    parser.add_argument(
+        "--scenario",
+        default="mountain_pass",
+        help="the scenario walked (pf-plan scenario list)",
+    )
+    parser.add_argument(
+        "--follow",
+        choices=("trajectory", "feedback"),
+        default="trajectory",
+        help="track the plan's time-indexed reference, or the P-F feedback field at the robot's position",
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument(
         "--figure",
@@ -358,9 +387,15 @@ def main() -> int:
     args = parser.parse_args()
 
     from pfnav_harness import paths, results_page
+    from pfnav_harness.engine import DEFAULT_FRICTION
     from pfnav_harness.fmu_runner import read_contract
     from pfnav_harness.pipeline import export_scenario
-    from pfnav_harness.planner_client import DEFAULT_LCM_URL, plan_scenario
+    from pfnav_harness.planner_client import (
+        DEFAULT_LCM_URL,
+        PlannerClient,
+        RequestOptions,
+        StartPose,
+    )
     from pfnav_harness.robot_fmu import robot_and_fmu
     from tqdm import tqdm
 
@@ -385,11 +420,25 @@ def main() -> int:
     unknown = sorted({name for v in variants for name, _ in v.parameters} - set(known))
     if unknown:
         parser.error(f"the FMU has no parameter {', '.join(unknown)}")
-    scenario = export_scenario(paths.pf_plan_path(), "mountain_pass", out / "scenarios")
-    plan = plan_scenario(
-        scenario, ["pf"], DEFAULT_LCM_URL, service_binary=paths.planner_service_path()
-    )["pf"]
-    shared = Shared(scenario, plan, fmu, robot, out / "cache")
+    scenario = export_scenario(paths.pf_plan_path(), args.scenario, out / "scenarios")
+    with PlannerClient(
+        DEFAULT_LCM_URL, service_binary=paths.planner_service_path()
+    ) as client:
+        seq = client.publish_map(scenario.terrain)
+        answer = client.request_answer(
+            StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw),
+            scenario.goal,
+            "pf",
+            seq,
+            RequestOptions(),
+        )
+    plan = answer.plan_or_raise("pf")
+    friction = DEFAULT_FRICTION if args.friction is None else args.friction
+    if not friction > 0.0:
+        parser.error(f"--friction must be > 0, got {friction:g}")
+    shared = Shared(
+        scenario, plan, fmu, robot, out / "cache", friction, args.follow, answer.field
+    )
     tasks = [
         Task(v, m, d, t)
         for v, m, d, t in itertools.product(
@@ -406,9 +455,12 @@ def main() -> int:
                 unit="run",
             )
         )
-    text = tables(rows, variants, magnitudes, directions)
+    text = (
+        f"Scenario {args.scenario}, ground friction {friction:g}, following the {args.follow}.\n\n"
+        + tables(rows, variants, magnitudes, directions)
+    )
     figure = out / "push_diagnosis.png"
-    plot(rows, variants, magnitudes, figure)
+    plot(rows, variants, magnitudes, args.scenario, figure)
     if args.figure is not None:
         shutil.copyfile(figure, args.figure)
     (out / "summary.md").write_text(text)
@@ -417,7 +469,7 @@ def main() -> int:
         command = results_page.regenerate_command(
             ".venv/bin/python scripts/push_diagnosis.py", sys.argv[1:]
         )
-        title = "Push diagnosis: what fails when a push knocks the robot over (mountain_pass)"
+        title = f"Push diagnosis: what fails when a push knocks the robot over ({args.scenario})"
         print(
             f"results page: {results_page.write_results_page(args.results_page, title, text, command, stamp)}"
         )

@@ -586,6 +586,11 @@ controller_config! {
         mu_slope_margin: f64 = 0.17,
             fmi "mpc.muSlopeMargin", range limits::MU_SLOPE_MARGIN, unit "",
             "Friction kept above tan(slope) on steep ground: where tan(slope) + margin > mpc.mu the MPC plans with that coefficient, lowers the body by cos(slope)/cos(slope where they are equal) and limits the reference's accelerations to half the margin times g cos(slope)";
+        /// Largest acceleration with which the motion reference brings a pushed body back to the
+        /// given velocity, m/s² (`reference_governor.rs`, docs/push-recovery.md).
+        recovery_acceleration: f64 = crate::reference_governor::RECOVERY_ACCELERATION,
+            fmi "recovery.acceleration", range limits::RECOVERY_ACCELERATION, unit "m/s2",
+            "Largest acceleration with which the reference brings a pushed body back to the given velocity";
     }
 }
 

@@ -28,6 +28,7 @@ pub const SWING_HEIGHT: RangeInclusive<f64> = 0.0..=0.25;
 pub const MU: RangeInclusive<f64> = 0.05..=2.0;
 /// `mu_slope_margin`.
 pub const MU_SLOPE_MARGIN: RangeInclusive<f64> = 0.0..=1.0;
+pub const RECOVERY_ACCELERATION: RangeInclusive<f64> = 0.1..=20.0;
 /// `f_min`, N (also `f_min < f_max`).
 pub const F_MIN: RangeInclusive<f64> = 0.0..=1000.0;
 /// `f_max`, N (the robot weighs about 120 N).

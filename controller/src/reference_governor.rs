@@ -21,19 +21,34 @@ pub const RECOVERY_ACCELERATION: f64 = 2.5;
 /// no more than the allowed acceleration, and the position leads (or lags) the given one by what
 /// that difference accumulated. Without a limit the velocity is the given one and the lead
 /// returns to zero with [`LEAD_TIME_CONSTANT`] (with no lead: the reference unchanged).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReferenceGovernor {
     velocity: [f64; 2],
+    /// The acceleration limit while recovering from a push, m/s² (default [`RECOVERY_ACCELERATION`]).
+    recovery_acceleration: f64,
     lead: [f64; 2],
     /// A push moved the body off the reference, and the velocity is not back on the given one.
     recovering: bool,
 }
 
+impl Default for ReferenceGovernor {
+    fn default() -> Self {
+        Self::starting_at([0.0; 2])
+    }
+}
+
 impl ReferenceGovernor {
     /// Starts at `velocity` (world xy, m/s) with no lead.
     pub fn starting_at(velocity: [f64; 2]) -> Self {
+        Self::with_recovery_acceleration(velocity, RECOVERY_ACCELERATION)
+    }
+
+    /// Starts at `velocity` with no lead, bringing pushed bodies back at no more than
+    /// `recovery_acceleration` (m/s²).
+    pub fn with_recovery_acceleration(velocity: [f64; 2], recovery_acceleration: f64) -> Self {
         ReferenceGovernor {
             velocity,
+            recovery_acceleration,
             lead: [0.0; 2],
             recovering: false,
         }
@@ -82,7 +97,7 @@ impl ReferenceGovernor {
         dt: f64,
     ) -> ([f64; 2], [f64; 2]) {
         let max_acceleration = if self.recovering {
-            max_acceleration.min(RECOVERY_ACCELERATION)
+            max_acceleration.min(self.recovery_acceleration)
         } else {
             max_acceleration
         };
@@ -256,5 +271,24 @@ mod tests {
         assert!((velocity[1] - (start - (0.7 + RECOVERY_ACCELERATION) * dt)).abs() < 1e-12);
         // A NaN measurement is no push.
         assert!(!governor.absorb_push([0.0, 0.0], [0.0, 0.0], [f64::NAN, 0.0]));
+    }
+
+    #[test]
+    fn the_configured_recovery_acceleration_brakes() {
+        let dt = 0.001;
+        for limit in [1.0, RECOVERY_ACCELERATION, 6.0] {
+            let mut governor = ReferenceGovernor::with_recovery_acceleration([0.0, 0.0], limit);
+            assert!(governor.absorb_push([0.0, 0.0], [0.0, 0.0], [0.0, 2.0]));
+            let start = 2.0 - DISTURBANCE_VELOCITY;
+            let (_, velocity) = governor.step([0.0, 0.0], [0.0, 0.0], f64::INFINITY, dt);
+            assert!(
+                (velocity[1] - (start - limit * dt)).abs() < 1e-12,
+                "{limit}"
+            );
+        }
+        assert_eq!(
+            ReferenceGovernor::default(),
+            ReferenceGovernor::starting_at([0.0, 0.0])
+        );
     }
 }

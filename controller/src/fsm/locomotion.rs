@@ -34,6 +34,8 @@ pub struct Locomotion {
     /// Configured friction coefficient and the margin kept above tan(slope) (steep ground).
     mu: f64,
     mu_slope_margin: f64,
+    /// Largest acceleration of the reference while it brings a pushed body back, m/s².
+    recovery_acceleration: f64,
 }
 
 impl Locomotion {
@@ -49,6 +51,7 @@ impl Locomotion {
             governor: ReferenceGovernor::default(),
             mu: config.mu,
             mu_slope_margin: config.mu_slope_margin,
+            recovery_acceleration: config.recovery_acceleration,
         }
     }
 
@@ -58,7 +61,10 @@ impl Locomotion {
         self.stance_anchor = estimate.feet_world;
         self.swing_start = estimate.feet_world;
         self.footholds = estimate.feet_world;
-        self.governor = ReferenceGovernor::starting_at([estimate.velocity.x, estimate.velocity.y]);
+        self.governor = ReferenceGovernor::with_recovery_acceleration(
+            [estimate.velocity.x, estimate.velocity.y],
+            self.recovery_acceleration,
+        );
     }
 
     pub fn run(&mut self, stages: &mut Stages, tick: &Tick) -> Actuation {
