@@ -268,3 +268,14 @@ def test_mass_scaling_pushes_every_robot_to_the_same_velocity_change() -> None:
     assert forces[go1.mass] / go1.mass == pytest.approx(100.0 / ours.mass) and go1.mass != ours.mass
     (unscaled,) = run_tasks(parse_spec(spec_with(runs=1, factors=factors)), set(), go1)
     assert float(np.hypot(*run_config(unscaled).pushes.pushes[0].force[:2])) == pytest.approx(100.0)  # type: ignore[union-attr]
+
+
+def test_the_first_runs_of_a_spec_are_a_spec_of_fewer_runs(tmp_path: Path) -> None:
+    """`--runs N` keeps the draws: run k of the N-run spec is run k of the full one."""
+    spec_file = tmp_path / "spec.toml"
+    spec_file.write_text('scenario = "mountain_pass"\nduration = 4.0\nseed = 3\nruns = 20\n[factors]\nfriction = { range = [0.5, 1.0] }\n')
+    full, first = load_spec(spec_file), load_spec(spec_file, runs=5)
+    assert first.runs == 5 and first.hash != full.hash
+    assert [first.run_factors(k) for k in range(5)] == [full.run_factors(k) for k in range(5)]
+    with pytest.raises(SpecError, match="`runs` must be an integer >= 1"):
+        load_spec(spec_file, runs=0)

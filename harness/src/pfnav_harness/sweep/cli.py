@@ -73,7 +73,7 @@ def _robot_config(spec: SweepSpec) -> Path | None:
 
 
 def _load(args: argparse.Namespace) -> SweepSpec:
-    return load_spec(args.spec, args.estimator, args.engine, _robot_override(args.robot))
+    return load_spec(args.spec, args.estimator, args.engine, _robot_override(args.robot), args.runs)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -191,6 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
         )
         p.add_argument("--engine", choices=ENGINE_NAMES, default=None, help="walk in this physics engine instead of the spec's `engine` (a store of its own)")
         p.add_argument("--robot", default=None, metavar="CONFIG", help="walk this robot config instead of the spec's `robot` (a store of its own)")
+        p.add_argument("--runs", type=int, default=None, metavar="N", help="the spec's first N runs (random sampling: the same draws; a store of its own)")
         if name == "run":
             p.add_argument("--workers", type=int, default=None, help="local Dask worker processes (default: one per core)")
             p.add_argument(

@@ -354,10 +354,11 @@ def parse_spec(data: dict[str, Any], source: Path | None = None) -> SweepSpec:
     return spec_with(runs)
 
 
-def load_spec(path: Path, estimator: str | None = None, engine: str | None = None, robot: str | None = None) -> SweepSpec:
-    """The spec in the TOML file `path`; `estimator`, `engine` and `robot` (if given) replace its own
-    before the checks, so that one spec measures both estimators, both engines or several robots
-    (the store hash differs)."""
+def load_spec(path: Path, estimator: str | None = None, engine: str | None = None, robot: str | None = None, runs: int | None = None) -> SweepSpec:
+    """The spec in the TOML file `path`; `estimator`, `engine`, `robot` and `runs` (if given) replace its
+    own before the checks, so that one spec measures both estimators, both engines or several robots
+    (the store hash differs). Random draws depend on (seed, run id, factor) only: the first N runs of
+    a spec are the runs of the same spec with `runs = N`."""
     try:
         data = tomllib.loads(Path(path).read_text())
     except OSError as err:
@@ -370,4 +371,6 @@ def load_spec(path: Path, estimator: str | None = None, engine: str | None = Non
         data["engine"] = engine
     if robot is not None:
         data["robot"] = robot
+    if runs is not None:
+        data["runs"] = runs
     return parse_spec(data, Path(path))
