@@ -12,6 +12,7 @@
 //! as the controller's loader resolves it, as JSON (the simulation harness builds its robot from
 //! it); exit status 2 with the loader's error on stderr when the config cannot be loaded.
 
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -50,10 +51,20 @@ enum Command {
 /// Exit status of `describe` for a config the loader refuses.
 const CONFIG_REFUSED: u8 = 2;
 
-fn print_report(config: &std::path::Path, check: &RobotCheck) {
-    println!("pf-robot check {}", config.display());
+/// The check's report as printed (written in one go by `main`, so that a reader that went away
+/// is an error message, not a panic).
+fn report(config: &std::path::Path, check: &RobotCheck) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    // Writing into a String cannot fail.
+    macro_rules! say {
+        ($($arg:tt)*) => {
+            let _ = writeln!(out, $($arg)*);
+        };
+    }
+    say!("pf-robot check {}", config.display());
     if let Some(model) = &check.model {
-        println!(
+        say!(
             "  robot `{}`: {:.3} kg, stand height {:.3} m, foot radius {:.4} m",
             model.name(),
             model.total_mass(),
@@ -62,23 +73,23 @@ fn print_report(config: &std::path::Path, check: &RobotCheck) {
         );
     }
     if check.findings.is_empty() {
-        println!("  no problems");
+        say!("  no problems");
     } else {
-        println!("  {} problem(s):", check.findings.len());
+        say!("  {} problem(s):", check.findings.len());
         for (i, finding) in check.findings.iter().enumerate() {
-            println!("  {}. `{}`: {}", i + 1, finding.key, finding.problem);
+            say!("  {}. `{}`: {}", i + 1, finding.key, finding.problem);
             if let Some(fix) = &finding.fix {
-                println!("     fix: {fix}");
+                say!("     fix: {fix}");
             }
         }
     }
     if let Some(srdf) = &check.srdf {
-        println!("  proposed from the `standing` pose of {}:", srdf.display());
+        say!("  proposed from the `standing` pose of {}:", srdf.display());
         if let Some(height) = check.stand_height {
-            println!("    stand_height = {height:.3}");
+            say!("    stand_height = {height:.3}");
         }
         for leg in &check.legs {
-            println!(
+            say!(
                 "    [legs.{}] knee_points = \"{}\", crouch = [{:.3}, {:.3}, {:.3}]",
                 leg.leg.name(),
                 match leg.knee_points {
@@ -92,8 +103,9 @@ fn print_report(config: &std::path::Path, check: &RobotCheck) {
         }
     }
     for note in &check.notes {
-        println!("  note: {note}");
+        say!("  note: {note}");
     }
+    out
 }
 
 fn main() -> ExitCode {
@@ -101,7 +113,13 @@ fn main() -> ExitCode {
     match command {
         Command::Check { config, srdf } => {
             let check = check_robot_config(&config, &PackagePath::from_env(), srdf.as_deref());
-            print_report(&config, &check);
+            if let Err(e) = std::io::stdout()
+                .lock()
+                .write_all(report(&config, &check).as_bytes())
+            {
+                eprintln!("cannot write the report: {e}");
+                return ExitCode::FAILURE;
+            }
             if check.findings.is_empty() {
                 ExitCode::SUCCESS
             } else {
