@@ -1,7 +1,8 @@
 //! `pf-plan`: plan on a built-in scenario or a map file with P-F, A* or Dijkstra; list and export
 //! scenarios; measure a path (∫p ds) or write the traversability field with the planner's own cost
 //! model; import an elevation model (GeoTIFF, ESRI ASCII grid) as a map; run the demo (all
-//! methods × all scenarios → report.md + PNGs).
+//! methods × all scenarios → report.md + PNGs); put the paper's figures beside ours
+//! (`paper-numbers`).
 
 use std::fs;
 use std::io::{Read, Write};
@@ -14,6 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use tracing_subscriber::EnvFilter;
 
+mod paper;
 mod plot;
 mod report;
 
@@ -84,6 +86,22 @@ enum Command {
         /// Plans per method and scenario; the report gives the range of their solve times.
         #[arg(long, default_value_t = 5)]
         repeats: usize,
+    },
+    /// Every figure quoted from the paper (and from the formulation note's prototype) beside the
+    /// planner's own, computed on the rebuilt terrains: DIR/report.md (see docs/results/paper-numbers.md).
+    PaperNumbers {
+        /// Output directory.
+        #[arg(long, default_value = "out/paper-numbers")]
+        out: PathBuf,
+        /// Planning cells along the longer side for P-F indicator and the graph searches.
+        #[arg(long, default_value_t = 64)]
+        grid: usize,
+        /// RBF centres along the longer side for P-F RBF.
+        #[arg(long, default_value_t = 32)]
+        rbf_grid: usize,
+        /// Leave out Clarabel and the exact solver at twice --grid (the prototype's 128² row).
+        #[arg(long)]
+        skip_large: bool,
     },
 }
 
@@ -360,6 +378,19 @@ fn main() -> Result<()> {
             speed,
             repeats,
         } => run_demo(&out, grid, rbf_grid, speed, repeats),
+        Command::PaperNumbers {
+            out,
+            grid,
+            rbf_grid,
+            skip_large,
+        } => paper::run(
+            &out,
+            &paper::PaperSizes {
+                grid,
+                rbf_grid,
+                large_clarabel: !skip_large,
+            },
+        ),
     }
 }
 

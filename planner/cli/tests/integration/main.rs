@@ -3,3 +3,4 @@
 mod cli_field;
 mod cli_path_cost;
 mod import_cli;
+mod paper_numbers;
