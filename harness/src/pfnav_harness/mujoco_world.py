@@ -219,6 +219,11 @@ class MujocoWorld:
         self._joint_qpos = model.jnt_qposadr[self._joint_ids].astype(np.int64)
         self._joint_dof = model.jnt_dofadr[self._joint_ids].astype(np.int64)
         self._actuators = np.array([model.actuator(name).id for name in robot.joint_names], dtype=np.int64)
+        actuators = _as_slice(self._actuators)
+        self._controls: NDArray[np.float64] = self.data.ctrl[actuators] if isinstance(actuators, slice) else self.data.ctrl
+        self._write_controls: Callable[[NDArray[np.float64], NDArray[np.float64]], None] = (
+            np.copyto if isinstance(actuators, slice) else lambda ctrl, torques: ctrl.__setitem__(self._actuators, torques)
+        )
         self._foot_ids = np.array([model.body(name).id for name in robot.foot_links], dtype=np.int64)
         # The foot contact sensors' counts, a live view of the data (legs in the config's order:
         # the sensors were added so, one value each).
@@ -253,7 +258,6 @@ class MujocoWorld:
             body.fullinertia = [math.nan, 0.0, 0.0, 0.0, 0.0, 0.0]
         effort = self._effort_limits(robot)
         self.effort_limits = effort
-        self._effort_low = -effort
         for k, name in enumerate(robot.joint_names):
             joint = spec.joint(name)
             if joint is None:
@@ -460,7 +464,9 @@ class MujocoWorld:
         return read_by_index
 
     def apply_torques(self, torques: NDArray[np.float64]) -> None:
-        self.data.ctrl[self._actuators] = np.minimum(np.maximum(torques, self._effort_low), self.effort_limits)
+        # The motors' control ranges are the effort limits (`_robot_spec`): MuJoCo clamps the
+        # controls to them itself in every step, with the same comparisons as np.clip.
+        self._write_controls(self._controls, torques)
 
     def apply_trunk_force(self, force: tuple[float, float, float] | NDArray[np.float64] | None) -> None:
         applied = self.data.xfrc_applied[self._trunk_id]
