@@ -517,13 +517,17 @@ class CoSimulation:
         flags[0:4] = contacts_view
         flags[8] = fmu.fsm_state
         flags[9] = mode
-        actual_contacts = flags[4:8]
+        # The engine writes the actual contacts through a boolean view of their bytes (0 or 1, no casting).
+        actual_contacts = flags[4:8].view(np.bool_)
         write_contacts = world.write_foot_contacts
         world_step = world.step
         damping = int(fsm.Damping)
         locomotion, stand = int(modes.Locomotion), int(modes.Stand)
-        # ndarray.sum goes through a Python-level wrapper; np.add.reduce is the same reduction.
-        total = np.add.reduce
+        # Finiteness checks by sums: a vector is finite when its sum is (short of an overflow
+        # past 1e308). A dot product with ones is that sum in about half the time of
+        # np.add.reduce (ndarray.sum costs more still: a Python-level wrapper).
+        state_sum, torque_sum = state.dot, torques.dot
+        state_ones, torque_ones = np.ones(len(state)), np.ones(len(torques))
         # Without an estimator the belief offset stays zero: only the block corner moves the map.
         offset_moves = estimator is not None
         stop_reason: str | None = None
@@ -536,7 +540,7 @@ class CoSimulation:
             t = k * dt
             read_state()
             # (np.float64 is a float: math.isfinite takes it as it is)
-            if not isfinite(total(state)):
+            if not isfinite(state_sum(state_ones)):
                 stop_reason = f"physics state became non-finite at t={t:.3f} s"
                 break
             walking = t >= walk_start
@@ -610,7 +614,7 @@ class CoSimulation:
                 fmu.do_step(t, c.comm_step)
                 fmu.read_outputs()
                 fmu_seconds += perf() - t0
-                if not isfinite(total(torques)):
+                if not isfinite(torque_sum(torque_ones)):
                     raise SimulationError(f"the FMU returned non-finite torques at t={t:.3f} s")
                 if estimator is not None:
                     estimator.belief_offset(state, true_yaw, offset)

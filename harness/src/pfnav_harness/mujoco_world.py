@@ -563,6 +563,7 @@ class MujocoWorld:
         if self._restored_contacts is not None:
             out[:] = self._restored_contacts
             return
+        # Into a boolean `out` without a cast (the co-simulation passes a boolean view of its log row).
         np.greater(self._foot_contact_counts, 0.0, out=out)
 
     def touching_links(self) -> list[str]:
