@@ -180,8 +180,8 @@ class MujocoWorld:
         spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         spec.option.impratio = FRICTION_IMPEDANCE_RATIO
         # MuJoCo picks dense constraint Jacobians below 60 degrees of freedom; with a dozen or so
-        # contacts on an 18-dof robot the sparse ones make a step about an eighth cheaper
-        # (scripts/bench_cosim.py). The same equations, summed in another order.
+        # contacts on an 18-dof robot the sparse ones made mj_step about an eighth cheaper (states
+        # replayed from a walk, 2026-11-29). The same equations, summed in another order.
         spec.option.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE
         # One contact sensor per foot link: the number of contacts of its geoms, computed inside
         # mj_step from the contacts it reports (`write_foot_contacts` reads four numbers instead of
