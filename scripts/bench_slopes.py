@@ -20,6 +20,7 @@ Usage:
     .venv/bin/python scripts/bench_slopes.py --robot robot/third_party/go1.toml   # another robot (PFNAV_PACKAGE_PATH)
     .venv/bin/python scripts/bench_slopes.py --results-page slopes-quadruped      # also docs/results/slopes-quadruped.md
     .venv/bin/python scripts/bench_slopes.py --engine mujoco --results-page slopes-quadruped-mujoco   # in MuJoCo
+    .venv/bin/python scripts/bench_slopes.py --engine mujoco --contact-time-constant 0.005   # on a stiffer MuJoCo ground
 
 Another robot than ours runs on an FMU bundled for it by bundle-fmu (cached in OUT/cache).
 """
@@ -305,6 +306,13 @@ def main() -> int:
         help=f"physics engine the robot walks in (default {DEFAULT_ENGINE})",
     )
     parser.add_argument(
+        "--contact-time-constant",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="MuJoCo only: the contacts' time constant (a stiffer ground below MuJoCo's own 0.02 s; docs/engines.md)",
+    )
+    parser.add_argument(
         "--results-page",
         default=None,
         metavar="NAME",
@@ -315,6 +323,8 @@ def main() -> int:
         parser.error(f"--friction must be positive, got {args.friction}")
     if args.results_page is not None and not results_page.PAGE_NAME.match(args.results_page):
         parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    if args.contact_time_constant is not None and args.engine != "mujoco":
+        parser.error("--contact-time-constant is MuJoCo's soft-contact setting: use it with --engine mujoco")
     # Taken before the runs: the commit that ran and the load it ran under.
     stamp = results_page.collect_stamp() if args.results_page else None
     parameters = dict(args.parameters)
@@ -341,6 +351,7 @@ def main() -> int:
                         speed=args.speed,
                         parameters=parameters,
                         engine=args.engine,
+                        contact_time_constant=args.contact_time_constant,
                     )
                 )
                 bar.update(1)
@@ -360,7 +371,8 @@ def main() -> int:
         f"- machine: {machine()}",
         f"- robot: {robot.config_path} (URDF {robot.urdf_path})",
         f"- controller: {fmu} (sha256 {file_digest(fmu)}), parameters changed: {changed}",
-        f"- physics: {ENGINE_LABELS[args.engine]}, 1 kHz",
+        f"- physics: {ENGINE_LABELS[args.engine]}, 1 kHz"
+        + ("" if args.contact_time_constant is None else f", contact time constant {args.contact_time_constant:g} s"),
         f"- friction μ = {args.friction:g} (feet and ground), walk {args.distance:g} m (horizontal) at {args.speed:g} m/s after the harness's stand-up",
         f"- passed: {sum(o.passed for o in outcomes)} of {len(outcomes)} (stood up, no fall, ≥ {MIN_WALKED:g} m walked, only the feet on the ground while walking); wall {sum(o.wall_time for o in outcomes):.1f} s",
         "",
@@ -376,6 +388,7 @@ def main() -> int:
                 "parameters": parameters,
                 "friction": args.friction,
                 "engine": args.engine,
+                "contact_time_constant": args.contact_time_constant,
                 "runs": [o.as_dict() for o in outcomes],
             },
             indent=1,
@@ -390,7 +403,8 @@ def main() -> int:
             args.results_page,
             f"Inclines: {robot.config_path.stem} on 10°, 20°, 30° planes"
             # The DART pages keep their titles.
-            + ("" if args.engine == DEFAULT_ENGINE else f", in {ENGINE_TITLES[args.engine]}"),
+            + ("" if args.engine == DEFAULT_ENGINE else f", in {ENGINE_TITLES[args.engine]}")
+            + ("" if args.contact_time_constant is None else f" (contact time constant {args.contact_time_constant:g} s)"),
             text,
             results_page.regenerate_command(
                 ".venv/bin/python scripts/bench_slopes.py", sys.argv[1:]

@@ -8,7 +8,7 @@ walk and during the stand-up, peak torque against the effort limit, the share of
 steps, and the links other than the feet that touched the ground while walking, each as
 DART / MuJoCo.
 
-    for r in quadruped go1 a1; do ... bench_slopes.py [--robot robot/third_party/$r.toml] --out out/slopes/$r [--engine mujoco --out out/slopes/$r-mujoco] ...; done
+    for r in quadruped go1 a1 solo12 hyq anymal_c; do ... bench_slopes.py [--robot robot/third_party/$r.toml] --out out/slopes/$r [--engine mujoco --out out/slopes/$r-mujoco] ...; done
     .venv/bin/python scripts/slopes_engines.py --results-page slopes-engines
 """
 
@@ -21,9 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from pfnav_harness import results_page
-from pfnav_harness.incline import InclineOutcome, SlipEvent
+from pfnav_harness.incline import MIN_WALKED, InclineOutcome, SlipEvent
 
-ROBOTS = ("quadruped", "go1", "a1")
+# Our robot, the Unitree robots of the paper, and the other robots with an incline grid (docs/robots.md).
+ROBOTS = ("quadruped", "go1", "a1", "solo12", "hyq", "anymal_c")
 ENGINES = ("dart", "mujoco")
 
 
@@ -48,6 +49,22 @@ def load_outcomes(folder: Path) -> tuple[dict[str, Any], list[InclineOutcome]]:
 
 def walk_links(outcome: InclineOutcome) -> str:
     return ", ".join(f"{name.removesuffix('_link')} {time:.2f} s" for name, time in outcome.walk_contacts.items()) or "none"
+
+
+def failure(outcome: InclineOutcome) -> str:
+    """Which part of the pass criterion (`InclineOutcome.passed`) a run missed, in words ("" when it passed)."""
+    if outcome.passed:
+        return ""
+    if not outcome.stood_up:
+        return "did not stand up" + (f" (fell at {outcome.fall_time:.2f} s: {outcome.fall_reason})" if outcome.fell and outcome.fall_time is not None else "")
+    missed = []
+    if outcome.fell:
+        missed.append(f"fell at {outcome.fall_time:.2f} s ({outcome.fall_reason})" if outcome.fall_time is not None else f"fell ({outcome.fall_reason})")
+    if outcome.walked < MIN_WALKED:
+        missed.append(f"walked {outcome.walked:.2f} m of the {MIN_WALKED:g} m needed")
+    if outcome.walk_contacts:
+        missed.append(f"{walk_links(outcome)} on the ground while walking")
+    return "; ".join(missed)
 
 
 def pair(dart: str, mujoco: str) -> str:
@@ -97,6 +114,13 @@ def robot_section(robot: str, out: Path) -> tuple[list[str], int, int]:
             )
             + " |"
         )
+    differing = [case for case in cases if grids["dart"][case].passed != grids["mujoco"][case].passed]
+    if differing:
+        lines += ["", "Where the verdicts differ, what the failing run missed:", ""]
+        for case in differing:
+            d, m = grids["dart"][case], grids["mujoco"][case]
+            engine, outcome = ("DART", d) if not d.passed else ("MuJoCo", m)
+            lines.append(f"- {case[0]:g}° {case[1]}: {engine} {failure(outcome)}.")
     return lines + [""], same, len(cases)
 
 

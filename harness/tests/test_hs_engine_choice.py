@@ -18,6 +18,7 @@ from test_hs_online import ScriptedClient
 from pfnav_harness import cli, cosim, paths
 from pfnav_harness.cosim import CoSimConfig
 from pfnav_harness.engine import PhysicsEngine, make_engine
+from pfnav_harness.errors import SimulationError
 from pfnav_harness.incline import run_incline
 from pfnav_harness.pipeline import simulate_online
 from pfnav_harness.robot import RobotDescription
@@ -87,3 +88,24 @@ def test_the_incline_benchmark_walks_in_the_engine_asked_for(engine: str, tmp_pa
     assert made == [engine]
     assert run.outcome.engine == engine
     assert str(run.result.log["engine"]) == engine
+
+
+def test_the_incline_benchmark_s_contact_time_constant_reaches_mujoco_s_world_only(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`run_incline(contact_time_constant=...)` (bench_slopes.py --contact-time-constant) sets every contact of the
+    MuJoCo world it walks in to that time constant; DART has no such setting and refuses it."""
+    from pfnav_harness.mujoco_world import MujocoWorld
+
+    worlds: list[PhysicsEngine] = []
+
+    def recording(*args: object, **kwargs: object) -> PhysicsEngine:
+        world = make_engine(*args, **kwargs)  # type: ignore[arg-type]
+        worlds.append(world)
+        return world
+
+    monkeypatch.setattr(cosim, "make_engine", recording)
+    config = CoSimConfig(settle_time=1.0, estimator="groundTruth", max_duration=BRIEF)
+    run_incline(10.0, "up", paths.fmu_path(), ROBOT, tmp_path, config=config, engine="mujoco", contact_time_constant=0.005)
+    assert isinstance(worlds[0], MujocoWorld)
+    np.testing.assert_array_equal(worlds[0].model.geom_solref[:, 0], 0.005)
+    with pytest.raises(SimulationError, match="contact time constant"):
+        run_incline(10.0, "up", paths.fmu_path(), ROBOT, tmp_path, config=config, engine="dart", contact_time_constant=0.005)

@@ -281,3 +281,36 @@ def test_a_stiffer_mujoco_ground_lets_the_standing_feet_sink_less(tmp_path: Path
     assert depths[0] > 0.0015 and 0.0 < depths[1] < 0.25 * depths[0]
     with pytest.raises(SimulationError, match="at least two physics steps"):
         world.set_contact_time_constant(0.001)
+
+
+def test_mujoco_s_foot_contact_sensors_say_what_its_contact_list_says(tmp_path: Path) -> None:
+    """MuJoCo's foot contacts come from one contact sensor per foot link, computed inside the step: at every
+    step of a drop onto bumpy ground and a stand with the legs lifted one after the other they name the
+    feet whose geoms are in the step's contact list, and every foot both stands and is lifted."""
+    from pfnav_harness.mujoco_world import MujocoWorld
+
+    world = make_engine("mujoco", bumpy_terrain(), ROBOT, tmp_path)
+    assert isinstance(world, MujocoWorld)
+    model, data = world.model, world.data
+    leg_of_body = {int(body): leg for leg, body in enumerate(world._foot_ids)}
+    world.place(2.0, 1.5, 0.3, clearance=0.05)
+    seen = np.zeros((2, 4), dtype=bool)
+    for k in range(1600):
+        s = world.state()
+        target = CROUCH.copy()
+        if k >= 400:
+            # One leg at a time folds its knee, lifting its foot.
+            target[3 * ((k - 400) // 300 % 4) + 2] -= 0.8
+        world.apply_torques(120.0 * (target - s.joint_positions) - 3.0 * s.joint_velocities)
+        world.step()
+        listed = np.zeros(4, dtype=bool)
+        for geoms in data.contact.geom[: data.ncon]:
+            for geom in geoms:
+                leg = leg_of_body.get(int(model.geom_bodyid[geom]))
+                if leg is not None:
+                    listed[leg] = True
+        np.testing.assert_array_equal(world.foot_contacts(), listed, err_msg=f"step {k}")
+        if k >= 400:
+            seen[0] |= listed
+            seen[1] |= ~listed
+    assert seen.all()

@@ -450,6 +450,9 @@ class ControllerFmu:
         # The height map is the tail of the real inputs: without it, only the head is sent.
         self._in_count_without_map = len(FIXED_REAL_INPUTS)
         self._mode = (ctypes.addressof(self._mode_vr), ctypes.addressof(self._mode_val))
+        # The mode request the FMU holds (inputs keep their values until set): it changes a few
+        # times a run, so an exchange only sends it when it differs. None: send it next time.
+        self._mode_sent: int | None = None
         self._out_real = (ctypes.addressof(self._out_vr), ctypes.addressof(self._out_val))
         self._out_count = len(self._out_vr)
         self._contact = (ctypes.addressof(self._contact_vr), ctypes.addressof(self._contact_val))
@@ -547,10 +550,12 @@ class ControllerFmu:
         status = self._set_real(c, vr, self._in_count if height_map else self._in_count_without_map, values)
         if status > _FMI2_WARNING:
             raise self._failed(status, "fmi2SetReal")
-        self._mode_val[0] = mode
-        status = self._set_integer(c, self._mode[0], 1, self._mode[1])
-        if status > _FMI2_WARNING:
-            raise self._failed(status, "fmi2SetInteger")
+        if mode != self._mode_sent:
+            self._mode_val[0] = mode
+            status = self._set_integer(c, self._mode[0], 1, self._mode[1])
+            if status > _FMI2_WARNING:
+                raise self._failed(status, "fmi2SetInteger")
+            self._mode_sent = mode
         if self._estimation is not None:
             in_vr, in_val, valid_vr, valid_val, contact_vr, contact_val = self._estimation_at[:6]
             self._check(self._set_real(c, in_vr, len(ESTIMATION_REAL_INPUTS), in_val), "fmi2SetReal (estimator inputs)")
@@ -620,6 +625,8 @@ class ControllerFmu:
             state = self._fmu.deSerializeFMUstate(bytes(blob))
         except FMICallException as err:
             raise SimulationError(f"the FMU refused the serialized state ({len(blob)} bytes): {err}") from err
+        # The restored instance holds the saved instance's inputs: the next exchange sends the mode again.
+        self._mode_sent = None
         try:
             self._fmu.setFMUstate(state)
         except FMICallException as err:
@@ -655,6 +662,7 @@ class ControllerFmu:
         self.inputs.values[:] = io.inputs
         self.outputs.values[:] = io.outputs
         self._mode_val[0] = io.mode
+        self._mode_sent = None
         self._contact_np[:] = io.contacts
         self._fsm_val[0] = io.fsm
         if io.estimation is not None and self._estimation is not None:

@@ -438,9 +438,11 @@ def run_incline(
     config: CoSimConfig | None = None,
     progress: Callable[[float], None] | None = None,
     engine: str = DEFAULT_ENGINE,
+    contact_time_constant: float | None = None,
 ) -> InclineRun:
     """One incline run with the controller FMU (optionally with FMU `parameters` changed from their defaults)
-    in the physics engine `engine` (it and `friction` replace those of `config`)."""
+    in the physics engine `engine` (it and `friction` replace those of `config`); `contact_time_constant`:
+    MuJoCo's contacts with that time constant (`MujocoWorld.set_contact_time_constant`) instead of its own."""
     if not (math.isfinite(friction) and friction > 0.0):
         raise SimulationError(f"friction coefficient must be positive, got {friction}")
     scenario = incline_scenario(angle_deg, direction, distance)
@@ -455,6 +457,12 @@ def run_incline(
         nominal_height = float((parameters or {}).get(fr.STAND_HEIGHT_PARAMETER, contract.stand_height))
         stand_code = int(contract.fsm.Stand)
         sim = CoSimulation(scenario, plan, None, robot, cache_dir, config, controller=controller)
+        if contact_time_constant is not None:
+            from .mujoco_world import MujocoWorld
+
+            if not isinstance(sim.world, MujocoWorld):
+                raise SimulationError(f"a contact time constant is MuJoCo's soft-contact setting, not {engine}'s")
+            sim.world.set_contact_time_constant(contact_time_constant)
     except BaseException:
         controller.close()
         raise

@@ -77,6 +77,11 @@ CRITICAL_DAMPING_RATIO = 1.0
 # robot creep (a PD-held stance on a bumpy slope turned 0.18 rad in 3 s, 0.002 rad in DART); 100,
 # as MuJoCo Menagerie's quadruped scenes use with the elliptic cone, leaves 0.02 rad.
 FRICTION_IMPEDANCE_RATIO = 100.0
+# Foot contact sensors: name prefix, and MuJoCo's contact-sensor parameters (intprm): the data
+# field "found" (bit 0: the number of matching contacts) and no reduction of the matches.
+FOOT_CONTACT_SENSOR = "foot_contacts:"
+CONTACT_SENSOR_FOUND = 1
+CONTACT_SENSOR_UNREDUCED = 0
 
 
 @dataclass(frozen=True)
@@ -174,6 +179,21 @@ class MujocoWorld:
         spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         spec.option.impratio = FRICTION_IMPEDANCE_RATIO
+        # MuJoCo picks dense constraint Jacobians below 60 degrees of freedom; with a dozen or so
+        # contacts on an 18-dof robot the sparse ones made mj_step about an eighth cheaper (states
+        # replayed from a walk, 2026-11-29). The same equations, summed in another order.
+        spec.option.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE
+        # One contact sensor per foot link: the number of contacts of its geoms, computed inside
+        # mj_step from the contacts it reports (`write_foot_contacts` reads four numbers instead of
+        # walking the contact list in Python every step).
+        for foot in robot.foot_links:
+            spec.add_sensor(
+                name=f"{FOOT_CONTACT_SENSOR}{foot}",
+                type=mujoco.mjtSensor.mjSENS_CONTACT,
+                objtype=mujoco.mjtObj.mjOBJ_BODY,
+                objname=foot,
+                intprm=[CONTACT_SENSOR_FOUND, CONTACT_SENSOR_UNREDUCED, 1],
+            )
         self._spec = spec
         model = self._compile(where)
         self.trunk_names = [b.name for b in _welded_children(spec.body(robot.base_link))]
@@ -199,11 +219,16 @@ class MujocoWorld:
         self._joint_qpos = model.jnt_qposadr[self._joint_ids].astype(np.int64)
         self._joint_dof = model.jnt_dofadr[self._joint_ids].astype(np.int64)
         self._actuators = np.array([model.actuator(name).id for name in robot.joint_names], dtype=np.int64)
+        actuators = _as_slice(self._actuators)
+        self._controls: NDArray[np.float64] = self.data.ctrl[actuators] if isinstance(actuators, slice) else self.data.ctrl
+        self._write_controls: Callable[[NDArray[np.float64], NDArray[np.float64]], None] = (
+            np.copyto if isinstance(actuators, slice) else lambda ctrl, torques: ctrl.__setitem__(self._actuators, torques)
+        )
         self._foot_ids = np.array([model.body(name).id for name in robot.foot_links], dtype=np.int64)
-        # Geom → leg whose foot link carries it (−1: none), for the contact read-out.
-        self._geom_leg = np.full(model.ngeom + 1, -1, dtype=np.int64)
-        for leg, body_id in enumerate(self._foot_ids):
-            self._geom_leg[: model.ngeom][model.geom_bodyid == body_id] = leg
+        # The foot contact sensors' counts, a live view of the data (legs in the config's order:
+        # the sensors were added so, one value each).
+        first = int(model.sensor_adr[model.sensor(f"{FOOT_CONTACT_SENSOR}{robot.foot_links[0]}").id])
+        self._foot_contact_counts = self.data.sensordata[first : first + len(robot.foot_links)]
         self._robot_bodies = {model.body(i).name for i in range(1, model.nbody)}
         self._restored_contacts: NDArray[np.bool_] | None = None
 
@@ -233,7 +258,6 @@ class MujocoWorld:
             body.fullinertia = [math.nan, 0.0, 0.0, 0.0, 0.0, 0.0]
         effort = self._effort_limits(robot)
         self.effort_limits = effort
-        self._effort_low = -effort
         for k, name in enumerate(robot.joint_names):
             joint = spec.joint(name)
             if joint is None:
@@ -403,28 +427,46 @@ class MujocoWorld:
 
     def state_reader(self, out: NDArray[np.float64]) -> Callable[[], None]:
         qpos, qvel = self.data.qpos, self.data.qvel
-        # A slice where the model keeps the joints in the controller's order (a copy without the
-        # index array: the read-out runs every physics step), else the index arrays.
+        # Every source and target is a view made once (the read-out runs every physics step); a
+        # slice where the model keeps the joints in the controller's order, else index arrays.
         joint_qpos, joint_dof = _as_slice(self._joint_qpos), _as_slice(self._joint_dof)
         pose, quaternion, velocity, omega = out[0:7], out[3:7], out[7:10], out[10:13]
         joint_q, joint_dq = out[13:25], out[25:37]
+        # Position and quaternion lie side by side in both.
+        free_pose, free_velocity, free_omega = qpos[0:7], qvel[0:3], qvel[3:6]
         rotate = mujoco.mju_rotVecQuat
+        copy = np.copyto
+        negative = np.negative
+        if isinstance(joint_qpos, slice) and isinstance(joint_dof, slice):
+            qpos_joints, qvel_joints = qpos[joint_qpos], qvel[joint_dof]
 
-        def read() -> None:
-            # Position and quaternion lie side by side in both.
-            pose[:] = qpos[0:7]
-            # Same sign convention as the DART world: w ≥ 0 (either sign rotates alike, bit for bit).
+            def read() -> None:
+                copy(pose, free_pose)
+                # Same sign convention as the DART world: w ≥ 0 (either sign rotates alike, bit for bit).
+                if quaternion[0] < 0.0:
+                    negative(quaternion, out=quaternion)
+                copy(velocity, free_velocity)
+                rotate(omega, free_omega, quaternion)
+                copy(joint_q, qpos_joints)
+                copy(joint_dq, qvel_joints)
+
+            return read
+
+        def read_by_index() -> None:
+            copy(pose, free_pose)
             if quaternion[0] < 0.0:
-                np.negative(quaternion, out=quaternion)
-            velocity[:] = qvel[0:3]
-            rotate(omega, qvel[3:6], quaternion)
+                negative(quaternion, out=quaternion)
+            copy(velocity, free_velocity)
+            rotate(omega, free_omega, quaternion)
             joint_q[:] = qpos[joint_qpos]
             joint_dq[:] = qvel[joint_dof]
 
-        return read
+        return read_by_index
 
     def apply_torques(self, torques: NDArray[np.float64]) -> None:
-        self.data.ctrl[self._actuators] = np.minimum(np.maximum(torques, self._effort_low), self.effort_limits)
+        # The motors' control ranges are the effort limits (`_robot_spec`): MuJoCo clamps the
+        # controls to them itself in every step, with the same comparisons as np.clip.
+        self._write_controls(self._controls, torques)
 
     def apply_trunk_force(self, force: tuple[float, float, float] | NDArray[np.float64] | None) -> None:
         applied = self.data.xfrc_applied[self._trunk_id]
@@ -521,12 +563,8 @@ class MujocoWorld:
         if self._restored_contacts is not None:
             out[:] = self._restored_contacts
             return
-        out[:] = 0
-        if self.data.ncon == 0:
-            return
-        # Both geoms of every contact at once (one accessor call: they cost more than the indexing).
-        legs = self._geom_leg[self.data.contact.geom]
-        out[legs[legs >= 0]] = 1
+        # Into a boolean `out` without a cast (the co-simulation passes a boolean view of its log row).
+        np.greater(self._foot_contact_counts, 0.0, out=out)
 
     def touching_links(self) -> list[str]:
         feet = set(self.description.foot_links)
