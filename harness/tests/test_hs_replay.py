@@ -225,6 +225,36 @@ def test_replay_command_writes_the_recording_beside_the_logs(
     assert times[-1] == pytest.approx(load_run_log(log_file)["t"][-1])
 
 
+def test_replay_with_the_runs_field_shows_its_density_planned_with_the_logged_cost_model(
+    tmp_path: Path, scenario_writer: Callable[..., Path], robot: RobotDescription
+) -> None:
+    out = tmp_path / "out"
+    heights = np.tile(0.1 + 0.01 * np.arange(30), (20, 1))
+    scenario = load_scenario(scenario_writer(out / "scenarios", "slope_test", heights, 0.1, start=(0.5, 1.0), goal=(2.5, 1.0)))
+    # The run planned with a footprint the sidecar does not name (the demo's override): the log keeps it.
+    model = {"footprint_radius_m": 0.2}
+    map_json = write_map(scenario.terrain, tmp_path / "map", "slope_test", model, start=scenario.start, goal=scenario.goal)
+    field_file = tmp_path / "field.npz"
+    subprocess.run(
+        [str(paths.pf_plan_path()), "plan", "--map", str(map_json), "--method", "pf", "--grid", "30", "--out", str(tmp_path), "--field-out", str(field_file)],
+        check=True,
+        capture_output=True,
+    )
+    log_file = out / "logs" / "slope_test_pf.npz"
+    log_file.parent.mkdir(parents=True)
+    log = synthetic_log(scenario, robot)
+    np.savez_compressed(log_file, **log, traversability=np.array(json.dumps(model)))
+    assert cli.main(["replay", str(log_file), "--robot", str(robot.config_path), "--field", str(field_file)]) == 0
+    chunks = read_chunks(out / "recordings" / "slope_test_pf.rrd")
+    assert "/world/pf_density" in chunks and "/world/feedback_field" in chunks
+    # Without the logged cost model the plan differs (no footprint): no density, and the notes say why.
+    np.savez_compressed(log_file, **log)
+    assert cli.main(["replay", str(log_file), "--robot", str(robot.config_path), "--field", str(field_file)]) == 0
+    chunks = read_chunks(out / "recordings" / "slope_test_pf.rrd")
+    assert "/world/pf_density" not in chunks
+    assert "does not match" in column(chunks["/notes"], "TextDocument:text")[0][0]
+
+
 def test_replay_refuses_a_log_without_its_scenario(
     tmp_path: Path, ramp_scenario: Scenario, robot: RobotDescription, capsys: pytest.CaptureFixture[str]
 ) -> None:
