@@ -36,6 +36,8 @@ def synthetic_log(scenario: Scenario, robot: RobotDescription, online: bool = Fa
         "contact_actual": contact,
         "fsm": np.where(t < 0.5, 1, 2).astype(np.int8),
         "fsm_damping": np.array(4),
+        "fsm_state_names": np.array(["Passive", "Stand", "Locomotion", "Damping"]),
+        "fsm_state_codes": np.array([0, 1, 2, 4]),
         "mpc_solve_time": np.where(np.arange(n) % 97 == 0, 0.004, 0.001),
         "walk_start": np.array(0.5),
         "plan_x": np.linspace(scenario.start[0], scenario.goal.center[0], 20),
@@ -45,6 +47,8 @@ def synthetic_log(scenario: Scenario, robot: RobotDescription, online: bool = Fa
         "push_force": np.where((t > 1.0) & (t < 1.2), 1.0, 0.0)[:, None] * [0.0, 60.0, 0.0],
     }
     if online:
+        # Three updates: the first and the third put in use, each with its field; the map as each sent it.
+        log["replan_t_publish"] = np.array([0.2, 1.2, 1.3])
         log["replan_t_apply"] = np.array([0.7, np.nan, 1.4])
         log["replan_in_use"] = np.array([True, False, True])
         log["replan_path_lengths"] = np.array([5, 3, 4])
@@ -54,4 +58,21 @@ def synthetic_log(scenario: Scenario, robot: RobotDescription, online: bool = Fa
         heights[:, 15:] = np.nan
         log["map_heights_final"] = heights
         log["map_variances_final"] = np.where(np.isfinite(heights), 0.01, np.inf)
+        ny, nx = heights.shape
+        log["replan_field_rows"] = np.array([0, 2])
+        log["replan_field_origin"] = np.array(scenario.origin)
+        log["replan_field_resolution"] = np.array(scenario.resolution)
+        log["replan_field_goal"] = np.array([*scenario.goal.center, scenario.goal.radius])
+        # First field along +x, second along +y.
+        log["replan_field_dir_x"] = np.stack([np.ones((ny, nx)), np.zeros((ny, nx))]).astype(np.float16)
+        log["replan_field_dir_y"] = np.stack([np.zeros((ny, nx)), np.ones((ny, nx))]).astype(np.float16)
+        log["replan_field_speed"] = np.full((2, ny, nx), 0.3, dtype=np.float16)
+        log["replan_field_cost_to_go"] = np.ones((2, ny, nx), dtype=np.float32)
+        # Snapshots at 0.2 s (columns < 5 known), 1.2 s (< 10) and 1.3 s (< 12); the last is closer
+        # than the recording's period to the one before and is left out there.
+        known_columns = [5, 10, 12]
+        snapshot_heights = np.stack([np.where(np.arange(nx) < c, scenario.terrain.heights, np.nan) for c in known_columns])
+        log["map_snapshot_rows"] = np.array([0, 1, 2])
+        log["map_snapshot_heights"] = snapshot_heights.astype(np.float32)
+        log["map_snapshot_variances"] = np.where(np.isfinite(snapshot_heights), 0.02, np.nan).astype(np.float32)
     return log

@@ -102,6 +102,8 @@ def test_master_steps_logs_and_closes(ramp_scenario: Scenario, fmu_contract: fr.
     assert stand_in.modes[0] == modes.Stand and stand_in.modes[-1] == modes.Locomotion
     assert stand_in.modes.count(modes.Stand) == 50
     assert np.all(log["fsm"] == fmu_contract.fsm.Stand) and log["fsm_damping"] == fmu_contract.fsm.Damping
+    # The FSM's names and codes as the FMU's modelDescription declares them, for a replay to name the states by.
+    assert dict(zip(log["fsm_state_names"].tolist(), log["fsm_state_codes"].tolist(), strict=True)) == {s.name: int(s) for s in fmu_contract.fsm}
     # Torques are held between communication points (zero-order hold).
     np.testing.assert_array_equal(log["tau"][4], log["tau"][7])
     assert result.stop_reason == "completed"

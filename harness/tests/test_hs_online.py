@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -11,7 +12,7 @@ import pytest
 
 from pfnav_harness.errors import SimulationError
 from pfnav_harness.feedback_field import FeedbackField
-from pfnav_harness.online import OnlineConfig, OnlineNavigator, latency_summary
+from pfnav_harness.online import OnlineConfig, OnlineNavigator, latency_summary, map_snapshot_log, replan_field_log
 from pfnav_harness.planner_client import Plan, PlanAnswer, RequestOptions, StartPose
 from pfnav_harness.scenario import GoalRegion, Scenario, Terrain
 from pfnav_harness.sensing import SensorConfig
@@ -156,6 +157,37 @@ def test_bad_updates_are_published_in_order_after_the_first_regular_one() -> Non
     assert any(np.isnan(h) for h in nan_map.heights)
     assert (shape_map.width, shape_map.height) == (SHAPE[1] // 2, SHAPE[0] // 2)
     assert stale_map.header.seq < navigator.replans[0].map_seq
+
+
+def test_the_log_keeps_each_field_in_use_and_each_map_sent() -> None:
+    client = ScriptedClient(statuses={3: (3, "rejected")})
+    # The fourth answer's field points along +y: the log must keep each field as it was.
+    client.grids[4] = dataclasses.replace(_field(), dir_x=np.zeros(SHAPE), dir_y=np.ones(SHAPE))
+    config = OnlineConfig(sensor=SensorConfig(range_m=1.0), bad_updates=("nan",))
+    navigator = OnlineNavigator(client, _scenario(), config)  # type: ignore[arg-type]
+    navigator.start(1.0, 4.0, 0.0, timeout=1.0, retries=0)
+    _walk(navigator, 2.3)
+    replans = navigator.replans
+    assert [r.kind for r in replans] == ["start", "update", "nan", "update", "update"]
+    fields = replan_field_log(replans)
+    # The start and the replans put in use, not the rejected answer to the bad update (row 2).
+    assert fields["replan_field_rows"].tolist() == [i for i, r in enumerate(replans) if r.in_use] == [0, 1, 3, 4]
+    assert fields["replan_field_dir_x"].shape == (4, *SHAPE) and fields["replan_field_dir_x"].dtype == np.float16
+    np.testing.assert_array_equal(fields["replan_field_dir_y"][2], 1.0)
+    np.testing.assert_array_equal(fields["replan_field_dir_y"][[0, 1, 3]], 0.0)
+    np.testing.assert_allclose(fields["replan_field_origin"], [0.0, 0.0])
+    assert float(fields["replan_field_resolution"]) == RES
+    # The map as each regular update sent it: the ideal sensor's cells known so far (exact: σ² = 0), NaN elsewhere.
+    maps = map_snapshot_log(replans)
+    assert maps["map_snapshot_rows"].tolist() == [0, 1, 3, 4]
+    known = np.isfinite(maps["map_snapshot_heights"])
+    assert known.shape == (4, *SHAPE) and maps["map_snapshot_heights"].dtype == np.float32
+    # Each snapshot knows what its map message marked known, and the map grows as the robot walks.
+    for k, (_, _, mask, _) in zip(range(4), [client.maps[i] for i in (0, 1, 2, 3)], strict=True):
+        np.testing.assert_array_equal(known[k], mask)
+    assert known[0].sum() < known[-1].sum()
+    np.testing.assert_array_equal(maps["map_snapshot_variances"][known], 0.0)
+    assert np.isnan(maps["map_snapshot_variances"][~known]).all()
 
 
 @pytest.mark.parametrize(

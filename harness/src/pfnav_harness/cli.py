@@ -619,10 +619,11 @@ def execute(args: argparse.Namespace) -> int:
     context = RunContext(args, out, fmu, robot, config, online_config, show_progress=not args.no_progress and parallel == 1)
     media = None
     if args.record or args.video:
+        from .replay.density import DensityOptions
         from .replay.run_media import MediaQueue
 
         # After each run, from its log, beside the other runs: the co-simulation loop pays nothing for it.
-        media = MediaQueue(out, robot, args.record, args.video, workers=parallel)
+        media = MediaQueue(out, robot, args.record, args.video, workers=parallel, density_options=DensityOptions(args.basis, args.generators))
     records = _run_all(context, jobs, parallel, media)
     runs: dict[str, list[RunRecord]] = {name: [] for name in scenarios}
     for job in jobs:

@@ -35,7 +35,7 @@ from .engine import DEFAULT_ENGINE, PhysicsEngine, make_engine, validate_engine_
 from .errors import SimulationError
 from .feedback_field import FeedbackField
 from .metrics import FallThresholds
-from .online import OnlineNavigator
+from .online import OnlineNavigator, map_snapshot_log, replan_field_log
 from .perception import SensedMap
 from .planner_client import Plan
 from .pushes import PushSchedule
@@ -685,6 +685,9 @@ class CoSimulation:
             "fsm": log_flags[:n, 8],
             # The FMU's code of its damping state, so the log's FSM codes can be read without it.
             "fsm_damping": np.array(int(fmu.contract.fsm.Damping)),
+            # The FSM's state names and their codes, as the FMU's modelDescription declares them.
+            "fsm_state_names": np.array([state.name for state in fmu.contract.fsm]),
+            "fsm_state_codes": np.array([int(state) for state in fmu.contract.fsm], dtype=np.int64),
             "mpc_solve_time": log_outputs[:n, outputs.index(fr.SOLVE_TIME_OUTPUT)],
             "mode": log_flags[:n, 9],
             "walk_start": np.array(c.stand_time),
@@ -840,6 +843,8 @@ def replan_log(online: OnlineNavigator) -> dict[str, NDArray[np.float64]]:
         "replan_path_x": np.concatenate([r.path_x for r in replans]) if replans else np.zeros(0),
         "replan_path_y": np.concatenate([r.path_y for r in replans]) if replans else np.zeros(0),
         "known_final": online.belief.known.copy(),
+        **replan_field_log(replans),
+        **map_snapshot_log(replans),
     }
 
 

@@ -71,6 +71,26 @@ class OnlineConfig:
             raise SimulationError(f"unknown bad map update kind(s) {', '.join(unknown)}; choose from {', '.join(BAD_UPDATE_KINDS)}")
 
 
+@dataclass(frozen=True)
+class MapSnapshot:
+    """The belief map at one update: heights and height variances (m, m²; NaN where unknown), float32
+    to keep a run's log small (a recording draws them, nothing plans on them)."""
+
+    heights: NDArray[np.float32]
+    variances: NDArray[np.float32]
+
+    @classmethod
+    def of(cls, belief: BeliefMap | SensedMap) -> MapSnapshot:
+        if isinstance(belief, SensedMap):
+            known = belief.map.known
+            heights, variances = belief.map.heights, belief.map.variances
+        else:
+            # The ideal sensor reveals exact heights: variance 0 where known.
+            known = belief.known
+            heights, variances = belief.heights, np.zeros(known.shape)
+        return cls(np.where(known, heights, np.nan).astype(np.float32), np.where(known, variances, np.nan).astype(np.float32))
+
+
 @dataclass
 class Replan:
     """One map update and what became of its plan request."""
@@ -89,6 +109,10 @@ class Replan:
     path_x: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     path_y: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     planner_cost: float | None = None
+    # The feedback field put in use (P-F answers in use only).
+    field: FeedbackField | None = None
+    # The map as it was sent with this update (regular updates only; not the deliberately bad ones).
+    map_snapshot: MapSnapshot | None = None
     _published_wall: float = 0.0
 
     @property
@@ -163,6 +187,7 @@ class OnlineNavigator:
             self.belief.sense(0.0, position, quaternion, PoseBelief(position, quaternion))
             changed = self.belief.take_changed()
         seq = self._publish_belief()
+        snapshot = MapSnapshot.of(self.belief)
         self._first_seq = seq
         published = time.time()
         answer = self.client.request_answer(
@@ -175,7 +200,7 @@ class OnlineNavigator:
             retries=retries,
             context=f"'{self.scenario.name}' (start)",
         )
-        replan = Replan(0.0, seq, answer.request_id, changed, kind="start", _published_wall=published)
+        replan = Replan(0.0, seq, answer.request_id, changed, kind="start", map_snapshot=snapshot, _published_wall=published)
         self._accept(replan, answer, 0.0)
         self.replans.append(replan)
         self._next_update = self.config.update_period
@@ -228,14 +253,16 @@ class OnlineNavigator:
     def _send_update(self, t: float, x: float, y: float, yaw: float, sigma: float) -> None:
         changed = self._observe(x, y)
         kind = "update"
+        snapshot = None
         if self._bad_updates and len(self.replans) >= 2:
             kind = self._bad_updates.pop(0)
             seq = self._publish_bad(kind)
         else:
             seq = self._publish_belief()
+            snapshot = MapSnapshot.of(self.belief)
         published = time.time()
         request_id = self.client.send_request(StartPose(x, y, yaw, sigma), self.scenario.goal, self.config.method, seq, self.options)
-        replan = Replan(t, seq, request_id, changed, kind=kind, _published_wall=published)
+        replan = Replan(t, seq, request_id, changed, kind=kind, map_snapshot=snapshot, _published_wall=published)
         self.replans.append(replan)
         self._pending = replan
 
@@ -286,6 +313,7 @@ class OnlineNavigator:
                 )
                 return False
             self._current_field = answer.field
+            replan.field = answer.field
         plan = answer.plan
         replan.t_apply = t
         replan.outcome = OUTCOME_IN_USE
@@ -305,6 +333,43 @@ class OnlineNavigator:
         if answer is not None:
             pending.service_latency = answer.reply_utime * 1e-6 - pending._published_wall
             pending.outcome = OUTCOME_RUN_ENDED
+
+
+def replan_field_log(replans: Sequence[Replan]) -> dict[str, NDArray[np.generic]]:
+    """The feedback fields put in use, stacked (npz-friendly): `replan_field_rows` names each one's
+    replan (row of the `replan_*` arrays). The navigator refuses a field on another grid than the
+    one in use, so all share one grid. Directions and speeds as float16, cost-to-go as float32:
+    a drawing's precision at a third of the bytes."""
+    rows = [i for i, r in enumerate(replans) if r.field is not None]
+    if not rows:
+        return {}
+    fields = [replans[i].field for i in rows]
+    first = fields[0]
+    assert first is not None and all(f is not None and f.same_grid(first) for f in fields), "fields in use share one grid"
+    return {
+        "replan_field_rows": np.array(rows, dtype=np.int64),
+        "replan_field_origin": np.array(first.origin),
+        "replan_field_resolution": np.array(first.resolution),
+        "replan_field_goal": np.array(first.goal),
+        "replan_field_dir_x": np.stack([f.dir_x for f in fields if f is not None]).astype(np.float16),
+        "replan_field_dir_y": np.stack([f.dir_y for f in fields if f is not None]).astype(np.float16),
+        "replan_field_speed": np.stack([f.speed for f in fields if f is not None]).astype(np.float16),
+        "replan_field_cost_to_go": np.stack([f.cost_to_go for f in fields if f is not None]).astype(np.float32),
+    }
+
+
+def map_snapshot_log(replans: Sequence[Replan]) -> dict[str, NDArray[np.generic]]:
+    """The belief map sent with each regular update, stacked: `map_snapshot_rows` names each one's
+    replan (row of the `replan_*` arrays; its `replan_t_publish` is the snapshot's time)."""
+    rows = [i for i, r in enumerate(replans) if r.map_snapshot is not None]
+    if not rows:
+        return {}
+    snapshots = [replans[i].map_snapshot for i in rows]
+    return {
+        "map_snapshot_rows": np.array(rows, dtype=np.int64),
+        "map_snapshot_heights": np.stack([s.heights for s in snapshots if s is not None]),
+        "map_snapshot_variances": np.stack([s.variances for s in snapshots if s is not None]),
+    }
 
 
 def latency_summary(replans: Sequence[Replan]) -> dict[str, float | int]:

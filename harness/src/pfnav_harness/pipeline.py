@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from .cosim import CoSimConfig, CoSimulation, RunResult, save_log
@@ -116,6 +118,9 @@ def simulate(
         planner_solve_time=plan.metrics.get("solve_time"),
     )
     estimation = compute_estimation_metrics(result.log, until=metrics.fall_time) if has_estimate(result.log) else None
+    # The planner's cost model for this run (the scenario's, with the demo's overrides), so that a
+    # replay can plan the same map again (`replay.density`).
+    result.log["traversability"] = np.array(json.dumps(scenario.traversability, sort_keys=True))
     if log_path is not None:
         save_log(result, log_path)
     if lcm_log_path is not None:

@@ -28,7 +28,7 @@ use pf_planner::import::{
     Placement, Resolution,
 };
 use pf_planner::io::{
-    load_scenario_limited, parse_path_csv, read_path_csv, save_scenario, write_npy_f64,
+    load_scenario_limited, parse_path_csv, read_path_csv, save_scenario, write_npy_f64, write_npz,
     MapScenario, MAX_PATH_CSV_BYTES,
 };
 use pf_planner::lp::LpSolver;
@@ -270,6 +270,11 @@ struct PlanArgs {
     /// Draw the P-F plan's feedback law: arrows over cost-to-go bands, obstacles dark.
     #[arg(long, value_name = "FILE.png")]
     field_plot: Option<PathBuf>,
+    /// Write the P-F LP's occupation density ρ on the planning grid as a numpy .npz: density
+    /// (float64, shape (height, width), [iy, ix]; the expected time the start's unit mass spends
+    /// per square metre around each cell centre, 0 on the goal cells), origin (2,), resolution ().
+    #[arg(long, value_name = "FILE.npz")]
+    density_out: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -555,8 +560,8 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
         MethodArg::All => Method::ALL.to_vec(),
     };
     let wants_field = args.field_out.is_some() || args.field_plot.is_some();
-    if wants_field && !methods.contains(&Method::Pf) {
-        bail!("--field-out and --field-plot need a P-F plan (--method pf or all)");
+    if (wants_field || args.density_out.is_some()) && !methods.contains(&Method::Pf) {
+        bail!("--field-out, --field-plot and --density-out need a P-F plan (--method pf or all)");
     }
     fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut planner = Planner::new(
@@ -600,6 +605,26 @@ fn run_plan(args: &PlanArgs) -> Result<()> {
                         )?;
                         println!("feedback field plot -> {}", path.display());
                     }
+                }
+                if let (Method::Pf, Some(path)) = (method, &args.density_out) {
+                    let flow = plan
+                        .lp_flow
+                        .as_ref()
+                        .context("the P-F plan came without its LP solution")?;
+                    let grid = planner.grid();
+                    write_npz(
+                        path,
+                        &[
+                            (
+                                "density",
+                                &[grid.height, grid.width],
+                                &flow.density_on(grid),
+                            ),
+                            ("origin", &[2], &grid.origin),
+                            ("resolution", &[], &[grid.cell_size]),
+                        ],
+                    )?;
+                    println!("occupation density -> {}", path.display());
                 }
                 let m = plan.metrics;
                 println!(

@@ -76,6 +76,16 @@ impl FeedbackField {
         self.sums(p, &mut Vec::new()).0
     }
 
+    /// ρ at the centre of every cell of `grid`, row-major (`iy · width + ix`): the LP's
+    /// occupation density, the expected time the start's unit mass spends per square metre
+    /// there (0 on the targets).
+    pub fn density_on(&self, grid: &PlanningGrid) -> Vec<f64> {
+        let mut scratch = Vec::new();
+        (0..grid.len())
+            .map(|i| self.sums(grid.center_of_index(i), &mut scratch).0)
+            .collect()
+    }
+
     /// ρ̄(p), the flux vector.
     pub fn flux_at(&self, p: Point) -> [f64; 2] {
         self.sums(p, &mut Vec::new()).1

@@ -32,7 +32,6 @@
 //! (origin, cell size, width, height). With the RBF basis the functions next to obstacles are
 //! inactive, so those free cells read as unreachable (-1) like the obstacles themselves.
 
-use std::io::Write;
 use std::path::Path;
 
 use thiserror::Error;
@@ -258,37 +257,23 @@ impl FeedbackGrid {
     /// float64 of shape (height, width) indexed `[iy, ix]`, `origin` (2,), `resolution` (),
     /// `goal` (3,) = centre x, y and radius. Entries are stored uncompressed (numpy reads both).
     pub fn write_npz(&self, path: &Path) -> Result<(), PlanError> {
-        let io = |e: &dyn std::fmt::Display| PlanError::Io {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        };
-        let file = std::fs::File::create(path).map_err(|e| io(&e))?;
-        let mut zip = zip::ZipWriter::new(std::io::BufWriter::new(file));
-        let options = zip::write::SimpleFileOptions::default()
-            .compression_method(zip::CompressionMethod::Stored)
-            .large_file(false);
         let shape = [self.height, self.width];
-        let entries: [(&str, &[usize], &[f64]); 7] = [
-            ("dir_x", &shape, &self.dir_x),
-            ("dir_y", &shape, &self.dir_y),
-            ("speed", &shape, &self.speed),
-            ("cost_to_go", &shape, &self.cost_to_go),
-            ("origin", &[2], &self.origin),
-            ("resolution", &[], &[self.resolution]),
-            (
-                "goal",
-                &[3],
-                &[self.goal.center[0], self.goal.center[1], self.goal.radius],
-            ),
-        ];
-        for (name, dims, data) in entries {
-            zip.start_file(format!("{name}.npy"), options)
-                .map_err(|e| io(&e))?;
-            zip.write_all(&crate::io::npy_f64_bytes(dims, data))
-                .map_err(|e| io(&e))?;
-        }
-        zip.finish().map_err(|e| io(&e))?;
-        Ok(())
+        crate::io::write_npz(
+            path,
+            &[
+                ("dir_x", &shape, &self.dir_x),
+                ("dir_y", &shape, &self.dir_y),
+                ("speed", &shape, &self.speed),
+                ("cost_to_go", &shape, &self.cost_to_go),
+                ("origin", &[2], &self.origin),
+                ("resolution", &[], &[self.resolution]),
+                (
+                    "goal",
+                    &[3],
+                    &[self.goal.center[0], self.goal.center[1], self.goal.radius],
+                ),
+            ],
+        )
     }
 }
 

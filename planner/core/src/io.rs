@@ -403,9 +403,31 @@ pub fn write_npy_bool(path: &Path, shape: (usize, usize), data: &[bool]) -> Resu
     fs::write(path, bytes).map_err(|e| io_error(path, e))
 }
 
+/// One float64 member of an `.npz` archive: name (without `.npy`), shape, row-major values.
+pub type NpzEntry<'a> = (&'a str, &'a [usize], &'a [f64]);
+
+/// Writes a numpy `.npz` archive of float64 arrays, stored uncompressed (numpy reads both): the
+/// one `.npz` writer of the planner (the feedback field's and the occupation density's).
+pub fn write_npz(path: &Path, entries: &[NpzEntry<'_>]) -> Result<(), PlanError> {
+    use std::io::Write;
+    let file = fs::File::create(path).map_err(|e| io_error(path, e))?;
+    let mut zip = zip::ZipWriter::new(std::io::BufWriter::new(file));
+    let options = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Stored)
+        .large_file(false);
+    for &(name, dims, data) in entries {
+        zip.start_file(format!("{name}.npy"), options)
+            .map_err(|e| io_error(path, e))?;
+        zip.write_all(&npy_f64_bytes(dims, data))
+            .map_err(|e| io_error(path, e))?;
+    }
+    zip.finish().map_err(|e| io_error(path, e))?;
+    Ok(())
+}
+
 /// A whole `.npy` file (version 1.0) of little-endian float64 in C order with shape `dims` (any
 /// number of dimensions; `[]` is a scalar): the one `.npy` writer of the planner (map arrays here,
-/// the feedback field's `.npz` members in `feedback_grid`).
+/// the `.npz` members of [`write_npz`]).
 pub fn npy_f64_bytes(dims: &[usize], data: &[f64]) -> Vec<u8> {
     let mut bytes = npy_header("<f8", dims);
     bytes.reserve(data.len() * 8);

@@ -13,6 +13,7 @@ use tracing::info;
 
 use crate::deadline::Deadline;
 use crate::error::PlanError;
+use crate::feedback::FeedbackField;
 use crate::feedback_grid::{FeedbackGrid, FieldUnavailable};
 use crate::graph::{astar_admissible_path, astar_path, dijkstra_path, Connectivity, GraphPath};
 use crate::grid::{GoalRegion, PlanningGrid};
@@ -162,6 +163,9 @@ pub struct Plan {
     /// why there is none (graph methods; Clarabel with a point start). Computed with every P-F
     /// plan at O(cells × directions).
     pub feedback_field: Result<FeedbackGrid, FieldUnavailable>,
+    /// The LP's density and flux (P-F; `None` for graph methods), kept as solved: its occupation
+    /// density ([`FeedbackField::density_on`]) is evaluated only by those who ask for it.
+    pub lp_flow: Option<FeedbackField>,
 }
 
 /// Where the P-F generators of a plan come from: `(generators, taken from a cache)` for a grid,
@@ -208,6 +212,7 @@ impl PreparedMap<'_> {
         let mut feedback_field = Err(FieldUnavailable::NotPf {
             method: method.name(),
         });
+        let mut lp_flow = None;
         let (path, planner_cost, expanded, lp) = match method {
             Method::Dijkstra => graph_plan(dijkstra_path(self.grid, start, goal, connectivity)?),
             Method::AStar => graph_plan(astar_path(self.grid, start, goal, connectivity)?),
@@ -249,6 +254,7 @@ impl PreparedMap<'_> {
                     grid.set_speed(options.speed);
                     grid
                 });
+                lp_flow = Some(solution.field);
                 (solution.path, solution.weighted_length, None, Some(lp))
             }
         };
@@ -279,6 +285,7 @@ impl PreparedMap<'_> {
             trajectory_time_s,
             generators_cached,
             feedback_field,
+            lp_flow,
         })
     }
 }

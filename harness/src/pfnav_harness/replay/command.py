@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .. import paths
+from ..planner_client import BASES, GENERATORS
 from ..robot import RobotDescription
 from .run_media import recording_path
 
@@ -27,7 +28,15 @@ def add_replay_command(sub: argparse._SubParsersAction[argparse.ArgumentParser])
         default=None,
         help="the robot config the run walked (default $PFNAV_ROBOT, else robot/quadruped.toml; the report names it)",
     )
-    replay.add_argument("--field", type=Path, default=None, help="a P-F feedback field to draw over the terrain (`pf-plan plan --field-out FILE.npz`)")
+    replay.add_argument(
+        "--field",
+        type=Path,
+        default=None,
+        help="the offline P-F plan's feedback field to draw over the terrain (`pf-plan plan --field-out FILE.npz`); "
+        "pf-plan then plans the map again for the plan's occupation density",
+    )
+    replay.add_argument("--basis", choices=BASES, default=None, help="with --field: the P-F basis the run planned with (default: the service's, indicator)")
+    replay.add_argument("--generators", choices=GENERATORS, default=None, help="with --field: the RBF generators the run planned with (default: transfer)")
     replay.add_argument("--video", type=Path, default=None, metavar="FILE.mp4", help="also render the run's video (isometric view, MP4) to this file")
     replay.add_argument("--pose-rate", type=float, default=50.0, help="poses per simulated second in the recording (default 50)")
 
@@ -35,18 +44,23 @@ def add_replay_command(sub: argparse._SubParsersAction[argparse.ArgumentParser])
 def run_replay(args: argparse.Namespace) -> int:
     from ..feedback_field import FeedbackField
     from ..scenario import load_scenario
+    from .density import DensityOptions, plan_density
     from .recording import write_recording
-    from .run_log import load_run_log, scenario_of_log
+    from .run_log import load_run_log, scenario_of_log, with_logged_traversability
 
     log_path: Path = args.log
     log = load_run_log(log_path)
     scenario = load_scenario(args.scenario_file) if args.scenario_file is not None else scenario_of_log(log_path)
+    scenario = with_logged_traversability(scenario, log)
     robot = RobotDescription.load(args.robot if args.robot is not None else paths.robot_config_path())
     field = FeedbackField.from_npz(args.field) if args.field is not None else None
+    density = None
+    if field is not None and "replan_t_apply" not in log:
+        density = plan_density(paths.pf_plan_path(), scenario, field, DensityOptions(args.basis, args.generators))
     run_name = log_path.stem
     # The demo's layout: OUT/logs/NAME.npz → OUT/recordings/NAME.rrd.
     out = args.out if args.out is not None else recording_path(log_path.absolute().parent.parent, run_name)
-    summary = write_recording(log, scenario, robot, out, run_name, field, pose_rate=args.pose_rate)
+    summary = write_recording(log, scenario, robot, out, run_name, field, pose_rate=args.pose_rate, density=density)
     print(
         f"recording: {summary.path} ({summary.bytes / 1e6:.1f} MB, {summary.t_last - summary.t_first:.1f} simulated s, "
         f"{summary.pose_frames} poses); open it with `rerun {summary.path}`",

@@ -11,10 +11,15 @@ by entity path:
   (the MPC's commanded forces, world frame), `world/pushes` when the run was pushed;
 - `world/walked` and `world/estimate/path` (the truth and the estimator's belief of the base path),
   `world/estimate/pose` (the believed trunk pose as axes);
+- `world/pf_density` (the P-F LP's occupation density on the planning grid, from `pf-plan`, log
+  colour scale) for offline P-F runs whose field is given;
 - `world/feedback_field` (the P-F feedback law's directions over the terrain, coloured by
-  cost-to-go) when the run's field is given; online runs: `world/replans` (each path when it was put
-  in use) and `world/sensed_map` (the elevation map at the end of the run, coloured by its σ);
+  cost-to-go) when the run's field is given; online runs: each field from the moment it was put in
+  use, `world/replans` (each path likewise) and `world/sensed_map` (the map as each update sent
+  it, coloured by its σ, or by height for the ideal sensor's exact map; its final state at the end);
 - `plots/...`: tracking error, joint torques, MPC solve time, FSM state, estimate error;
+  `fsm_state` (each change of the controller's FSM state, by the name the FMU declares) and
+  `world/fsm_state` (that name floating above the robot);
 - `notes`: what the log did not keep.
 
 Poses are written at `pose_rate` (default 50 Hz) and time series at `series_rate` (100 Hz), not at
@@ -38,8 +43,9 @@ from numpy.typing import NDArray
 from ..feedback_field import FeedbackField
 from ..robot import JOINT_ROLES, LEG_LABELS, RobotDescription
 from ..scenario import Scenario, Terrain
+from .density import DensityResult, OccupationDensity
 from .kinematics import LegKinematics
-from .run_log import RunLog, estimated_quaternions, frame_steps, horizontal_tracking_error, window_max
+from .run_log import RunLog, estimated_quaternions, frame_steps, fsm_state_names, fsm_transitions, horizontal_tracking_error, window_max
 
 TIMELINE = "sim_time"
 # Rerun's frame of the 3-D view's root (entities logged without a transform live in it).
@@ -55,8 +61,16 @@ SWINGING = (150, 150, 150)
 TRUTH = (220, 40, 40)
 ESTIMATE = (40, 90, 230)
 PLAN = (250, 250, 250)
+# The occupation density's sheet covers the cells within this many decades of its largest value.
+DENSITY_DECADES = 3.0
+# The FSM state's label floats this far above the trunk.
+FSM_LABEL_HEIGHT = 0.45
 # Feedback-field arrows: at most this many along the map's longer side.
 FIELD_ARROWS_ACROSS = 48
+# The sensed map over time: at most one snapshot per this many simulated seconds, each with at
+# most this many vertices along the map's longer side (its final state is drawn in full).
+SENSED_MAP_PERIOD = 1.0
+SENSED_MAP_VERTICES_ACROSS = 64
 
 
 @dataclass(frozen=True)
@@ -90,19 +104,62 @@ def terrain_mesh(terrain: Terrain) -> rr.Mesh3D:
     )
 
 
-def sensed_map_mesh(terrain: Terrain, heights: NDArray[np.float64], variances: NDArray[np.float64]) -> rr.Mesh3D | None:
-    """The sensed elevation map's known cells as a mesh coloured by σ (viridis, 0 to the largest σ); None if nothing is known."""
+def sensed_map_mesh(
+    terrain: Terrain, heights: NDArray[np.floating], variances: NDArray[np.floating], vertices_across: int | None = None
+) -> rr.Mesh3D | None:
+    """The sensed elevation map's known cells as a mesh coloured by σ (viridis, 0 to the largest σ;
+    a map of exact heights, the ideal sensor's, by height instead); None if nothing is known.
+
+    `vertices_across` thins the mesh to at most that many vertices along the map's longer side
+    (every n-th cell centre): a map drawn at every update would otherwise dominate a recording.
+    """
+    ny, nx = heights.shape
+    stride = 1 if vertices_across is None else max(1, math.ceil(max(nx, ny) / vertices_across))
+    heights = np.asarray(heights, dtype=np.float64)[::stride, ::stride]
+    variances = np.asarray(variances, dtype=np.float64)[::stride, ::stride]
     known = np.isfinite(heights) & np.isfinite(variances)
     if not known.any():
         return None
-    vertices = terrain.vertices().copy()
-    vertices[:, 2] = np.where(known, heights, 0.0).ravel()
-    triangles = terrain.triangles()
+    res = terrain.resolution
+    xs = terrain.origin[0] + (np.arange(0, nx, stride) + 0.5) * res
+    ys = terrain.origin[1] + (np.arange(0, ny, stride) + 0.5) * res
+    gx, gy = np.meshgrid(xs, ys)
+    vertices = np.stack([gx.ravel(), gy.ravel(), np.where(known, heights, 0.0).ravel()], axis=1)
+    rows, cols = heights.shape
+    iy, ix = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (iy * cols + ix).ravel()
+    triangles = np.concatenate([np.stack([a, a + 1, a + cols + 1], axis=1), np.stack([a, a + cols + 1, a + cols], axis=1)])
     # Only triangles whose three corners were sensed.
     triangles = triangles[known.ravel()[triangles].all(axis=1)]
     sigma = np.sqrt(np.where(known, variances, 0.0))
-    top = float(sigma.max()) or 1.0
-    colours = (matplotlib.colormaps["viridis"](sigma / top)[..., :3] * 255).astype(np.uint8).reshape(-1, 3)
+    top = float(sigma.max())
+    if top > 0.0:
+        colours = (matplotlib.colormaps["viridis"](sigma / top)[..., :3] * 255).astype(np.uint8).reshape(-1, 3)
+    else:
+        colours = terrain_colours(np.where(known, heights, np.nan), None)
+    return rr.Mesh3D(vertex_positions=vertices.astype(np.float32), triangle_indices=triangles.astype(np.uint32), vertex_colors=colours)
+
+
+def density_mesh(density: OccupationDensity, terrain: Terrain) -> rr.Mesh3D | None:
+    """The occupation density as a sheet just above the terrain over the cells the flow visits
+    (ρ above `DENSITY_DECADES` decades below its largest value), coloured on a log scale
+    (inferno: dark = rarely, bright = most visited); None where it has no positive value."""
+    rho = np.asarray(density.density, dtype=np.float64)
+    top = float(rho.max()) if rho.size else 0.0
+    if not top > 0.0:
+        return None
+    ny, nx = rho.shape
+    xs = density.origin[0] + (np.arange(nx) + 0.5) * density.resolution
+    ys = density.origin[1] + (np.arange(ny) + 0.5) * density.resolution
+    gx, gy = np.meshgrid(xs, ys)
+    vertices = np.stack([gx.ravel(), gy.ravel(), terrain.height(gx.ravel(), gy.ravel()) + 0.5 * LIFT], axis=1)
+    visited = (rho >= top * 10.0**-DENSITY_DECADES).ravel()
+    iy, ix = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
+    a = (iy * nx + ix).ravel()
+    triangles = np.concatenate([np.stack([a, a + 1, a + nx + 1], axis=1), np.stack([a, a + nx + 1, a + nx], axis=1)])
+    triangles = triangles[visited[triangles].all(axis=1)]
+    scaled = 1.0 + np.log10(np.maximum(rho, top * 10.0**-DENSITY_DECADES) / top) / DENSITY_DECADES
+    colours = (matplotlib.colormaps["inferno"](np.clip(scaled, 0.0, 1.0))[..., :3] * 255).astype(np.uint8).reshape(-1, 3)
     return rr.Mesh3D(vertex_positions=vertices.astype(np.float32), triangle_indices=triangles.astype(np.uint32), vertex_colors=colours)
 
 
@@ -155,23 +212,32 @@ def ros_package_path(robot: RobotDescription) -> Iterator[None]:
             os.environ["ROS_PACKAGE_PATH"] = before
 
 
-def missing_contents(log: RunLog, field: FeedbackField | None) -> list[str]:
+def missing_contents(log: RunLog, field: FeedbackField | None, density: DensityResult | None = None) -> list[str]:
     """What a viewer might look for that this run's log does not hold."""
-    notes = [
-        "The P-F occupation density: the planner service publishes the plan and the feedback law, not the LP's density.",
-        "Ground reaction forces are the MPC's commanded forces (controller output), not measured contact forces.",
-    ]
-    if field is None:
+    notes = ["Ground reaction forces are the MPC's commanded forces (controller output), not measured contact forces."]
+    if density is None or density.density is None:
+        if "replan_t_apply" in log:
+            why = "an online run's replans were planned on the map sensed so far, which pf-plan does not take."
+        elif density is not None:
+            why = density.reason
+        else:
+            why = "the planner service publishes the plan and the feedback law, not the LP's density (pf-plan computes it when the run's field is given)."
+        notes.insert(0, f"The P-F occupation density: {why}")
+    if field is None and "replan_field_rows" not in log:
         notes.append(
             "The feedback field: not stored in the run log (offline P-F runs record it when the demo writes the recording; "
             "`pfnav-demo replay --field FILE.npz` adds one written by `pf-plan plan --field-out`)."
         )
     if "replan_t_apply" in log:
-        notes.append("Replans: the paths are recorded, their feedback fields are not in the log.")
-        if "map_heights_final" in log:
-            notes.append("The sensed map: only its state at the end of the run is in the log, not its growth.")
-        else:
-            notes.append("The sensed map: the ideal sensor keeps no elevation map (only which cells were seen).")
+        if "replan_field_rows" not in log:
+            notes.append("Replans: the paths are recorded, their feedback fields are not in the log.")
+        if "map_snapshot_rows" not in log:
+            if "map_heights_final" in log:
+                notes.append("The sensed map: only its state at the end of the run is in the log, not its growth.")
+            else:
+                notes.append("The sensed map: the ideal sensor keeps no elevation map (only which cells were seen).")
+    if "fsm_state_names" not in log:
+        notes.append("FSM state names: the log has only their codes (it predates the names).")
     if "est_pos" not in log:
         notes.append("The estimate: the controller ran on ground truth (estimator groundTruth).")
     return notes
@@ -186,8 +252,12 @@ def write_recording(
     field: FeedbackField | None = None,
     pose_rate: float = 50.0,
     series_rate: float = 100.0,
+    density: DensityResult | None = None,
 ) -> RecordingSummary:
-    """Writes the recording of one run to `path` (parents created) and summarises it."""
+    """Writes the recording of one run to `path` (parents created) and summarises it.
+
+    `field` is the offline plan's feedback field (online runs log their own); `density` what
+    `density.plan_density` made of it."""
     path.parent.mkdir(parents=True, exist_ok=True)
     terrain = scenario.terrain
     t = np.asarray(log["t"], dtype=np.float64)
@@ -209,9 +279,27 @@ def write_recording(
     static("world/plan", rr.LineStrips3D([on_ground(terrain, log["plan_x"], log["plan_y"])], colors=[PLAN], radii=0.015))
     static("world/start", rr.Points3D(on_ground(terrain, np.array([scenario.start[0]]), np.array([scenario.start[1]])), radii=0.08, colors=[(255, 255, 255)]))
     static("world/goal", rr.LineStrips3D([goal_circle(scenario)], colors=[(255, 215, 0)], radii=0.02))
-    if field is not None:
+    replan_fields = logged_replan_fields(log)
+    if replan_fields:
+        # An online run: every field put in use, from its time on (the log's own, not `field`).
+        for t_apply, replan_field in replan_fields:
+            rec.set_time(TIMELINE, duration=t_apply)
+            rec.log("world/feedback_field", field_arrows(replan_field, terrain))
+        rec.reset_time()
+        entities.append("world/feedback_field")
+    elif field is not None:
         static("world/feedback_field", field_arrows(field, terrain))
-    if "map_heights_final" in log and "map_variances_final" in log:
+    if density is not None and density.density is not None:
+        sheet = density_mesh(density.density, terrain)
+        if sheet is not None:
+            # The plan was made before the walk: its density is there from the first step on.
+            rec.set_time(TIMELINE, duration=float(t[0]))
+            rec.log("world/pf_density", sheet)
+            rec.reset_time()
+            entities.append("world/pf_density")
+    if sensed_map_over_time(rec, log, terrain, float(t[-1])):
+        entities.append("world/sensed_map")
+    elif "map_heights_final" in log and "map_variances_final" in log:
         mesh = sensed_map_mesh(terrain, log["map_heights_final"], log["map_variances_final"])
         if mesh is not None:
             static("world/sensed_map", mesh)
@@ -283,19 +371,107 @@ def write_recording(
         columns(f"plots/joint_torque/{label}", series_times, rr.Scalars.columns(scalars=tau[series, 3 * leg : 3 * leg + 3]))
     static("plots/mpc_solve_time", rr.SeriesLines(names="MPC solve time, largest per sample [ms]"))
     columns("plots/mpc_solve_time", series_times, rr.Scalars.columns(scalars=1000.0 * window_max(np.asarray(log["mpc_solve_time"], dtype=np.float64), series)))
-    damping = f" (damping = {int(log['fsm_damping'])})" if "fsm_damping" in log else ""
-    static("plots/fsm_state", rr.SeriesLines(names=f"controller FSM state code{damping}"))
-    columns("plots/fsm_state", series_times, rr.Scalars.columns(scalars=np.asarray(log["fsm"], dtype=np.float64)[series]))
+    fsm_states(rec, log, steps, series, entities)
     if "est_pos" in log:
         error = np.linalg.norm(np.asarray(log["est_pos"], dtype=np.float64)[series] - np.asarray(log["base_pos"], dtype=np.float64)[series], axis=1)
         static("plots/estimate_error", rr.SeriesLines(names="estimated base position − truth [m]"))
         columns("plots/estimate_error", series_times, rr.Scalars.columns(scalars=error))
-    notes = "\n".join(f"- {line}" for line in missing_contents(log, field))
+    notes = "\n".join(f"- {line}" for line in missing_contents(log, field, density))
     static("notes", rr.TextDocument(f"# {run_name}\n\nNot in this recording:\n\n{notes}\n", media_type=rr.MediaType.MARKDOWN))
     rec.flush()
     # Disconnecting finishes the file (its footer and index).
     rec.disconnect()
     return RecordingSummary(path, path.stat().st_size, tuple(entities), float(t[0]), float(t[-1]), len(steps))
+
+
+def fsm_states(rec: rr.RecordingStream, log: RunLog, steps: NDArray[np.int64], series: NDArray[np.int64], entities: list[str]) -> None:
+    """The controller FSM's state by its FMU name: the code as a plot (its legend names the codes), each
+    change as a line of `fsm_state`, and a label floating above the robot at every pose."""
+    t = np.asarray(log["t"], dtype=np.float64)
+    codes = np.asarray(log["fsm"], dtype=np.int64)
+    names = fsm_state_names(log)
+
+    def name(code: int) -> str:
+        return names.get(code, f"state {code}")
+
+    legend = ", ".join(f"{code} = {state}" for code, state in sorted(names.items()))
+    rec.log("plots/fsm_state", rr.SeriesLines(names=f"controller FSM state ({legend})" if legend else "controller FSM state code"), static=True)
+    rec.send_columns(
+        "plots/fsm_state", indexes=[rr.TimeColumn(TIMELINE, duration=t[series])], columns=rr.Scalars.columns(scalars=codes[series].astype(np.float64))
+    )
+    changes = fsm_transitions(codes)
+    rec.send_columns(
+        "fsm_state",
+        indexes=[rr.TimeColumn(TIMELINE, duration=t[changes])],
+        columns=rr.TextLog.columns(text=[name(int(code)) for code in codes[changes]], level=["INFO"] * len(changes)),
+    )
+    above = np.asarray(log["base_pos"], dtype=np.float64)[steps] + np.array([0.0, 0.0, FSM_LABEL_HEIGHT])
+    rec.send_columns(
+        "world/fsm_state",
+        indexes=[rr.TimeColumn(TIMELINE, duration=t[steps])],
+        columns=rr.Points3D.columns(positions=above, labels=[name(int(code)) for code in codes[steps]], radii=[0.005] * len(steps)),
+    )
+    entities.extend(["plots/fsm_state", "fsm_state", "world/fsm_state"])
+
+
+def logged_replan_fields(log: RunLog) -> list[tuple[float, FeedbackField]]:
+    """(time put in use, field) of every feedback field an online run's log holds (`replan_field_*`)."""
+    if "replan_field_rows" not in log or "replan_t_apply" not in log:
+        return []
+    applied = np.asarray(log["replan_t_apply"], dtype=np.float64)
+    origin = np.asarray(log["replan_field_origin"], dtype=np.float64)
+    goal = np.asarray(log["replan_field_goal"], dtype=np.float64)
+    fields = []
+    for k, row in enumerate(np.asarray(log["replan_field_rows"], dtype=np.int64)):
+        if not math.isfinite(applied[row]):
+            continue
+        fields.append(
+            (
+                float(applied[row]),
+                FeedbackField(
+                    origin=(float(origin[0]), float(origin[1])),
+                    resolution=float(log["replan_field_resolution"]),
+                    dir_x=log["replan_field_dir_x"][k],
+                    dir_y=log["replan_field_dir_y"][k],
+                    speed=log["replan_field_speed"][k],
+                    cost_to_go=log["replan_field_cost_to_go"][k],
+                    goal=(float(goal[0]), float(goal[1]), float(goal[2])),
+                ),
+            )
+        )
+    return fields
+
+
+def snapshot_times(log: RunLog) -> NDArray[np.float64]:
+    """Simulated time of each logged map snapshot (the update it was sent with)."""
+    return np.asarray(log["replan_t_publish"], dtype=np.float64)[np.asarray(log["map_snapshot_rows"], dtype=np.int64)]
+
+
+def sensed_map_over_time(rec: rr.RecordingStream, log: RunLog, terrain: Terrain, t_end: float) -> bool:
+    """The map as sent with the updates (`map_snapshot_*`), thinned to at most one per
+    `SENSED_MAP_PERIOD` and `SENSED_MAP_VERTICES_ACROSS` vertices across, then at the run's end
+    its final state (`map_*_final`) at full resolution. False when the log has no snapshots."""
+    if "map_snapshot_rows" not in log or "replan_t_publish" not in log:
+        return False
+    times = snapshot_times(log)
+    heights, variances = log["map_snapshot_heights"], log["map_snapshot_variances"]
+    last = -math.inf
+    for k, t_snapshot in enumerate(times):
+        if t_snapshot < last + SENSED_MAP_PERIOD - 1e-9:
+            continue
+        mesh = sensed_map_mesh(terrain, heights[k], variances[k], SENSED_MAP_VERTICES_ACROSS)
+        if mesh is None:
+            continue
+        last = float(t_snapshot)
+        rec.set_time(TIMELINE, duration=last)
+        rec.log("world/sensed_map", mesh)
+    if "map_heights_final" in log and "map_variances_final" in log:
+        final = sensed_map_mesh(terrain, log["map_heights_final"], log["map_variances_final"])
+        if final is not None:
+            rec.set_time(TIMELINE, duration=t_end)
+            rec.log("world/sensed_map", final)
+    rec.reset_time()
+    return True
 
 
 def replan_paths(rec: rr.RecordingStream, log: RunLog, terrain: Terrain) -> None:

@@ -6,6 +6,8 @@ steps a replay shows at a chosen rate.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -99,3 +101,36 @@ def estimated_quaternions(rpy: NDArray[np.float64]) -> NDArray[np.float64]:
         ],
         axis=1,
     )
+
+
+def fsm_state_names(log: RunLog) -> dict[int, str]:
+    """Code → name of the controller FSM's states, as the run's FMU declared them (logs from before
+    the names were logged: only the damping state, else nothing)."""
+    if "fsm_state_names" in log and "fsm_state_codes" in log:
+        return {int(code): str(name) for code, name in zip(log["fsm_state_codes"], log["fsm_state_names"], strict=True)}
+    if "fsm_damping" in log:
+        return {int(log["fsm_damping"]): "Damping"}
+    return {}
+
+
+def fsm_transitions(fsm: NDArray[np.generic]) -> NDArray[np.int64]:
+    """The steps at which the FSM state differs from the step before (the first step included)."""
+    codes = np.asarray(fsm, dtype=np.int64)
+    if len(codes) == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.concatenate([[0], np.nonzero(np.diff(codes))[0] + 1]).astype(np.int64)
+
+
+def with_logged_traversability(scenario: Scenario, log: RunLog) -> Scenario:
+    """`scenario` with the cost model its run planned with, when the log records it (the demo's
+    overrides are not in the scenario's sidecar)."""
+    if "traversability" not in log:
+        return scenario
+    try:
+        model = json.loads(str(log["traversability"]))
+    except json.JSONDecodeError as err:
+        raise RunLogError(f"the run log's traversability model is not JSON: {err}") from err
+    if not isinstance(model, dict):
+        raise RunLogError("the run log's traversability model is not a JSON object")
+    return dataclasses.replace(scenario, traversability=model)
+

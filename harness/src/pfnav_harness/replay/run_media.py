@@ -20,6 +20,7 @@ from pathlib import Path
 from ..feedback_field import FeedbackField
 from ..robot import RobotDescription
 from ..scenario import Scenario
+from .density import DensityOptions
 from .run_log import RunLog, load_run_log
 
 RECORDINGS_DIR = "recordings"
@@ -62,15 +63,25 @@ def write_run_media(
     record: bool,
     video: bool,
     show_progress: bool = False,
+    density_options: DensityOptions | None = None,
 ) -> RunMedia:
-    """The recording and/or the video of one finished run, from its log."""
+    """The recording and/or the video of one finished run, from its log.
+
+    An offline P-F run's recording (its `field` given) shows the plan's occupation density,
+    planned again by pf-plan with `density_options` (None: leave it out)."""
     recording_file = video_file = None
     recording_seconds = video_seconds = 0.0
     if record:
         from .recording import write_recording
 
         started = time.perf_counter()
-        recording_file = write_recording(log, scenario, robot, recording_path(out, run_name), run_name, field).path
+        density = None
+        if field is not None and density_options is not None and "replan_t_apply" not in log:
+            from .. import paths
+            from .density import plan_density
+
+            density = plan_density(paths.pf_plan_path(), scenario, field, density_options)
+        recording_file = write_recording(log, scenario, robot, recording_path(out, run_name), run_name, field, density=density).path
         recording_seconds = time.perf_counter() - started
     if video:
         from .video import render_video
@@ -84,23 +95,33 @@ def write_run_media(
 
 
 def write_run_media_from_log(
-    out: Path, log_file: Path, scenario: Scenario, robot: RobotDescription, field: FeedbackField | None, record: bool, video: bool
+    out: Path,
+    log_file: Path,
+    scenario: Scenario,
+    robot: RobotDescription,
+    field: FeedbackField | None,
+    record: bool,
+    video: bool,
+    density_options: DensityOptions | None = None,
 ) -> RunMedia:
     """`write_run_media` for the run whose log is `log_file` (OUT/logs/NAME.npz)."""
-    return write_run_media(out, log_file.stem, load_run_log(log_file), scenario, robot, field, record, video)
+    return write_run_media(out, log_file.stem, load_run_log(log_file), scenario, robot, field, record, video, density_options=density_options)
 
 
 class MediaQueue:
     """Recordings and videos of finished runs, made in `workers` processes while other work goes on."""
 
-    def __init__(self, out: Path, robot: RobotDescription, record: bool, video: bool, workers: int) -> None:
+    def __init__(self, out: Path, robot: RobotDescription, record: bool, video: bool, workers: int, density_options: DensityOptions | None = None) -> None:
         self.out, self.robot, self.record, self.video = out, robot, record, video
+        self.density_options = density_options
         # spawn: a worker starts clean, without the parent's LCM or DART state.
         self.pool = ProcessPoolExecutor(max_workers=max(1, workers), mp_context=multiprocessing.get_context("spawn"))
         self.pending: list[Future[RunMedia]] = []
 
     def submit(self, log_file: Path, scenario: Scenario, field: FeedbackField | None) -> None:
-        self.pending.append(self.pool.submit(write_run_media_from_log, self.out, log_file, scenario, self.robot, field, self.record, self.video))
+        self.pending.append(
+            self.pool.submit(write_run_media_from_log, self.out, log_file, scenario, self.robot, field, self.record, self.video, self.density_options)
+        )
 
     def wait(self, show_progress: bool) -> list[RunMedia]:
         """Every submitted run's media (in submission order) once all are written; the first failure is raised."""

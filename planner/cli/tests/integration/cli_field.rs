@@ -93,3 +93,63 @@ fn a_field_without_a_pf_plan_is_refused_with_the_reason() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!npz.exists());
 }
+
+#[test]
+fn the_occupation_density_is_written_on_the_planning_grid() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (density, field) = (dir.path().join("density.npz"), dir.path().join("field.npz"));
+    let out = pf_plan(&[
+        "plan",
+        "--scenario",
+        "c_shape",
+        "--method",
+        "pf",
+        "--grid",
+        "32",
+        "--out",
+        dir.path().to_str().expect("utf-8 path"),
+        "--field-out",
+        field.to_str().expect("utf-8 path"),
+        "--density-out",
+        density.to_str().expect("utf-8 path"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
+    if !python.exists() {
+        eprintln!("no .venv: numpy check skipped (scripts/setup.sh makes it)");
+        return;
+    }
+    // The uniform start puts mass on every cell that reaches the goal: ρ > 0 exactly where the
+    // field has a cost-to-go > 0, 0 in the goal and where the goal is out of reach.
+    let check = r#"
+import sys, numpy as np
+d, f = np.load(sys.argv[1]), np.load(sys.argv[2])
+assert sorted(d.files) == ["density", "origin", "resolution"], d.files
+rho = d["density"]
+assert rho.shape == (32, 32) and rho.dtype == np.float64, (rho.shape, rho.dtype)
+assert np.array_equal(d["origin"], f["origin"]) and float(d["resolution"]) == float(f["resolution"]) == 0.5
+c = f["cost_to_go"]
+assert np.all(np.isfinite(rho)) and rho.min() >= 0.0
+assert np.all(rho[c > 0] > 0.0) and np.all(rho[c <= 0] == 0.0)
+print("ok")
+"#;
+    let out = Command::new(python)
+        .args([
+            "-c",
+            check,
+            density.to_str().expect("utf-8 path"),
+            field.to_str().expect("utf-8 path"),
+        ])
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success() && String::from_utf8_lossy(&out.stdout).trim() == "ok",
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
