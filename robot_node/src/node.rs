@@ -234,6 +234,20 @@ pub fn run(
         let receiver = std::thread::Builder::new()
             .name("pfnav-robot-lcm".to_owned())
             .spawn_scoped(scope, || {
+                // The receiving thread stamps the states' arrival and wakes the control loop:
+                // under load a normally scheduled thread would hand the states over in bursts.
+                // Same priority as the control thread; its work per packet is a decode and a
+                // copy.
+                if let Some(priority) = config.realtime_priority {
+                    let rc = clock::set_thread_fifo(priority);
+                    if rc != 0 {
+                        tracing::warn!(
+                            priority,
+                            error = %std::io::Error::from_raw_os_error(rc),
+                            "SCHED_FIFO refused for the LCM thread"
+                        );
+                    }
+                }
                 while !receiver_stop.load(Ordering::Relaxed) {
                     if let Err(error) = lcm.handle_timeout(Duration::from_millis(10)) {
                         tracing::error!(%error, "LCM receive failed");
@@ -345,6 +359,12 @@ fn control_loop(
             }
         }
         previous_cycle_start = Some(cycle_start);
+        tracing::trace!(
+            cycle_start,
+            centre = schedule.centre_ns(),
+            ?trigger,
+            "cycle"
+        );
         window.count_trigger(trigger);
         total.count_trigger(trigger);
 
