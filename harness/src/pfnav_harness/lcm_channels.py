@@ -37,9 +37,20 @@ class PlannerChannels:
     service_status: str = _channel("planner", "service_status")
 
 
+@dataclass(frozen=True)
+class RobotChannels:
+    """The robot node's and its body's channels (names without the prefix)."""
+
+    low_state: str = _channel("robot", "low_state")
+    low_cmd: str = _channel("robot", "low_cmd")
+    nav_cmd: str = _channel("robot", "nav_cmd")
+    robot_status: str = _channel("robot", "robot_status")
+
+
 DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
 DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
 PLANNER = PlannerChannels()
+ROBOT = RobotChannels()
 SIM_ROBOT_STATE = DEFAULT_CHANNEL_PREFIX + _channel("simulation", "robot_state")
 
 
