@@ -33,6 +33,7 @@ import math
 import os
 import select
 import signal
+import struct
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -224,7 +225,7 @@ class BodyNode:
     def _on_command(self, _channel: str, data: bytes) -> None:
         try:
             message = self._types.low_cmd_t.decode(data)
-        except (ValueError, KeyError, IndexError, UnicodeDecodeError, OverflowError):
+        except (ValueError, struct.error, KeyError, IndexError, UnicodeDecodeError, OverflowError):
             # Not a low_cmd_t (wrong fingerprint, truncated): a motor driver ignores it.
             self.commands_rejected += 1
             return

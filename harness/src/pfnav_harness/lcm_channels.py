@@ -45,6 +45,7 @@ class RobotChannels:
     low_cmd: str = _channel("robot", "low_cmd")
     nav_cmd: str = _channel("robot", "nav_cmd")
     robot_status: str = _channel("robot", "robot_status")
+    robot_estimate: str = _channel("robot", "robot_estimate")
 
 
 DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
