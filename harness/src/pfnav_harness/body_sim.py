@@ -11,11 +11,12 @@ drives instead of a robot.
 Two timings:
 
 * **real time** (default): ticks on absolute `CLOCK_MONOTONIC` deadlines, the body's own clock.
-  A tick sends the state measured at the end of the previous tick, then applies the newest
-  command and steps: the states leave on the clock, and a command computed from a state acts
-  from the next tick on (one tick of transport delay, as on a robot). A tick that overruns
-  its period is counted, and the clock continues on its grid after the present rather than
-  running the missed ticks back to back.
+  A tick sends the state measured at the end of the previous tick, waits up to half a period
+  for the command answering it (a motor driver applies a command when it arrives), then steps
+  with the newest command: the states leave on the clock, and a prompt answer acts on the step
+  after its own state, a late one a tick later. A tick that overruns its period is counted,
+  and the clock continues on its grid after the present rather than running the missed ticks
+  back to back.
 * **lockstep** (`--lockstep`, for tests): the body waits for the command answering its last
   state (`low_cmd_t.state_seq`) before the next step, so a slow machine slows the run down
   instead of changing it.
@@ -47,7 +48,7 @@ from numpy.typing import NDArray
 from .body_sensors import BodySensorConfig, BodySensors
 from .engine import DEFAULT_ENGINE, ENGINE_NAMES, PhysicsEngine, make_engine
 from .errors import HarnessError
-from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, ROBOT
+from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, ROBOT, SIM_ROBOT_STATE_NAME
 
 FloatArray = NDArray[np.float64]
 JOINTS = 12
@@ -116,6 +117,8 @@ class SimTiming:
 
     ticks: int = 0
     overruns: int = 0
+    # Ticks whose step ran with the command answering that tick's state.
+    answered_in_time: int = 0
     work: list[float] = field(default_factory=list)
     period: list[float] = field(default_factory=list)
 
@@ -126,7 +129,13 @@ class SimTiming:
             a = np.array(values)
             return {"count": len(values), "p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
 
-        return {"ticks": self.ticks, "overruns": self.overruns, "work": stats(self.work), "period": stats(self.period)}
+        return {
+            "ticks": self.ticks,
+            "overruns": self.overruns,
+            "answered_in_time": self.answered_in_time,
+            "work": stats(self.work),
+            "period": stats(self.period),
+        }
 
     def summary(self) -> str:
         if not self.work:
@@ -136,7 +145,7 @@ class SimTiming:
         if self.period:
             period = np.array(self.period) * 1e3
             text += f", period p50/p99/max {np.percentile(period, 50):.3f}/{np.percentile(period, 99):.3f}/{period.max():.3f} ms"
-        return text + f", {self.overruns} overruns"
+        return text + f", {self.overruns} overruns, {self.answered_in_time} ticks stepped with their own state's answer"
 
 
 class BodySimulation:
@@ -168,6 +177,24 @@ class BodySimulation:
         self.steps += 1
         self._read_state()
 
+    def truth(self) -> Any:
+        """The simulated robot's true state as a robot_state_t (for logs and evaluation; a robot has no such message)."""
+        s = self.state
+        message = self._types.robot_state_t()
+        message.utime = round(self.time * 1e6)
+        message.position = s[0:3].tolist()
+        message.orientation = s[3:7].tolist()
+        message.linear_velocity = s[7:10].tolist()
+        message.angular_velocity = s[10:13].tolist()
+        message.joint_positions = s[13:25].tolist()
+        message.joint_velocities = s[25:37].tolist()
+        message.joint_torques = self.motors.torque.tolist()
+        self.world.write_foot_contacts(self._contacts)
+        message.foot_contact = [bool(c) for c in self._contacts]
+        message.fsm_state = -1
+        message.reference = [0.0] * 7
+        return message
+
     def low_state(self, seq: int) -> Any:
         """The body sensors now, as a low_state_t with header.seq = `seq`."""
         s = self.state
@@ -198,17 +225,20 @@ class BodySimulation:
 class Channels:
     low_state: str
     low_cmd: str
+    truth: str
 
     @classmethod
     def with_prefix(cls, prefix: str) -> Channels:
-        return cls(prefix + ROBOT.low_state, prefix + ROBOT.low_cmd)
+        return cls(prefix + ROBOT.low_state, prefix + ROBOT.low_cmd, prefix + SIM_ROBOT_STATE_NAME)
 
 
 class BodyNode:
     """A `BodySimulation` on an LCM bus: commands in, states out, in real time or in lockstep."""
 
-    def __init__(self, sim: BodySimulation, lcm: Any, channels: Channels) -> None:
+    def __init__(self, sim: BodySimulation, lcm: Any, channels: Channels, truth_every: int = 0) -> None:
+        """`truth_every` > 0: also publish the true state (robot_state_t on the simulation channel) every that many ticks."""
         self.sim = sim
+        self.truth_every = truth_every
         self.lcm = lcm
         self.channels = channels
         self.seq = 0
@@ -250,11 +280,26 @@ class BodyNode:
         self.seq += 1
         return bytes(self.sim.low_state(self.seq).encode())
 
+    def _drain_until_answer(self, seq: int, until_ns: int) -> None:
+        """Handles commands until one answers state `seq` or CLOCK_MONOTONIC reaches `until_ns`."""
+        fd = self.lcm.fileno()
+        while self.last_answered_seq < seq:
+            left = until_ns - time.monotonic_ns()
+            if left <= 0:
+                break
+            if select.select([fd], [], [], left * 1e-9)[0]:
+                self.lcm.handle()
+        self._drain()
+
     def publish_state(self) -> None:
         self.lcm.publish(self.channels.low_state, self.next_state())
 
-    def run_realtime(self, duration: float | None, stop: Callable[[], bool], rate: float = 1000.0) -> None:
-        """Ticks at `rate` Hz on absolute deadlines until `stop()` or `duration` seconds of wall time."""
+    def run_realtime(self, duration: float | None, stop: Callable[[], bool], rate: float = 1000.0, command_wait: float = 0.5) -> None:
+        """Ticks at `rate` Hz on absolute deadlines until `stop()` or `duration` seconds of wall time.
+
+        `command_wait`: fraction of the period a tick waits for the command answering its state
+        before it steps with the newest command it has.
+        """
         period_ns = round(1e9 / rate)
         if abs(period_ns * 1e-9 - self.sim.world.time_step) > 1e-12:
             raise HarnessError(f"the tick ({period_ns * 1e-6} ms) must equal the physics step ({self.sim.world.time_step * 1e3} ms)")
@@ -265,7 +310,11 @@ class BodyNode:
         previous: int | None = None
         timing = self.timing
         # Each tick sends the state measured at the end of the previous one first, so the states
-        # leave on the tick's clock and the physics step's varying cost does not jitter them.
+        # leave on the tick's clock and the physics step's varying cost does not jitter them;
+        # then it waits a while for the answer, as a motor driver applies a command when it
+        # arrives: in time, the step runs with the torque computed from this very state (the
+        # delay is the node's latency, not a tick); late, with the previous command.
+        wait_ns = round(command_wait * period_ns)
         state = self.next_state()
         while not stop():
             deadline += period_ns
@@ -279,9 +328,13 @@ class BodyNode:
                 timing.period.append((tick_start - previous) * 1e-9)
             previous = tick_start
             self.lcm.publish(self.channels.low_state, state)
-            self._drain()
+            self._drain_until_answer(self.seq, tick_start + wait_ns)
+            if self.last_answered_seq >= self.seq:
+                timing.answered_in_time += 1
             self.sim.step()
             state = self.next_state()
+            if self.truth_every and self.sim.steps % self.truth_every == 0:
+                self.lcm.publish(self.channels.truth, self.sim.truth().encode())
             done = clock()
             timing.work.append((done - tick_start) * 1e-9)
             timing.ticks += 1
@@ -305,6 +358,8 @@ class BodyNode:
             start = time.perf_counter()
             self.sim.step()
             self.publish_state()
+            if self.truth_every and self.sim.steps % self.truth_every == 0:
+                self.lcm.publish(self.channels.truth, self.sim.truth().encode())
             self.timing.work.append(time.perf_counter() - start)
             self.timing.ticks += 1
 
@@ -376,6 +431,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--imu-noise-scale", type=float, default=1.0, help="multiplies the IMU's noise and bias (0: ideal)")
     p.add_argument("--contact-sensor", action="store_true", help="report the engine's foot contacts (else foot_contact = -1)")
     p.add_argument("--out", type=Path, default=Path("out/sim"), help="folder of the exported scenario and the mesh cache")
+    p.add_argument(
+        "--truth-rate",
+        type=float,
+        default=0.0,
+        help="also publish the true state (robot_state_t, channel of [simulation] robot_state) at this rate, Hz (0: never)",
+    )
     p.add_argument("--priority", type=int, default=0, help="SCHED_FIFO priority (1..99) and mlockall for the real-time loop; 0: neither")
     p.add_argument("--report-json", type=Path, help="at exit, write the tick statistics and counters to this JSON file")
     return p
@@ -396,7 +457,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"pfnav-sim: {err}", file=sys.stderr)
         return 2
     lcm = _import_lcm().LCM(args.lcm_url)
-    node = BodyNode(sim, lcm, Channels.with_prefix(args.channel_prefix))
+    if not (math.isfinite(args.truth_rate) and 0.0 <= args.truth_rate <= 1000.0):
+        print("pfnav-sim: --truth-rate must be in 0 ..= 1000 Hz", file=sys.stderr)
+        return 2
+    truth_every = round(1000.0 / args.truth_rate) if args.truth_rate > 0 else 0
+    node = BodyNode(sim, lcm, Channels.with_prefix(args.channel_prefix), truth_every)
     stopping = False
 
     def request_stop(_signum: int, _frame: object) -> None:

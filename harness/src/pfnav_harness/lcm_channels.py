@@ -52,7 +52,9 @@ DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
 DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
 PLANNER = PlannerChannels()
 ROBOT = RobotChannels()
-SIM_ROBOT_STATE = DEFAULT_CHANNEL_PREFIX + _channel("simulation", "robot_state")
+# Without the prefix: pfnav-sim publishes the true state under its own --channel-prefix.
+SIM_ROBOT_STATE_NAME = _channel("simulation", "robot_state")
+SIM_ROBOT_STATE = DEFAULT_CHANNEL_PREFIX + SIM_ROBOT_STATE_NAME
 
 
 def udpm_url(port: int, recv_buf_size: bool = True) -> str:
