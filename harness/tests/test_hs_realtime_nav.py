@@ -53,7 +53,8 @@ def estimate(position: tuple[float, float, float], yaw: float, safety: int = 0) 
 def test_stand_first_then_the_field_on_the_estimate_moved_to_the_world(ramp_scenario: Scenario) -> None:
     bus = FakeBus()
     start = ramp_scenario.start
-    nav = Navigator(ramp_scenario, east_field(ramp_scenario), start, bus, "T_", stand_time=1.0)
+    origin = (start[0], start[1], ramp_scenario.terrain.height_at(*start))
+    nav = Navigator(ramp_scenario, east_field(ramp_scenario), origin, bus, "T_", stand_time=1.0)
     handler: Any = bus.handlers["T_ROBOT_ESTIMATE"]
     assert nav.command(0.0).mode == MODE_STAND, "no estimate yet"
 

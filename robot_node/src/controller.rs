@@ -98,8 +98,14 @@ fn references<const N: usize>(
 
 impl HostedController {
     /// Unpacks the FMU at `archive`, instantiates it with the estimator on and initialises it
-    /// for steps of `step` seconds.
-    pub fn load(archive: &Path, step: f64) -> anyhow::Result<Self> {
+    /// for steps of `step` seconds. `initial_position`: the trunk's position when the node
+    /// starts (`base.pos`, read by the estimator at its first tick only); None keeps the FMU's
+    /// start values, a frame that starts where the robot stands.
+    pub fn load(
+        archive: &Path,
+        step: f64,
+        initial_position: Option<[f64; 3]>,
+    ) -> anyhow::Result<Self> {
         let unpacked = UnpackedFmu::open(archive)?;
         let library = Fmi2Library::load(&unpacked.binary_path())?;
         let description = &unpacked.description;
@@ -146,6 +152,16 @@ impl HostedController {
         fmu.enter_initialization(0.0)?;
         fmu.set_integer(&[estimator], &[kalman])
             .context("setting estimator = kalman")?;
+        if let Some(position) = initial_position {
+            let base: [u32; 3] = references(
+                description,
+                ["x", "y", "z"].iter().map(|c| format!("base.pos.{c}")),
+                ScalarKind::Real,
+                "input",
+            )?;
+            fmu.set_real(&base, &position)
+                .context("setting the initial trunk position base.pos")?;
+        }
         fmu.exit_initialization()?;
         Ok(Self {
             fmu,

@@ -60,6 +60,11 @@ struct Args {
     /// one-period slots, the slot's end as the watchdog); `clock` = fixed deadlines only.
     #[arg(long, value_enum, default_value_t = TriggerArg::State)]
     trigger: TriggerArg,
+    /// The trunk's position X Y Z when the node starts, in the frame the controller should
+    /// estimate in (e.g. the world frame of a map); default: the FMU's start values, a frame
+    /// that starts where the robot stands.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true)]
+    initial_position: Option<Vec<f64>>,
     /// At exit, write the whole run's timing and counters to this JSON file.
     #[arg(long)]
     report_json: Option<PathBuf>,
@@ -122,6 +127,13 @@ fn main() -> anyhow::Result<()> {
     }
 
     config.align_to_state = args.trigger == TriggerArg::State;
+    if let Some(position) = &args.initial_position {
+        anyhow::ensure!(
+            position.len() == 3 && position.iter().all(|v| v.is_finite()),
+            "--initial-position takes three finite numbers X Y Z"
+        );
+        config.initial_position = Some([position[0], position[1], position[2]]);
+    }
 
     let url = args
         .lcm_url

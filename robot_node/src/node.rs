@@ -85,6 +85,9 @@ pub struct NodeConfig {
     pub realtime_priority: Option<i32>,
     /// Stop after this long (None: until the shutdown flag is set).
     pub duration: Option<Duration>,
+    /// The trunk's position when the node starts, in the frame the controller should work in
+    /// (None: the FMU's start values, a frame starting where the robot stands).
+    pub initial_position: Option<[f64; 3]>,
     /// Start each cycle when a fresh state arrives (phase-locked slots, `schedule`); false: on
     /// fixed deadlines, the slot centres, whatever the states do.
     pub align_to_state: bool,
@@ -109,6 +112,7 @@ impl NodeConfig {
             realtime_priority: Some(80),
             duration: None,
             align_to_state: true,
+            initial_position: None,
         }
     }
 
@@ -216,8 +220,12 @@ pub fn run(
 ) -> anyhow::Result<RunReport> {
     config.check()?;
     let period_ns = u64::try_from(config.period.as_nanos()).unwrap_or(u64::MAX);
-    let mut controller = HostedController::load(&config.fmu, config.period.as_secs_f64())
-        .with_context(|| format!("loading the controller FMU {}", config.fmu.display()))?;
+    let mut controller = HostedController::load(
+        &config.fmu,
+        config.period.as_secs_f64(),
+        config.initial_position,
+    )
+    .with_context(|| format!("loading the controller FMU {}", config.fmu.display()))?;
 
     let inbox = Arc::new(Inbox::new(config.safety.state_timeout_ns));
     let state_inbox = Arc::clone(&inbox);

@@ -213,7 +213,7 @@ def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: boo
     estimate_error = math.nan
     if estimates:
         e = estimates[-1]
-        estimate_error = math.hypot(e.position[0] + scenario.start[0] - final[0], e.position[1] + scenario.start[1] - final[1])
+        estimate_error = math.hypot(e.position[0] - final[0], e.position[1] - final[1])
     outcome = RealtimeOutcome(
         name,
         reached,
@@ -282,6 +282,11 @@ def run_realtime(args: Any) -> int:
     from .lcm_channels import udpm_url
     from .scenario import paper_scenario_names
 
+    def stop_on_sigterm(_signum: int, _frame: object) -> None:
+        # Through the `finally` of the run: its processes are stopped too.
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop_on_sigterm)
     if not in_private_network_namespace():
         os.execvp("bash", ["bash", str(paths.repo_root() / "scripts" / "netns.sh"), sys.executable, "-m", "pfnav_harness.cli", *args.argv])
     if not (math.isfinite(args.max_walk) and args.max_walk > 0):

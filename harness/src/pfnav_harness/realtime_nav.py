@@ -6,13 +6,12 @@ newest `robot_estimate_t` from pfnav-robot, turns it into a world pose, asks the
 sends `nav_cmd_t`: Stand for `--stand-time` seconds after the robot first reports torque control,
 Locomotion after, Stand again at the goal.
 
-Frames: the controller's world frame starts where the robot stood when pfnav-robot started
-(x, y = 0 there, yaw from the IMU, the same axes as the world). The navigator is told that start
-pose (`--start X Y`, the scenario's by default: the operator places the robot there) and moves the
-estimate into the world by it; the terrain plane under the robot goes back into the controller's
-frame with the height of the ground under the start taken as the controller's zero
-(`ref.z` = terrain height − ground height at the start). A robot without the start pose would
-use a localisation fix here.
+Frames: the controller estimates in the frame pfnav-robot gives it: the world frame when the
+node was started with `--initial-position` (the demo passes the body's pose; a robot would take
+it from a localisation fix), else a frame starting where the robot stood (x, y = 0 there, yaw
+from the IMU, the world's axes). `--origin X Y Z` is that frame's origin in the world: the
+estimate is moved into the world by it for the field, and the terrain plane under the robot
+back into the controller's frame for `ref.z` and the slopes.
 """
 
 from __future__ import annotations
@@ -55,14 +54,24 @@ class NavigatorState:
 class Navigator:
     """Estimate in, nav_cmd_t out; the planning happens before `run`."""
 
-    def __init__(self, scenario: Scenario, field: Any, start: tuple[float, float], lcm: Any, prefix: str, stand_time: float, period: float = 0.02) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        field: Any,
+        origin: tuple[float, float, float],
+        lcm: Any,
+        prefix: str,
+        stand_time: float,
+        period: float = 0.02,
+    ) -> None:
+        """`origin`: where the controller's frame origin lies in the world (0, 0, 0 when pfnav-robot estimates in the world frame)."""
         from .planner_client import _import_types
 
         self.types = _import_types()
         self.scenario = scenario
         self.follower = FieldFollower(field, FollowerLimits())
         self.planes = PlaneCache(scenario.terrain, PLANE_RADIUS)
-        self.origin = (start[0], start[1], scenario.terrain.height_at(start[0], start[1]))
+        self.origin = origin
         self.lcm = lcm
         self.channel = prefix + ROBOT.nav_cmd
         self.stand_time = stand_time
@@ -171,7 +180,14 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pfnav-navigator", description="The feedback-field navigator as an LCM process: robot_estimate_t in, nav_cmd_t out (50 Hz)."
     )
     p.add_argument("--scenario", required=True, help="paper scenario (terrain, start, goal)")
-    p.add_argument("--start", type=float, nargs=2, metavar=("X", "Y"), help="where the robot stood when pfnav-robot started (default: the scenario's start)")
+    p.add_argument(
+        "--origin",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="the controller frame's origin in the world: 0 0 0 when pfnav-robot was given --initial-position in the world frame "
+        "(default: the scenario's start and the ground height there, the frame of a node started without it)",
+    )
     p.add_argument("--lcm-url", default=os.environ.get("LCM_DEFAULT_URL", DEFAULT_LCM_URL))
     p.add_argument("--channel-prefix", default=DEFAULT_CHANNEL_PREFIX, help="prefix of the robot node's channels")
     p.add_argument("--planner-prefix", default=DEFAULT_CHANNEL_PREFIX, help="prefix of the planner service's channels")
@@ -194,8 +210,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except HarnessError as err:
         print(f"pfnav-navigator: {err}", file=sys.stderr)
         return err.exit_code
-    start = tuple(args.start) if args.start else scenario.start
-    navigator = Navigator(scenario, field, (float(start[0]), float(start[1])), _import_lcm().LCM(args.lcm_url), args.channel_prefix, args.stand_time)
+    if args.origin is not None:
+        origin = (args.origin[0], args.origin[1], args.origin[2])
+    else:
+        origin = (scenario.start[0], scenario.start[1], scenario.terrain.height_at(*scenario.start))
+    navigator = Navigator(scenario, field, origin, _import_lcm().LCM(args.lcm_url), args.channel_prefix, args.stand_time)
     stopping = False
 
     def request_stop(_signum: int, _frame: object) -> None:

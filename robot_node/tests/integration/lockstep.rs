@@ -145,3 +145,31 @@ fn a_body_on_its_own_clock_starts_the_cycles_and_each_command_answers_the_newest
         steps.len()
     );
 }
+
+#[test]
+fn an_initial_position_sets_the_frame_of_the_estimate() {
+    let rig = Rig::start("INITIAL_", |config| {
+        config.initial_position = Some([3.0, -2.0, 0.28]);
+        config.safety.state_timeout_ns = 500_000_000;
+        config.safety.nav_timeout_ns = 2_000_000_000;
+    });
+    let ok = rig.wait_status("torque control", -1, Duration::from_secs(10), |s| {
+        s.safety == RobotStatus::SAFETY_OK
+    });
+    rig.wait_status(
+        "a later status",
+        ok.header.seq,
+        Duration::from_secs(2),
+        |_| true,
+    );
+    let estimates = rig.estimates.clone();
+    rig.stop();
+    let estimates = estimates.lock().unwrap();
+    let last = estimates.last().expect("estimates");
+    // The rigid standing body does not move: the estimate stays where the frame put it.
+    assert!(
+        (last.position[0] - 3.0).abs() < 0.1 && (last.position[1] + 2.0).abs() < 0.1,
+        "{:?}",
+        last.position
+    );
+}
