@@ -29,6 +29,7 @@ beyond the torque law, and the transport's own delay.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import math
 import os
@@ -307,8 +308,6 @@ class BodyNode:
         start = clock()
         end = None if duration is None else start + round(duration * 1e9)
         deadline = start
-        previous: int | None = None
-        timing = self.timing
         # Each tick sends the state measured at the end of the previous one first, so the states
         # leave on the tick's clock and the physics step's varying cost does not jitter them;
         # then it waits a while for the answer, as a motor driver applies a command when it
@@ -316,6 +315,22 @@ class BodyNode:
         # delay is the node's latency, not a tick); late, with the previous command.
         wait_ns = round(command_wait * period_ns)
         state = self.next_state()
+        # The cyclic garbage collector off while ticking (the loop makes no reference cycles; a
+        # pass over the heap with the physics world in it stalls a tick by milliseconds), and
+        # what exists now moved out of its sight for good.
+        gc_was_enabled = gc.isenabled()
+        gc.disable()
+        gc.freeze()
+        try:
+            self._tick_realtime(state, period_ns, wait_ns, deadline, end, stop)
+        finally:
+            if gc_was_enabled:
+                gc.enable()
+
+    def _tick_realtime(self, state: bytes, period_ns: int, wait_ns: int, deadline: int, end: int | None, stop: Callable[[], bool]) -> None:
+        clock = time.monotonic_ns
+        previous: int | None = None
+        timing = self.timing
         while not stop():
             deadline += period_ns
             now = clock()

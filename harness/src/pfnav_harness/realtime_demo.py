@@ -66,7 +66,7 @@ def _stop(process: subprocess.Popen[bytes] | None, timeout: float = 20.0) -> Non
         process.wait()
 
 
-def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: bool) -> RealtimeOutcome:
+def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: bool, stand_time: float = 3.0) -> RealtimeOutcome:
     from . import paths
     from .pipeline import export_scenario
     from .planner_client import PlannerClient, RequestOptions, StartPose, _import_lcm, _import_types
@@ -126,43 +126,20 @@ def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: boo
                 str(sim_json),
             ],
         )
+        # The body settles on the ground before the node starts (motors idle: it sinks from its
+        # crouch), as a robot lies before its controller is switched on.
         deadline = time.monotonic() + 120.0
-        while not truth:
+        while not (len(truth) > 25 and max(abs(v) for v in truth[-1][1].linear_velocity) < 0.01):
             if sim.poll() is not None or time.monotonic() > deadline:
-                raise HarnessError(f"pfnav-sim did not start (log: {logs / f'{name}_sim.log'})")
+                raise HarnessError(f"pfnav-sim did not start or settle (log: {logs / f'{name}_sim.log'})")
             bus.handle_timeout(100)
-        robot = spawn(
-            "robot",
-            [
-                str(paths.pfnav_robot_path()),
-                "--fmu",
-                str(paths.fmu_path()),
-                "--channel-prefix",
-                prefix,
-                "--report-json",
-                str(robot_json),
-                "--nav-timeout-ms",
-                "1000",
-            ],
-        )
-        navigator = spawn(
-            "navigator",
-            [
-                sys.executable,
-                "-m",
-                "pfnav_harness.realtime_nav",
-                "--scenario",
-                name,
-                "--channel-prefix",
-                prefix,
-                "--planner-prefix",
-                prefix,
-                "--out",
-                str(out),
-                "--lcm-url",
-                lcm_url,
-            ],
-        )
+        # The estimator starts from the body's pose in the world (the co-simulation gives it the
+        # true first pose too): the controller, the navigator and the map share the world frame.
+        initial = [f"{v:.6f}" for v in truth[-1][1].position]
+        robot_args = [str(paths.pfnav_robot_path()), "--fmu", str(paths.fmu_path()), "--channel-prefix", prefix, "--report-json", str(robot_json)]
+        robot = spawn("robot", [*robot_args, "--nav-timeout-ms", "1000", "--initial-position", *initial])
+        navigator_args = [sys.executable, "-m", "pfnav_harness.realtime_nav", "--scenario", name, "--channel-prefix", prefix, "--planner-prefix", prefix]
+        navigator = spawn("navigator", [*navigator_args, "--out", str(out), "--lcm-url", lcm_url, "--origin", "0", "0", "0", "--stand-time", str(stand_time)])
         terrain, goal, fall = scenario.terrain, scenario.goal, FallThresholds()
         walk_started: float | None = None
         in_goal_since: float | None = None
@@ -270,6 +247,9 @@ def add_realtime_command(sub: Any) -> None:
     p = sub.add_parser("realtime", help="the stack as four processes (planner, pfnav-robot, pfnav-sim, navigator) walking scenarios in wall-clock time")
     p.add_argument("--scenario", action="append", default=None, help="only this scenario (repeatable; default: the paper's)")
     p.add_argument("--max-walk", type=float, default=150.0, help="wall seconds of walking before a run ends without the goal")
+    p.add_argument(
+        "--stand-time", type=float, default=3.0, help="seconds the navigator asks the robot to stand (after the node's first torque cycle) before walking"
+    )
     p.add_argument("--cosim", action="store_true", help="also co-simulate each scenario (feedback mode, kalman) for comparison")
     p.add_argument("--out", type=Path, default=Path("out/realtime"), help="output folder (logs, LCM logs, report.md)")
     p.add_argument("--results-page", metavar="NAME", help="also write docs/results/NAME.md (stamped)")
@@ -296,7 +276,7 @@ def run_realtime(args: Any) -> int:
     load_before = os.getloadavg()
     outcomes = []
     for name in args.scenario or paper_scenario_names():
-        outcome = run_scenario(name, out, udpm_url(7667), args.max_walk, args.cosim)
+        outcome = run_scenario(name, out, udpm_url(7667), args.max_walk, args.cosim, args.stand_time)
         outcomes.append(outcome)
         print(table([outcome]).splitlines()[-1], flush=True)
     load_after = os.getloadavg()
