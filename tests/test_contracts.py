@@ -53,7 +53,7 @@ CONTRACTS = [
         copies=(
             r"239\.255\.76\.67",
             r'"PFNAV_"',
-            r'"(MAP|PLAN_REQUEST|PLAN_REPLY|FEEDBACK_FIELD|SERVICE_STATUS|SIM_ROBOT_STATE|LOW_STATE|LOW_CMD|NAV_CMD|ROBOT_STATUS)"',
+            r'"(MAP|PLAN_REQUEST|PLAN_REPLY|FEEDBACK_FIELD|SERVICE_STATUS|SIM_ROBOT_STATE|LOW_STATE|LOW_CMD|NAV_CMD|ROBOT_STATUS|ROBOT_ESTIMATE)"',
             r"\{prefix\}(MAP|PLAN_REQUEST|PLAN_REPLY|FEEDBACK_FIELD|SERVICE_STATUS)\b",
         ),
         example='self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply)',

@@ -33,6 +33,7 @@ from pfnav import (
     plan_options_t,
     plan_reply_t,
     plan_request_t,
+    robot_estimate_t,
     robot_state_t,
     robot_status_t,
     service_status_t,
@@ -283,12 +284,23 @@ def sample_messages() -> list[Any]:
     robot_status.states_non_finite, robot_status.nav_cmds_received = 1, 3_000
     robot_status.malformed_messages = 12
     robot_status.realtime_priority, robot_status.memory_locked = False, True
+
+    estimate = robot_estimate_t()
+    estimate.header = header(24)
+    estimate.state_seq = 20
+    estimate.position = [1.25, -0.5, 0.31]
+    estimate.velocity = [0.4, 0.01, -0.02]
+    estimate.rpy = [0.01, -0.03, 0.8]
+    estimate.position_variance = [1e-4, 1e-4, 4e-6]
+    estimate.estimator_status = 8
+    estimate.fsm_state, estimate.safety = 3, robot_status_t.SAFETY_OK
     return [
         state,
         low_state,
         low_cmd,
         nav,
         robot_status,
+        estimate,
         terrain_map(16, 9, False),
         terrain_map(3, 3, True),
         terrain_map(6, 4, True, with_known=True),
@@ -328,6 +340,7 @@ def test_fingerprints_agree_for_every_type() -> None:
             "low_cmd_t",
             "nav_cmd_t",
             "robot_status_t",
+            "robot_estimate_t",
         )
     }
     assert rust == python

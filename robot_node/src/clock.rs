@@ -42,6 +42,16 @@ pub fn sleep_until_ns(deadline_ns: u64) {
     }
 }
 
+/// Gives the calling thread SCHED_FIFO at `priority`; returns pthread_setschedparam's error
+/// code (0: granted).
+pub fn set_thread_fifo(priority: i32) -> i32 {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: pthread_self is always valid; `param` is a valid pointer.
+    unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) }
+}
+
 /// What the real-time set-up achieved; reported in every status message.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RealtimeSettings {
@@ -54,11 +64,7 @@ pub struct RealtimeSettings {
 /// CAP_SYS_NICE / CAP_IPC_LOCK, RLIMIT_MEMLOCK, a container): the loop then runs with
 /// ordinary scheduling, more jitter, and says so in the log and the status.
 pub fn apply_realtime(priority: i32) -> RealtimeSettings {
-    let param = libc::sched_param {
-        sched_priority: priority,
-    };
-    // SAFETY: pthread_self is always valid; `param` is a valid pointer.
-    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    let rc = set_thread_fifo(priority);
     let fifo_priority = rc == 0;
     if fifo_priority {
         tracing::info!(priority, "control thread runs with SCHED_FIFO");

@@ -19,12 +19,27 @@ const REAL_INPUTS: usize = 4 + 3 + 3 + JOINTS + JOINTS + 8 + 2;
 /// cmd.mode and contact[1..4].
 const INTEGER_INPUTS: usize = 1 + 4;
 
+/// est.pos (3), est.vel (3), est.rpy (3), est.posVar (3).
+const ESTIMATE_OUTPUTS: usize = 12;
+
+/// The controller's estimate of the trunk after a step (its `est.*` outputs).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Estimate {
+    pub position: [f64; 3],
+    pub velocity: [f64; 3],
+    pub rpy: [f64; 3],
+    pub position_variance: [f64; 3],
+    /// `est.status`, the estimator's status bit mask.
+    pub status: i32,
+}
+
 /// What one controller step produced.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControllerOutput {
     pub torques: [f64; JOINTS],
     /// The FMU's `fsm.state`.
     pub fsm_state: i32,
+    pub estimate: Estimate,
 }
 
 pub struct HostedController {
@@ -34,7 +49,9 @@ pub struct HostedController {
     real_inputs: [u32; REAL_INPUTS],
     integer_inputs: [u32; INTEGER_INPUTS],
     torques: [u32; JOINTS],
-    fsm_state: [u32; 1],
+    estimate: [u32; ESTIMATE_OUTPUTS],
+    /// fsm.state and est.status.
+    integer_outputs: [u32; 2],
     /// FMU ModeRequest codes of nav_cmd_t's MODE_PASSIVE, MODE_STAND, MODE_LOCOMOTION.
     mode_codes: [i32; 3],
     /// Steps taken: the communication point is steps × step, free of summed rounding.
@@ -81,8 +98,14 @@ fn references<const N: usize>(
 
 impl HostedController {
     /// Unpacks the FMU at `archive`, instantiates it with the estimator on and initialises it
-    /// for steps of `step` seconds.
-    pub fn load(archive: &Path, step: f64) -> anyhow::Result<Self> {
+    /// for steps of `step` seconds. `initial_position`: the trunk's position when the node
+    /// starts (`base.pos`, read by the estimator at its first tick only); None keeps the FMU's
+    /// start values, a frame that starts where the robot stands.
+    pub fn load(
+        archive: &Path,
+        step: f64,
+        initial_position: Option<[f64; 3]>,
+    ) -> anyhow::Result<Self> {
         let unpacked = UnpackedFmu::open(archive)?;
         let library = Fmi2Library::load(&unpacked.binary_path())?;
         let description = &unpacked.description;
@@ -99,9 +122,17 @@ impl HostedController {
             ScalarKind::Real,
             "output",
         )?;
-        let fsm_state = references(
+        let estimate = references(
             description,
-            ["fsm.state".to_owned()],
+            ["pos", "vel", "rpy", "posVar"]
+                .iter()
+                .flat_map(|block| (1..=3).map(move |i| format!("est.{block}[{i}]"))),
+            ScalarKind::Real,
+            "output",
+        )?;
+        let integer_outputs = references(
+            description,
+            ["fsm.state".to_owned(), "est.status".to_owned()],
             ScalarKind::Integer,
             "output",
         )?;
@@ -121,6 +152,16 @@ impl HostedController {
         fmu.enter_initialization(0.0)?;
         fmu.set_integer(&[estimator], &[kalman])
             .context("setting estimator = kalman")?;
+        if let Some(position) = initial_position {
+            let base: [u32; 3] = references(
+                description,
+                ["x", "y", "z"].iter().map(|c| format!("base.pos.{c}")),
+                ScalarKind::Real,
+                "input",
+            )?;
+            fmu.set_real(&base, &position)
+                .context("setting the initial trunk position base.pos")?;
+        }
         fmu.exit_initialization()?;
         Ok(Self {
             fmu,
@@ -128,7 +169,8 @@ impl HostedController {
             real_inputs,
             integer_inputs,
             torques,
-            fsm_state,
+            estimate,
+            integer_outputs,
             mode_codes,
             steps: 0,
             step,
@@ -181,11 +223,20 @@ impl HostedController {
         let mut output = ControllerOutput {
             torques: [0.0; JOINTS],
             fsm_state: 0,
+            estimate: Estimate::default(),
         };
         self.fmu.get_real(&self.torques, &mut output.torques)?;
-        let mut fsm = [0i32; 1];
-        self.fmu.get_integer(&self.fsm_state, &mut fsm)?;
-        output.fsm_state = fsm[0];
+        let mut estimate = [0.0f64; ESTIMATE_OUTPUTS];
+        self.fmu.get_real(&self.estimate, &mut estimate)?;
+        let e = &mut output.estimate;
+        e.position.copy_from_slice(&estimate[0..3]);
+        e.velocity.copy_from_slice(&estimate[3..6]);
+        e.rpy.copy_from_slice(&estimate[6..9]);
+        e.position_variance.copy_from_slice(&estimate[9..12]);
+        let mut integers = [0i32; 2];
+        self.fmu.get_integer(&self.integer_outputs, &mut integers)?;
+        output.fsm_state = integers[0];
+        e.status = integers[1];
         Ok(output)
     }
 }

@@ -2,7 +2,8 @@
 //! thread, checks them, and keeps the newest good one of each for the control loop, which
 //! takes a copy once per cycle. Bad packets are counted, never stored, and never panic.
 
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Condvar, Mutex, PoisonError};
+use std::time::Duration;
 
 use lcm_types::pfnav::{LowState, NavCmd};
 use lcm_types::Message;
@@ -130,10 +131,12 @@ struct Held {
 }
 
 /// Shared between the LCM thread (writer) and the control loop (reader); each side holds the
-/// lock for a copy of a few hundred bytes.
+/// lock for a copy of a few hundred bytes. The control loop can wait for the next accepted
+/// state ([`Inbox::wait_for_state`]): the LCM thread wakes it as soon as one is stored.
 #[derive(Debug)]
 pub struct Inbox {
     held: Mutex<Held>,
+    state_accepted: Condvar,
     /// After this long without an accepted state the link counts as lost, and the next state
     /// may start a new sequence (a restarted body counts from 0 again).
     sequence_restart_ns: u64,
@@ -143,6 +146,7 @@ impl Inbox {
     pub fn new(sequence_restart_ns: u64) -> Self {
         Self {
             held: Mutex::new(Held::default()),
+            state_accepted: Condvar::new(),
             sequence_restart_ns,
         }
     }
@@ -181,6 +185,30 @@ impl Inbox {
         }
         snapshot.counters.states_received += 1;
         snapshot.state = Some((BodyState::from_message(&message), now_ns));
+        drop(held);
+        self.state_accepted.notify_one();
+    }
+
+    /// Waits until more than `accepted` states have been accepted in all (compare
+    /// `Counters::states_received` of the last snapshot) or CLOCK_MONOTONIC reaches `until_ns`,
+    /// whichever comes first. Returns the arrival time of the newest state if one came, None
+    /// at the deadline.
+    pub fn wait_for_state(&self, accepted: i64, until_ns: u64) -> Option<u64> {
+        let mut held = self.lock();
+        loop {
+            if held.snapshot.counters.states_received > accepted {
+                return held.snapshot.state.map(|(_, at)| at);
+            }
+            let now = crate::clock::now_ns();
+            if now >= until_ns {
+                return None;
+            }
+            held = self
+                .state_accepted
+                .wait_timeout(held, Duration::from_nanos(until_ns - now))
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
     }
 
     /// A `nav_cmd_t` packet received at `now_ns`; one with an unknown mode or a non-finite
@@ -273,6 +301,33 @@ mod tests {
             !again.non_finite_state && again.out_of_order.is_none(),
             "events are cleared"
         );
+    }
+
+    #[test]
+    fn a_waiting_loop_is_woken_by_the_next_accepted_state_only() {
+        let inbox = std::sync::Arc::new(Inbox::new(20_000_000));
+        inbox.on_low_state(&bytes(&state(1)), 5);
+        let accepted = inbox.take().counters.states_received;
+        assert_eq!(
+            inbox.wait_for_state(accepted - 1, 0),
+            Some(5),
+            "already there"
+        );
+        assert_eq!(
+            inbox.wait_for_state(accepted, crate::clock::now_ns() + 1_000_000),
+            None,
+            "nothing new: the deadline ends the wait"
+        );
+        let writer = std::sync::Arc::clone(&inbox);
+        let sender = std::thread::spawn(move || {
+            writer.on_low_state(b"garbage", 10);
+            writer.on_low_state(&bytes(&state(1)), 20);
+            writer.on_low_state(&bytes(&state(2)), 30);
+        });
+        // Generous deadline: only a state the inbox accepts (seq 2) ends this wait early.
+        let woke = inbox.wait_for_state(accepted, crate::clock::now_ns() + 60_000_000_000);
+        sender.join().expect("sender");
+        assert_eq!(woke, Some(30));
     }
 
     #[test]

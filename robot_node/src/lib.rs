@@ -17,6 +17,7 @@ pub mod inbox;
 pub mod model_description;
 pub mod node;
 pub mod safety;
+pub mod schedule;
 pub mod stats;
 
 pub use node::{run, NodeConfig, RobotChannels, RunReport, MISS_FACTOR};

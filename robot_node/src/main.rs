@@ -46,6 +46,9 @@ struct Args {
     /// Seconds between two robot_status_t messages.
     #[arg(long, default_value_t = 0.5)]
     status_period: f64,
+    /// Control cycles between two robot_estimate_t messages (10: 100 Hz at 1 kHz).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    estimate_every: u32,
     /// SCHED_FIFO priority of the control thread (1..=99); 0 keeps ordinary scheduling and
     /// does not lock memory.
     #[arg(long, default_value_t = 80)]
@@ -53,6 +56,24 @@ struct Args {
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
+    /// What starts a control cycle: `state` = the arrival of a fresh low_state_t (phase-locked
+    /// one-period slots, the slot's end as the watchdog); `clock` = fixed deadlines only.
+    #[arg(long, value_enum, default_value_t = TriggerArg::State)]
+    trigger: TriggerArg,
+    /// The trunk's position X Y Z when the node starts, in the frame the controller should
+    /// estimate in (e.g. the world frame of a map); default: the FMU's start values, a frame
+    /// that starts where the robot stands.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true)]
+    initial_position: Option<Vec<f64>>,
+    /// At exit, write the whole run's timing and counters to this JSON file.
+    #[arg(long)]
+    report_json: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum TriggerArg {
+    State,
+    Clock,
 }
 
 fn milliseconds(value: f64, flag: &str) -> anyhow::Result<u64> {
@@ -91,6 +112,7 @@ fn main() -> anyhow::Result<()> {
         "--status-period must be in (0, 3600] s"
     );
     config.status_period = Duration::from_secs_f64(args.status_period);
+    config.estimate_every = args.estimate_every;
     anyhow::ensure!(
         (0..=99).contains(&args.priority),
         "--priority must be 0 (ordinary scheduling) or 1..=99"
@@ -102,6 +124,15 @@ fn main() -> anyhow::Result<()> {
             "--duration must be a positive number of seconds"
         );
         config.duration = Some(Duration::from_secs_f64(seconds));
+    }
+
+    config.align_to_state = args.trigger == TriggerArg::State;
+    if let Some(position) = &args.initial_position {
+        anyhow::ensure!(
+            position.len() == 3 && position.iter().all(|v| v.is_finite()),
+            "--initial-position takes three finite numbers X Y Z"
+        );
+        config.initial_position = Some([position[0], position[1], position[2]]);
     }
 
     let url = args
@@ -124,5 +155,15 @@ fn main() -> anyhow::Result<()> {
         damping_entries = report.damping_entries,
         "stopped"
     );
+    if let Some(path) = &args.report_json {
+        let text = serde_json::to_string_pretty(&report.to_json(config_period_s(args.rate)))
+            .context("encoding the run report")?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("writing the run report {}", path.display()))?;
+    }
     Ok(())
+}
+
+fn config_period_s(rate: u32) -> f64 {
+    1.0 / f64::from(rate)
 }

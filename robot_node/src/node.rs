@@ -1,6 +1,8 @@
-//! The node: an LCM thread fills the inbox; the control loop wakes on absolute deadlines,
-//! takes the newest state and navigator command, asks the safety monitor, steps the controller
-//! (or damps), sends low_cmd_t, and every status period sends robot_status_t.
+//! The node: an LCM thread fills the inbox; the control loop runs once per period-long slot,
+//! started by the arrival of a fresh state or by the slot's end (the watchdog, an absolute
+//! deadline; see `schedule`), takes the newest state and navigator command, asks the safety
+//! monitor, steps the controller (or damps), sends low_cmd_t, and every status period sends
+//! robot_status_t.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -8,13 +10,14 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
 use lcm_transport::Lcm;
-use lcm_types::pfnav::{Header, LowCmd, RobotStatus};
+use lcm_types::pfnav::{Header, LowCmd, RobotEstimate, RobotStatus};
 use lcm_types::Message;
 
 use crate::clock::{self, RealtimeSettings};
 use crate::controller::HostedController;
 use crate::inbox::{Counters, Inbox};
 use crate::safety::{Mode, SafetyConfig, SafetyMonitor};
+use crate::schedule::{SlotSchedule, Trigger};
 use crate::stats::LoopTiming;
 
 /// A cycle is missed when its period exceeds this many nominal periods (Cheetah-Software's
@@ -28,6 +31,7 @@ pub struct RobotChannels {
     pub low_cmd: String,
     pub nav_cmd: String,
     pub status: String,
+    pub estimate: String,
 }
 
 impl RobotChannels {
@@ -38,6 +42,7 @@ impl RobotChannels {
             low_cmd: format!("{prefix}{}", robot::LOW_CMD),
             nav_cmd: format!("{prefix}{}", robot::NAV_CMD),
             status: format!("{prefix}{}", robot::ROBOT_STATUS),
+            estimate: format!("{prefix}{}", robot::ROBOT_ESTIMATE),
         };
         let plain = prefix
             .chars()
@@ -51,6 +56,7 @@ impl RobotChannels {
             &channels.low_cmd,
             &channels.nav_cmd,
             &channels.status,
+            &channels.estimate,
         ] {
             anyhow::ensure!(
                 name.len() <= lcm_transport::MAX_CHANNEL_LEN,
@@ -73,10 +79,18 @@ pub struct NodeConfig {
     /// Velocity gain of the damping command, N m s/rad.
     pub damping_kd: f32,
     pub status_period: Duration,
+    /// Cycles between two robot_estimate_t messages (10: 100 Hz at 1 kHz).
+    pub estimate_every: u32,
     /// Try SCHED_FIFO at this priority and mlockall (None: ordinary scheduling).
     pub realtime_priority: Option<i32>,
     /// Stop after this long (None: until the shutdown flag is set).
     pub duration: Option<Duration>,
+    /// The trunk's position when the node starts, in the frame the controller should work in
+    /// (None: the FMU's start values, a frame starting where the robot stands).
+    pub initial_position: Option<[f64; 3]>,
+    /// Start each cycle when a fresh state arrives (phase-locked slots, `schedule`); false: on
+    /// fixed deadlines, the slot centres, whatever the states do.
+    pub align_to_state: bool,
 }
 
 impl NodeConfig {
@@ -94,8 +108,11 @@ impl NodeConfig {
             },
             damping_kd: 2.0,
             status_period: Duration::from_millis(500),
+            estimate_every: 10,
             realtime_priority: Some(80),
             duration: None,
+            align_to_state: true,
+            initial_position: None,
         }
     }
 
@@ -110,6 +127,10 @@ impl NodeConfig {
             "damping kd must be finite and >= 0"
         );
         anyhow::ensure!(!self.status_period.is_zero(), "status period must be > 0");
+        anyhow::ensure!(
+            self.estimate_every > 0,
+            "estimate interval must be > 0 cycles"
+        );
         anyhow::ensure!(
             self.safety.state_timeout_ns > 0 && self.safety.nav_timeout_ns > 0,
             "timeouts must be > 0"
@@ -128,6 +149,48 @@ pub struct RunReport {
     pub realtime: RealtimeSettings,
     pub final_mode: Mode,
     pub final_reason: String,
+}
+
+impl RunReport {
+    /// The whole run's figures (seconds, counts) as JSON, for benchmarks.
+    pub fn to_json(&self, period_s: f64) -> serde_json::Value {
+        let t = &self.timing;
+        let s = |ns: u64| ns as f64 * 1e-9;
+        let percentiles = |h: &crate::stats::Histogram| {
+            serde_json::json!({
+                "count": h.count(),
+                "p50": s(h.percentile_ns(0.5)),
+                "p99": s(h.percentile_ns(0.99)),
+                "max": s(h.max_ns()),
+            })
+        };
+        serde_json::json!({
+            "period_nominal": period_s,
+            "cycles": self.cycles,
+            "misses": t.misses,
+            "period": percentiles(&t.period),
+            "jitter": percentiles(&t.jitter),
+            "runtime": percentiles(&t.runtime),
+            "latency": percentiles(&t.latency),
+            "cycles_state_arrived": t.state_arrived,
+            "cycles_state_waiting": t.state_waiting,
+            "cycles_watchdog": t.watchdog,
+            "skipped_slots": t.skipped_slots,
+            "damping_entries": self.damping_entries,
+            "states_received": self.counters.states_received,
+            "states_out_of_order": self.counters.states_out_of_order,
+            "states_non_finite": self.counters.states_non_finite,
+            "nav_cmds_received": self.counters.nav_cmds_received,
+            "malformed_messages": self.counters.malformed_messages,
+            "realtime_priority": self.realtime.fifo_priority,
+            "memory_locked": self.realtime.memory_locked,
+            "final_safety": match self.final_mode {
+                Mode::Torque => "torque",
+                Mode::Damping => "damping",
+            },
+            "final_reason": self.final_reason,
+        })
+    }
 }
 
 fn wall_utime() -> i64 {
@@ -157,8 +220,12 @@ pub fn run(
 ) -> anyhow::Result<RunReport> {
     config.check()?;
     let period_ns = u64::try_from(config.period.as_nanos()).unwrap_or(u64::MAX);
-    let mut controller = HostedController::load(&config.fmu, config.period.as_secs_f64())
-        .with_context(|| format!("loading the controller FMU {}", config.fmu.display()))?;
+    let mut controller = HostedController::load(
+        &config.fmu,
+        config.period.as_secs_f64(),
+        config.initial_position,
+    )
+    .with_context(|| format!("loading the controller FMU {}", config.fmu.display()))?;
 
     let inbox = Arc::new(Inbox::new(config.safety.state_timeout_ns));
     let state_inbox = Arc::clone(&inbox);
@@ -175,6 +242,20 @@ pub fn run(
         let receiver = std::thread::Builder::new()
             .name("pfnav-robot-lcm".to_owned())
             .spawn_scoped(scope, || {
+                // The receiving thread stamps the states' arrival and wakes the control loop:
+                // under load a normally scheduled thread would hand the states over in bursts.
+                // Same priority as the control thread; its work per packet is a decode and a
+                // copy.
+                if let Some(priority) = config.realtime_priority {
+                    let rc = clock::set_thread_fifo(priority);
+                    if rc != 0 {
+                        tracing::warn!(
+                            priority,
+                            error = %std::io::Error::from_raw_os_error(rc),
+                            "SCHED_FIFO refused for the LCM thread"
+                        );
+                    }
+                }
                 while !receiver_stop.load(Ordering::Relaxed) {
                     if let Err(error) = lcm.handle_timeout(Duration::from_millis(10)) {
                         tracing::error!(%error, "LCM receive failed");
@@ -221,6 +302,19 @@ fn control_loop(
     let mut command_bytes = Vec::new();
     let mut status_seq = 0i64;
     let mut fsm_state = -1i8;
+    // The newest estimate, sent every `estimate_every` cycles (its bytes reused like the command's).
+    let mut estimate = RobotEstimate {
+        header: Header {
+            frame_id: "controller".to_owned(),
+            ..Header::default()
+        },
+        state_seq: -1,
+        fsm_state: -1,
+        safety: RobotStatus::SAFETY_DAMPING,
+        ..RobotEstimate::default()
+    };
+    let mut estimate_bytes = Vec::new();
+    let mut estimate_seq = 0i64;
     let mut last_used_state_seq: Option<i64> = None;
     let mut counters = Counters::default();
     let mut command = LowCmd {
@@ -231,7 +325,9 @@ fn control_loop(
     };
 
     let start_ns = clock::now_ns();
-    let mut deadline = start_ns + period_ns;
+    let mut schedule = SlotSchedule::new(period_ns, start_ns);
+    // Accepted states in all at the previous cycle: a larger count in the inbox is a fresh one.
+    let mut states_seen = 0i64;
     let mut next_status = start_ns + status_ns;
     let mut previous_cycle_start: Option<u64> = None;
     tracing::info!(
@@ -242,7 +338,18 @@ fn control_loop(
     );
 
     while !shutdown.load(Ordering::Relaxed) {
-        clock::sleep_until_ns(deadline);
+        let trigger = if config.align_to_state {
+            let open = schedule.open_ns();
+            clock::sleep_until_ns(open);
+            match inbox.wait_for_state(states_seen, schedule.close_ns()) {
+                Some(arrival) if arrival > open => Trigger::StateArrived(arrival),
+                Some(arrival) => Trigger::StateWaiting(arrival),
+                None => Trigger::Watchdog,
+            }
+        } else {
+            clock::sleep_until_ns(schedule.centre_ns());
+            Trigger::Clock
+        };
         let cycle_start = clock::now_ns();
         if end_ns.is_some_and(|end| cycle_start - start_ns >= end) {
             break;
@@ -251,15 +358,27 @@ fn control_loop(
             let period = cycle_start.saturating_sub(previous);
             window.period.record(period);
             total.period.record(period);
+            let jitter = period.abs_diff(period_ns);
+            window.jitter.record(jitter);
+            total.jitter.record(jitter);
             if period > miss_ns {
                 window.misses += 1;
                 total.misses += 1;
             }
         }
         previous_cycle_start = Some(cycle_start);
+        tracing::trace!(
+            cycle_start,
+            centre = schedule.centre_ns(),
+            ?trigger,
+            "cycle"
+        );
+        window.count_trigger(trigger);
+        total.count_trigger(trigger);
 
         let snapshot = inbox.take();
         counters = snapshot.counters;
+        states_seen = counters.states_received;
         let mut mode = safety.update(&snapshot, cycle_start);
         let mut fresh_state_arrival = None;
         if mode == Mode::Torque {
@@ -273,6 +392,13 @@ fn control_loop(
                         command.kd = [0.0; 12];
                         fsm_state = i8::try_from(output.fsm_state).unwrap_or(-1);
                         command.state_seq = state.seq;
+                        let e = &output.estimate;
+                        estimate.state_seq = state.seq;
+                        estimate.position = e.position;
+                        estimate.velocity = e.velocity;
+                        estimate.rpy = e.rpy;
+                        estimate.position_variance = e.position_variance;
+                        estimate.estimator_status = e.status;
                         if last_used_state_seq != Some(state.seq) {
                             fresh_state_arrival = Some(arrived);
                             last_used_state_seq = Some(state.seq);
@@ -319,6 +445,25 @@ fn control_loop(
         }
         window_cycles += 1;
         cycles += 1;
+
+        if cycles % u64::from(config.estimate_every) == 0 && estimate.state_seq >= 0 {
+            estimate.header.seq = estimate_seq;
+            estimate.header.utime = wall_utime();
+            estimate.fsm_state = fsm_state;
+            estimate.safety = match mode {
+                Mode::Torque => RobotStatus::SAFETY_OK,
+                Mode::Damping => RobotStatus::SAFETY_DAMPING,
+            };
+            estimate_seq += 1;
+            match estimate.encode_into(&mut estimate_bytes) {
+                Ok(()) => {
+                    if let Err(error) = lcm.publish(&config.channels.estimate, &estimate_bytes) {
+                        tracing::error!(%error, "could not send robot_estimate_t");
+                    }
+                }
+                Err(error) => tracing::error!(%error, "could not encode robot_estimate_t"),
+            }
+        }
 
         if sent >= next_status {
             let status = RobotStatus {
@@ -370,14 +515,9 @@ fn control_loop(
             }
         }
 
-        deadline += period_ns;
-        let now = clock::now_ns();
-        if deadline <= now {
-            // Overran by at least a whole period: start again on the grid after now rather
-            // than running the missed cycles back to back (their states are stale anyway).
-            let behind = (now - deadline) / period_ns + 1;
-            deadline += behind * period_ns;
-        }
+        let skipped = schedule.advance(trigger, clock::now_ns());
+        window.skipped_slots += skipped;
+        total.skipped_slots += skipped;
     }
     Ok(RunReport {
         timing: total,

@@ -20,11 +20,26 @@ pub enum Mode {
     Damping,
 }
 
+/// The kinds of fault: while one persists its first reason is kept (the age of the last state
+/// when damping began, not a growing one), a different one replaces it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fault {
+    Controller,
+    NoStateYet,
+    StateTimeout,
+    NonFiniteState,
+    OutOfOrderState,
+    NoNavYet,
+    NavTimeout,
+}
+
 #[derive(Debug)]
 pub struct SafetyMonitor {
     config: SafetyConfig,
     mode: Mode,
     reason: String,
+    /// The fault the reason describes (None in torque mode and after recovery).
+    fault: Option<Fault>,
     /// CLOCK_MONOTONIC ns of the last change of mode (0: never changed).
     since_ns: u64,
     damping_entries: i64,
@@ -39,6 +54,7 @@ impl SafetyMonitor {
             config,
             mode: Mode::Damping,
             reason: "starting: no low_state_t and nav_cmd_t yet".to_owned(),
+            fault: None,
             since_ns: 0,
             damping_entries: 0,
             good_cycles: 0,
@@ -67,45 +83,57 @@ impl SafetyMonitor {
     pub fn controller_failed(&mut self, reason: String, now_ns: u64) {
         let reason = format!("controller failed: {reason}");
         self.controller_failure = Some(reason.clone());
-        self.enter_damping(reason, now_ns);
+        self.enter_damping(Fault::Controller, reason, now_ns);
     }
 
-    fn fault(&self, snapshot: &Snapshot, now_ns: u64) -> Option<String> {
+    fn fault(&self, snapshot: &Snapshot, now_ns: u64) -> Option<(Fault, String)> {
         if let Some(failure) = &self.controller_failure {
-            return Some(failure.clone());
+            return Some((Fault::Controller, failure.clone()));
         }
         let age_ms = |at: u64| now_ns.saturating_sub(at) as f64 * 1e-6;
         match snapshot.state {
-            None => return Some("no low_state_t received yet".to_owned()),
+            None => {
+                return Some((Fault::NoStateYet, "no low_state_t received yet".to_owned()));
+            }
             Some((_, at)) if now_ns.saturating_sub(at) > self.config.state_timeout_ns => {
-                return Some(format!(
-                    "no low_state_t for {:.1} ms (timeout {:.1} ms)",
-                    age_ms(at),
-                    self.config.state_timeout_ns as f64 * 1e-6
+                return Some((
+                    Fault::StateTimeout,
+                    format!(
+                        "no low_state_t for {:.1} ms (timeout {:.1} ms)",
+                        age_ms(at),
+                        self.config.state_timeout_ns as f64 * 1e-6
+                    ),
                 ))
             }
             Some(_) => {}
         }
         if snapshot.non_finite_state {
-            return Some("non-finite value in low_state_t".to_owned());
+            return Some((
+                Fault::NonFiniteState,
+                "non-finite value in low_state_t".to_owned(),
+            ));
         }
         if let Some((seq, last)) = snapshot.out_of_order {
-            return Some(format!("out-of-order low_state_t seq {seq} after {last}"));
+            return Some((
+                Fault::OutOfOrderState,
+                format!("out-of-order low_state_t seq {seq} after {last}"),
+            ));
         }
         match snapshot.nav {
-            None => Some("no nav_cmd_t received yet".to_owned()),
-            Some((_, at)) if now_ns.saturating_sub(at) > self.config.nav_timeout_ns => {
-                Some(format!(
-                    "no nav_cmd_t for {:.0} ms (timeout {:.0} ms)",
+            None => Some((Fault::NoNavYet, "no nav_cmd_t received yet".to_owned())),
+            Some((_, at)) if now_ns.saturating_sub(at) > self.config.nav_timeout_ns => Some((
+                Fault::NavTimeout,
+                format!(
+                    "no nav_cmd_t for {:.1} ms (timeout {:.1} ms)",
                     age_ms(at),
                     self.config.nav_timeout_ns as f64 * 1e-6
-                ))
-            }
+                ),
+            )),
             Some(_) => None,
         }
     }
 
-    fn enter_damping(&mut self, reason: String, now_ns: u64) {
+    fn enter_damping(&mut self, fault: Fault, reason: String, now_ns: u64) {
         self.good_cycles = 0;
         if self.mode == Mode::Torque {
             self.mode = Mode::Damping;
@@ -113,13 +141,16 @@ impl SafetyMonitor {
             self.damping_entries += 1;
             tracing::warn!(%reason, "damping");
         }
-        self.reason = reason;
+        if self.fault != Some(fault) {
+            self.fault = Some(fault);
+            self.reason = reason;
+        }
     }
 
     /// The mode of this cycle, given the inbox's snapshot at `now_ns`.
     pub fn update(&mut self, snapshot: &Snapshot, now_ns: u64) -> Mode {
         match self.fault(snapshot, now_ns) {
-            Some(reason) => self.enter_damping(reason, now_ns),
+            Some((fault, reason)) => self.enter_damping(fault, reason, now_ns),
             None if self.mode == Mode::Damping => {
                 self.good_cycles += 1;
                 if self.good_cycles >= self.config.recover_cycles {
@@ -127,6 +158,7 @@ impl SafetyMonitor {
                     self.mode = Mode::Torque;
                     self.since_ns = now_ns;
                     self.reason.clear();
+                    self.fault = None;
                 }
             }
             None => {}
@@ -209,7 +241,7 @@ mod tests {
                 }),
             ),
             (
-                "no nav_cmd_t for 501 ms",
+                "no nav_cmd_t for 501.0 ms",
                 Box::new(|now| Snapshot {
                     nav: Some((NavReference::default(), now - 501 * MS)),
                     ..healthy(now)
@@ -243,6 +275,31 @@ mod tests {
             assert_eq!(run_healthy(&mut monitor, now + 6 * MS, 1), Mode::Torque);
             now += 10 * MS;
         }
+    }
+
+    #[test]
+    fn a_persisting_fault_keeps_the_reason_it_began_with() {
+        let mut monitor = SafetyMonitor::new(config());
+        assert_eq!(run_healthy(&mut monitor, 0, 3), Mode::Torque);
+        let last_state = 2 * MS;
+        let stale = |now: u64| Snapshot {
+            state: Some((BodyState::default(), last_state)),
+            ..healthy(now)
+        };
+        monitor.update(&stale(last_state + 21 * MS), last_state + 21 * MS);
+        monitor.update(&stale(last_state + 90 * MS), last_state + 90 * MS);
+        assert_eq!(
+            monitor.reason(),
+            "no low_state_t for 21.0 ms (timeout 20.0 ms)",
+            "the age when damping began"
+        );
+        let nan = Snapshot {
+            non_finite_state: true,
+            ..healthy(last_state + 91 * MS)
+        };
+        monitor.update(&nan, last_state + 91 * MS);
+        assert_eq!(monitor.reason(), "non-finite value in low_state_t");
+        assert_eq!(monitor.damping_entries(), 1);
     }
 
     #[test]

@@ -2,6 +2,8 @@
 //! allocation-free, so it can run inside the control loop), and the per-window and whole-run
 //! figures of the status message and the benchmark.
 
+use crate::schedule::Trigger;
+
 /// Histogram bins, 1 µs each: durations up to 20 ms are resolved exactly to the microsecond;
 /// longer ones are counted in the last bin and still reach `max_ns`.
 const BINS: usize = 20_000;
@@ -81,20 +83,45 @@ impl Histogram {
 pub struct LoopTiming {
     /// Time between two consecutive cycle starts.
     pub period: Histogram,
+    /// |period − nominal period|.
+    pub jitter: Histogram,
     /// Time from a cycle's start to its command having been sent.
     pub runtime: Histogram,
     /// Time from a state's arrival to the sending of the command computed from it.
     pub latency: Histogram,
     /// Cycles whose period exceeded the miss threshold.
     pub misses: u64,
+    /// Cycles started by a state that arrived while the loop waited for it.
+    pub state_arrived: u64,
+    /// Cycles started at their slot's opening because a fresh state was already waiting.
+    pub state_waiting: u64,
+    /// Cycles started by the watchdog (the slot ended without a fresh state), or by the clock
+    /// alone when the loop is not aligned to the states.
+    pub watchdog: u64,
+    /// Slots without a cycle because the loop was still busy when they closed.
+    pub skipped_slots: u64,
 }
 
 impl LoopTiming {
+    pub fn count_trigger(&mut self, trigger: Trigger) {
+        match trigger {
+            Trigger::StateArrived(_) => self.state_arrived += 1,
+            Trigger::StateWaiting(_) => self.state_waiting += 1,
+            Trigger::Watchdog | Trigger::Clock => self.watchdog += 1,
+        }
+    }
+
+    /// Empties the window in place (no allocation: it runs inside the control loop).
     pub fn clear(&mut self) {
         self.period.clear();
+        self.jitter.clear();
         self.runtime.clear();
         self.latency.clear();
         self.misses = 0;
+        self.state_arrived = 0;
+        self.state_waiting = 0;
+        self.watchdog = 0;
+        self.skipped_slots = 0;
     }
 }
 

@@ -20,6 +20,7 @@ from .engine import DEFAULT_ENGINE, ENGINE_LABELS, ENGINE_NAMES
 from .errors import HarnessError
 from .fmu_runner import DEFAULT_ESTIMATOR, ESTIMATOR_MODES
 from .planner_client import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, METHODS, ROBOT_FOOTPRINT_RADIUS, PlanAnswer, PlannerClient, RequestOptions, StartPose
+from .realtime_demo import add_realtime_command, run_realtime
 from .replay.command import add_replay_command, run_replay
 from .robot_fmu import robot_and_fmu
 from .scenario import paper_scenario_names
@@ -239,6 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_common(demo)
     add_replay_command(sub)
+    add_realtime_command(sub)
     return parser
 
 
@@ -716,7 +718,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(format="pfnav-demo: %(message)s")
     logging.getLogger("pfnav_harness").setLevel(logging.INFO)
     try:
-        return run_replay(args) if args.command == "replay" else execute(args)
+        if args.command == "replay":
+            return run_replay(args)
+        if args.command == "realtime":
+            return run_realtime(args)
+        return execute(args)
     except HarnessError as err:
         print(f"pfnav-demo: error: {err}", file=sys.stderr)
         return err.exit_code

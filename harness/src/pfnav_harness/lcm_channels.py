@@ -37,10 +37,24 @@ class PlannerChannels:
     service_status: str = _channel("planner", "service_status")
 
 
+@dataclass(frozen=True)
+class RobotChannels:
+    """The robot node's and its body's channels (names without the prefix)."""
+
+    low_state: str = _channel("robot", "low_state")
+    low_cmd: str = _channel("robot", "low_cmd")
+    nav_cmd: str = _channel("robot", "nav_cmd")
+    robot_status: str = _channel("robot", "robot_status")
+    robot_estimate: str = _channel("robot", "robot_estimate")
+
+
 DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
 DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
 PLANNER = PlannerChannels()
-SIM_ROBOT_STATE = DEFAULT_CHANNEL_PREFIX + _channel("simulation", "robot_state")
+ROBOT = RobotChannels()
+# Without the prefix: pfnav-sim publishes the true state under its own --channel-prefix.
+SIM_ROBOT_STATE_NAME = _channel("simulation", "robot_state")
+SIM_ROBOT_STATE = DEFAULT_CHANNEL_PREFIX + SIM_ROBOT_STATE_NAME
 
 
 def udpm_url(port: int, recv_buf_size: bool = True) -> str:

@@ -64,6 +64,16 @@ def pf_robot_path() -> Path:
     )
 
 
+def pfnav_robot_path() -> Path:
+    """`pfnav-robot`, the controller FMU as a real-time LCM node (robot_node/)."""
+    return _artifact(
+        "PFNAV_ROBOT_NODE",
+        repo_root() / "target" / "release" / "pfnav-robot",
+        "pfnav-robot binary",
+        "build it with `cargo build --release -p pfnav-robot`",
+    )
+
+
 def default_robot_config_path() -> Path:
     """Our robot's config, the robot the default FMU is built for."""
     return repo_root() / "robot" / "quadruped.toml"

@@ -12,7 +12,7 @@ use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
 use lcm_types::pfnav::{
     FeedbackField, Header, LowCmd, LowState, NavCmd, PlanMetrics, PlanOptions, PlanReply,
-    PlanRequest, RobotStatus, ServiceStatus, TerrainMap, TrajectorySample,
+    PlanRequest, RobotEstimate, RobotStatus, ServiceStatus, TerrainMap, TrajectorySample,
 };
 use lcm_types::{AnyMessage, Message};
 
@@ -178,6 +178,7 @@ fn pfnav_seeds() -> Vec<AnyMessage> {
         AnyMessage::LowCmd(low_cmd()),
         AnyMessage::NavCmd(nav_cmd()),
         AnyMessage::RobotStatus(robot_status()),
+        AnyMessage::RobotEstimate(robot_estimate()),
         AnyMessage::TerrainMap(sample_map()),
         AnyMessage::FeedbackField(field),
         AnyMessage::PlanRequest(request),
@@ -447,4 +448,18 @@ fn typed_decoders_reject_other_types() {
             if expected == PlanRequest::FINGERPRINT && found == TerrainMap::FINGERPRINT),
         "{err}"
     );
+}
+
+fn robot_estimate() -> RobotEstimate {
+    RobotEstimate {
+        header: header(17),
+        state_seq: 13,
+        position: [1.25, -0.5, 0.31],
+        velocity: [0.4, 0.01, -0.02],
+        rpy: [0.01, -0.03, 0.8],
+        position_variance: [1e-4, 1e-4, 4e-6],
+        estimator_status: 8,
+        fsm_state: 3,
+        safety: RobotStatus::SAFETY_OK,
+    }
 }

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use lcm_types::pfnav::RobotStatus;
 
-use crate::support::Rig;
+use crate::support::{Pacing, Rig};
 
 #[test]
 fn keeps_1_khz_in_lockstep_and_its_torques_are_finite() {
@@ -25,6 +25,7 @@ fn keeps_1_khz_in_lockstep_and_its_torques_are_finite() {
         |_| true,
     );
     let commands = rig.commands.clone();
+    let estimates = rig.estimates.clone();
     let report = rig.stop();
 
     assert_eq!(last.safety, RobotStatus::SAFETY_OK, "{last:?}");
@@ -52,9 +53,123 @@ fn keeps_1_khz_in_lockstep_and_its_torques_are_finite() {
     );
     assert_eq!(report.damping_entries, 0, "no fault in a healthy run");
     assert_eq!(report.counters.states_out_of_order, 0);
+    // The body answers each command at once: its state waits for the next slot to open, and
+    // a state that is always there does not make the loop run faster (the rate bound above).
+    let timing = &report.timing;
+    assert!(
+        timing.state_waiting * 2 > report.cycles,
+        "{} of {} cycles found their state waiting",
+        timing.state_waiting,
+        report.cycles
+    );
+
+    // The estimate goes out every 10 cycles once the controller has stepped: finite, in torque
+    // control, on the rigid standing body near the controller's start (x = y = 0).
+    let estimates = estimates.lock().unwrap();
+    let count = estimates.len() as u64;
+    assert!(
+        count * 10 <= report.cycles && count * 10 + 200 >= report.cycles,
+        "{count} estimates in {} cycles",
+        report.cycles
+    );
+    let last_estimate = estimates.last().expect("estimates");
+    assert_eq!(last_estimate.safety, RobotStatus::SAFETY_OK);
+    assert!((1..=2).contains(&last_estimate.fsm_state));
+    assert!(last_estimate
+        .position
+        .iter()
+        .chain(&last_estimate.velocity)
+        .chain(&last_estimate.rpy)
+        .all(|v| v.is_finite()));
+    assert!(last_estimate.position[0].abs() < 0.1 && last_estimate.position[1].abs() < 0.1);
+    assert!(estimates
+        .windows(2)
+        .all(|w| w[1].header.seq == w[0].header.seq + 1));
 
     let commands = commands.lock().unwrap();
     let torque = commands.iter().filter(|c| !c.damping).count();
     assert!(torque > 1_500, "{torque} torque commands");
     assert!(commands.iter().all(|c| c.finite), "every command is finite");
+}
+
+#[test]
+fn a_body_on_its_own_clock_starts_the_cycles_and_each_command_answers_the_newest_state() {
+    let rig = Rig::start_paced(
+        "PACED_",
+        Pacing::Clock(Duration::from_millis(1)),
+        |config| {
+            config.safety.state_timeout_ns = 500_000_000;
+            config.safety.nav_timeout_ns = 2_000_000_000;
+        },
+    );
+    let first_ok = rig.wait_status("torque control", -1, Duration::from_secs(10), |s| {
+        s.safety == RobotStatus::SAFETY_OK
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    rig.wait_status(
+        "a later status",
+        first_ok.header.seq,
+        Duration::from_secs(2),
+        |_| true,
+    );
+    let commands = rig.commands.clone();
+    let report = rig.stop();
+    let timing = &report.timing;
+    // The loop waits for the body's state and runs when it arrives; only a state delayed by
+    // more than half a period (a starved scheduler) leaves a cycle to the watchdog. Before the
+    // phase-locked slots, no cycle was started by a state.
+    assert!(
+        timing.state_arrived * 2 > report.cycles,
+        "{} of {} cycles started by an arriving state ({} waiting, {} watchdog)",
+        timing.state_arrived,
+        report.cycles,
+        timing.state_waiting,
+        timing.watchdog
+    );
+    assert_eq!(report.damping_entries, 0, "no fault in a healthy run");
+    // Every state is answered once: the commands' state seqs increase one by one, apart from
+    // the few a late wake-up merged.
+    let commands = commands.lock().unwrap();
+    let answered: Vec<i64> = commands
+        .iter()
+        .filter(|c| !c.damping && c.state_seq >= 0)
+        .map(|c| c.state_seq)
+        .collect();
+    assert!(answered.len() > 1_500, "{} torque commands", answered.len());
+    let steps: Vec<i64> = answered.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(steps.iter().all(|&d| d >= 0), "state seqs never go back");
+    let one_by_one = steps.iter().filter(|&&d| d == 1).count();
+    assert!(
+        one_by_one * 10 > steps.len() * 8,
+        "{one_by_one} of {} commands answered the next state",
+        steps.len()
+    );
+}
+
+#[test]
+fn an_initial_position_sets_the_frame_of_the_estimate() {
+    let rig = Rig::start("INITIAL_", |config| {
+        config.initial_position = Some([3.0, -2.0, 0.28]);
+        config.safety.state_timeout_ns = 500_000_000;
+        config.safety.nav_timeout_ns = 2_000_000_000;
+    });
+    let ok = rig.wait_status("torque control", -1, Duration::from_secs(10), |s| {
+        s.safety == RobotStatus::SAFETY_OK
+    });
+    rig.wait_status(
+        "a later status",
+        ok.header.seq,
+        Duration::from_secs(2),
+        |_| true,
+    );
+    let estimates = rig.estimates.clone();
+    rig.stop();
+    let estimates = estimates.lock().unwrap();
+    let last = estimates.last().expect("estimates");
+    // The rigid standing body does not move: the estimate stays where the frame put it.
+    assert!(
+        (last.position[0] - 3.0).abs() < 0.1 && (last.position[1] + 2.0).abs() < 0.1,
+        "{:?}",
+        last.position
+    );
 }

@@ -1,5 +1,6 @@
-//! A node on a memq bus with a fake body that answers every low_cmd_t with a rigid standing
-//! low_state_t (lockstep), a fake navigator, and recorders of commands and status messages.
+//! A node on a memq bus with a fake body that sends a rigid standing low_state_t, either in
+//! answer to every low_cmd_t (lockstep) or on its own clock, a fake navigator, and recorders
+//! of commands and status messages.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -8,7 +9,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use lcm_transport::Lcm;
-use lcm_types::pfnav::{Header, LowCmd, LowState, NavCmd, RobotStatus};
+use lcm_types::pfnav::{Header, LowCmd, LowState, NavCmd, RobotEstimate, RobotStatus};
 use lcm_types::Message;
 use pfnav_robot::clock::now_ns;
 use pfnav_robot::fmu_host::UnpackedFmu;
@@ -53,6 +54,8 @@ pub struct Received {
     pub at_ns: u64,
     pub damping: bool,
     pub finite: bool,
+    /// The seq of the state the command answers.
+    pub state_seq: i64,
 }
 
 pub struct Rig {
@@ -61,12 +64,14 @@ pub struct Rig {
     pub body: Arc<Mutex<Body>>,
     pub commands: Arc<Mutex<Vec<Received>>>,
     pub statuses: Arc<Mutex<Vec<RobotStatus>>>,
+    pub estimates: Arc<Mutex<Vec<RobotEstimate>>>,
     /// CLOCK_MONOTONIC ns of the body's last answer with a valid state.
     pub last_state_ns: Arc<Mutex<u64>>,
     pub navigator_on: Arc<AtomicBool>,
     shutdown: Arc<AtomicBool>,
     node: Option<JoinHandle<anyhow::Result<RunReport>>>,
     navigator: Option<JoinHandle<()>>,
+    body_clock: Option<JoinHandle<()>>,
 }
 
 fn standing_state(fmu: &std::path::Path) -> LowState {
@@ -93,10 +98,78 @@ fn standing_state(fmu: &std::path::Path) -> LowState {
     }
 }
 
+/// How the fake body times its states.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pacing {
+    /// Answer every command at once (a body in lockstep with the node).
+    Lockstep,
+    /// Send a state every period on the body's own absolute deadlines, whatever the node does
+    /// (a body with its own clock: a robot's motor boards, or pfnav-sim in real time).
+    Clock(Duration),
+}
+
+/// The fake body's states: the standing state with seq + 1 each, or what `Body` says instead.
+struct FakeBody {
+    template: LowState,
+    behaviour: Arc<Mutex<Body>>,
+    last_state_ns: Arc<Mutex<u64>>,
+    seq: i64,
+    garbage_seed: u64,
+}
+
+impl FakeBody {
+    /// The next packet to send on the state channel (None: the body is silent).
+    fn next_payload(&mut self) -> Option<Vec<u8>> {
+        let mut behaviour = self.behaviour.lock().unwrap();
+        let mut state = self.template.clone();
+        self.seq += 1;
+        state.header.seq = self.seq;
+        state.tick = self.seq;
+        let payload = match *behaviour {
+            Body::Silent => return None,
+            Body::Answer => state.encode().expect("state encodes"),
+            Body::NanOnce => {
+                *behaviour = Body::Answer;
+                state.dq[4] = f32::NAN;
+                state.encode().expect("state encodes")
+            }
+            Body::OutOfOrderOnce => {
+                *behaviour = Body::Answer;
+                state.header.seq = self.seq - 5;
+                state.encode().expect("state encodes")
+            }
+            Body::Garbage => {
+                // xorshift: random lengths and bytes, every third packet behind the right
+                // fingerprint so the decoder gets past the first check.
+                let seed = &mut self.garbage_seed;
+                *seed ^= *seed << 13;
+                *seed ^= *seed >> 7;
+                *seed ^= *seed << 17;
+                let len = (*seed % 400) as usize;
+                let mut bytes: Vec<u8> = (0..len).map(|i| (*seed >> (i % 56)) as u8).collect();
+                if *seed % 3 == 0 && bytes.len() >= 8 {
+                    bytes[..8].copy_from_slice(&LowState::FINGERPRINT.to_be_bytes());
+                }
+                bytes
+            }
+        };
+        if *behaviour == Body::Answer {
+            *self.last_state_ns.lock().unwrap() = now_ns();
+        }
+        Some(payload)
+    }
+}
+
 impl Rig {
-    /// Starts a node with `prefix` channels, the fake body answering, the navigator sending
-    /// Stand every 20 ms, status every 100 ms; `adjust` changes the node's configuration.
+    /// Starts a node with `prefix` channels, the fake body answering every command, the
+    /// navigator sending Stand every 20 ms, status every 100 ms; `adjust` changes the node's
+    /// configuration.
     pub fn start(prefix: &str, adjust: impl FnOnce(&mut NodeConfig)) -> Self {
+        Self::start_paced(prefix, Pacing::Lockstep, adjust)
+    }
+
+    /// As `start`, with the body timed by `pacing`.
+    pub fn start_paced(prefix: &str, pacing: Pacing, adjust: impl FnOnce(&mut NodeConfig)) -> Self {
         let lcm = Arc::new(Lcm::open("memq://").expect("memq bus"));
         let channels = RobotChannels::with_prefix(prefix).expect("channels");
         let fmu = fmu_path();
@@ -110,13 +183,18 @@ impl Rig {
         let commands = Arc::new(Mutex::new(Vec::new()));
         let statuses = Arc::new(Mutex::new(Vec::new()));
         let last_state_ns = Arc::new(Mutex::new(0u64));
-        let template = standing_state(&fmu);
+        let shutdown = Arc::new(AtomicBool::new(false));
+        let fake_body = Arc::new(Mutex::new(FakeBody {
+            template: standing_state(&fmu),
+            behaviour: body.clone(),
+            last_state_ns: last_state_ns.clone(),
+            seq: 0,
+            garbage_seed: 0x9e37_79b9_7f4a_7c15,
+        }));
         {
-            let (body, commands, last_state_ns) =
-                (body.clone(), commands.clone(), last_state_ns.clone());
+            let commands = commands.clone();
             let (bus, state_channel) = (Arc::clone(&lcm), channels.low_state.clone());
-            let mut seq = 0i64;
-            let mut garbage_seed = 0x9e37_79b9_7f4a_7c15u64;
+            let fake_body = fake_body.clone();
             let subscription = lcm
                 .subscribe(&channels.low_cmd, move |_, bytes| {
                     let at_ns = now_ns();
@@ -127,49 +205,47 @@ impl Rig {
                         at_ns,
                         damping: command.kd.iter().any(|&kd| kd > 0.0),
                         finite: command.tau.iter().chain(&command.kd).all(|v| v.is_finite()),
+                        state_seq: command.state_seq,
                     });
-                    let mut behaviour = body.lock().unwrap();
-                    let mut state = template.clone();
-                    seq += 1;
-                    state.header.seq = seq;
-                    state.tick = seq;
-                    let payload = match *behaviour {
-                        Body::Silent => return,
-                        Body::Answer => state.encode().expect("state encodes"),
-                        Body::NanOnce => {
-                            *behaviour = Body::Answer;
-                            state.dq[4] = f32::NAN;
-                            state.encode().expect("state encodes")
+                    if pacing == Pacing::Lockstep {
+                        if let Some(payload) = fake_body.lock().unwrap().next_payload() {
+                            let _ = bus.publish(&state_channel, &payload);
                         }
-                        Body::OutOfOrderOnce => {
-                            *behaviour = Body::Answer;
-                            state.header.seq = seq - 5;
-                            state.encode().expect("state encodes")
-                        }
-                        Body::Garbage => {
-                            // xorshift: random lengths and bytes, every third packet behind
-                            // the right fingerprint so the decoder gets past the first check.
-                            garbage_seed ^= garbage_seed << 13;
-                            garbage_seed ^= garbage_seed >> 7;
-                            garbage_seed ^= garbage_seed << 17;
-                            let len = (garbage_seed % 400) as usize;
-                            let mut bytes: Vec<u8> =
-                                (0..len).map(|i| (garbage_seed >> (i % 56)) as u8).collect();
-                            if garbage_seed % 3 == 0 && bytes.len() >= 8 {
-                                bytes[..8].copy_from_slice(&LowState::FINGERPRINT.to_be_bytes());
-                            }
-                            bytes
-                        }
-                    };
-                    if *behaviour == Body::Answer {
-                        *last_state_ns.lock().unwrap() = now_ns();
                     }
-                    drop(behaviour);
-                    let _ = bus.publish(&state_channel, &payload);
                 })
                 .expect("subscribe low_cmd");
             // Subscriptions borrow the bus; the rig keeps the bus for the whole test, so the
             // subscription may live as long (dropping it would unsubscribe the body).
+            std::mem::forget(subscription);
+        }
+        let body_clock = match pacing {
+            Pacing::Lockstep => None,
+            Pacing::Clock(period) => {
+                let (bus, state_channel) = (Arc::clone(&lcm), channels.low_state.clone());
+                let shutdown = shutdown.clone();
+                let period_ns = period.as_nanos() as u64;
+                Some(std::thread::spawn(move || {
+                    let mut deadline = now_ns();
+                    while !shutdown.load(Ordering::Relaxed) {
+                        deadline += period_ns;
+                        pfnav_robot::clock::sleep_until_ns(deadline);
+                        if let Some(payload) = fake_body.lock().unwrap().next_payload() {
+                            let _ = bus.publish(&state_channel, &payload);
+                        }
+                    }
+                }))
+            }
+        };
+        let estimates = Arc::new(Mutex::new(Vec::new()));
+        {
+            let estimates = estimates.clone();
+            let subscription = lcm
+                .subscribe(&channels.estimate, move |_, bytes| {
+                    if let Ok(estimate) = RobotEstimate::decode(bytes) {
+                        estimates.lock().unwrap().push(estimate);
+                    }
+                })
+                .expect("subscribe estimate");
             std::mem::forget(subscription);
         }
         {
@@ -184,7 +260,6 @@ impl Rig {
             std::mem::forget(subscription);
         }
 
-        let shutdown = Arc::new(AtomicBool::new(false));
         let navigator_on = Arc::new(AtomicBool::new(true));
         let navigator = {
             let (bus, channel) = (Arc::clone(&lcm), channels.nav_cmd.clone());
@@ -218,11 +293,13 @@ impl Rig {
             body,
             commands,
             statuses,
+            estimates,
             last_state_ns,
             navigator_on,
             shutdown,
             node: Some(node),
             navigator: Some(navigator),
+            body_clock,
         }
     }
 
@@ -264,6 +341,9 @@ impl Rig {
         self.shutdown.store(true, Ordering::Relaxed);
         if let Some(navigator) = self.navigator.take() {
             navigator.join().expect("navigator thread");
+        }
+        if let Some(body_clock) = self.body_clock.take() {
+            body_clock.join().expect("body clock thread");
         }
         self.node
             .take()
