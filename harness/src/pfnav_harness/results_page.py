@@ -164,3 +164,48 @@ def write_results_page(
     )
     page.write_text(text, encoding="utf-8")
     return page
+
+
+def pf_plan_report_main(
+    *,
+    script: str,
+    subcommand: str,
+    title: str,
+    description: str,
+    default_out: Path,
+    extra_help: str,
+    argv: Sequence[str] | None,
+    echo_report: bool = False,
+) -> int:
+    """The command line of a script that runs `pf-plan SUBCOMMAND --out OUT [EXTRA…]` (which writes
+    OUT/report.md) and, with `--results-page NAME`, publishes that report as docs/results/NAME.md
+    with this module's stamp (taken before the run: the commit that ran and the load it ran under).
+    `echo_report`: print the report when no page is asked for."""
+    import argparse
+    import sys
+
+    from .errors import HarnessError
+
+    parser = argparse.ArgumentParser(prog=Path(script).name, description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=default_out, help=f"output folder of `pf-plan {subcommand}` (default {default_out})")
+    parser.add_argument("--results-page", default=None, metavar="NAME", help="also publish the report as docs/results/NAME.md")
+    parser.add_argument("extra", nargs="*", help=f"after --: more arguments of `pf-plan {subcommand}` ({extra_help})")
+    args = parser.parse_args(argv)
+    if args.results_page is not None and not PAGE_NAME.match(args.results_page):
+        parser.error(f"--results-page: lower-case letters, digits and '-', got {args.results_page!r}")
+    try:
+        pf_plan = paths.pf_plan_path()
+    except HarnessError as err:
+        print(f"{parser.prog}: error: {err}", file=sys.stderr)
+        return err.exit_code
+    stamp = collect_stamp() if args.results_page else None
+    proc = subprocess.run([str(pf_plan), subcommand, "--out", str(args.out), *args.extra], check=False, stdout=subprocess.DEVNULL if echo_report else None)
+    if proc.returncode != 0:
+        return proc.returncode
+    report = (args.out / "report.md").read_text(encoding="utf-8")
+    if args.results_page:
+        command = regenerate_command(f".venv/bin/python {script}", argv if argv is not None else sys.argv[1:])
+        print(f"results page: {write_results_page(args.results_page, title, without_pictures(report), command, stamp)}")
+    elif echo_report:
+        print(report, end="")
+    return 0
