@@ -11,11 +11,9 @@ fn pf_plan(args: &[&str]) -> std::process::Output {
         .expect("pf-plan runs")
 }
 
-#[test]
-fn the_field_is_written_as_npz_and_png_and_numpy_reads_it() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let (npz, png) = (dir.path().join("field.npz"), dir.path().join("field.png"));
-    let out = pf_plan(&[
+/// A P-F plan of c_shape on a 32² grid into `dir`, with `extra` arguments; it must succeed.
+fn plan_c_shape(dir: &Path, extra: &[&str]) {
+    let mut args = vec![
         "plan",
         "--scenario",
         "c_shape",
@@ -24,23 +22,53 @@ fn the_field_is_written_as_npz_and_png_and_numpy_reads_it() {
         "--grid",
         "32",
         "--out",
-        dir.path().to_str().expect("utf-8 path"),
-        "--field-out",
-        npz.to_str().expect("utf-8 path"),
-        "--field-plot",
-        png.to_str().expect("utf-8 path"),
-    ]);
+        dir.to_str().expect("utf-8 path"),
+    ];
+    args.extend_from_slice(extra);
+    let out = pf_plan(&args);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(png.metadata().expect("png written").len() > 10_000);
+}
+
+/// Runs the Python `check` (which prints "ok") with the repo's venv on `files`; skipped without
+/// a venv.
+fn numpy_check(check: &str, files: &[&Path]) {
     let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
     if !python.exists() {
         eprintln!("no .venv: numpy check skipped (scripts/setup.sh makes it)");
         return;
     }
+    let out = Command::new(python)
+        .arg("-c")
+        .arg(check)
+        .args(files.iter().map(|f| f.as_os_str()))
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success() && String::from_utf8_lossy(&out.stdout).trim() == "ok",
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn the_field_is_written_as_npz_and_png_and_numpy_reads_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (npz, png) = (dir.path().join("field.npz"), dir.path().join("field.png"));
+    plan_c_shape(
+        dir.path(),
+        &[
+            "--field-out",
+            npz.to_str().expect("utf-8 path"),
+            "--field-plot",
+            png.to_str().expect("utf-8 path"),
+        ],
+    );
+    assert!(png.metadata().expect("png written").len() > 10_000);
     let check = r#"
 import sys, numpy as np
 z = np.load(sys.argv[1])
@@ -58,16 +86,7 @@ ix, iy = int(gx / 0.5), int(gy / 0.5)
 assert c[iy, ix] == 0.0, c[iy, ix]
 print("ok")
 "#;
-    let out = Command::new(python)
-        .args(["-c", check, npz.to_str().expect("utf-8 path")])
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success() && String::from_utf8_lossy(&out.stdout).trim() == "ok",
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    numpy_check(check, &[&npz]);
 }
 
 #[test]
@@ -98,31 +117,15 @@ fn a_field_without_a_pf_plan_is_refused_with_the_reason() {
 fn the_occupation_density_is_written_on_the_planning_grid() {
     let dir = tempfile::tempdir().expect("temp dir");
     let (density, field) = (dir.path().join("density.npz"), dir.path().join("field.npz"));
-    let out = pf_plan(&[
-        "plan",
-        "--scenario",
-        "c_shape",
-        "--method",
-        "pf",
-        "--grid",
-        "32",
-        "--out",
-        dir.path().to_str().expect("utf-8 path"),
-        "--field-out",
-        field.to_str().expect("utf-8 path"),
-        "--density-out",
-        density.to_str().expect("utf-8 path"),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    plan_c_shape(
+        dir.path(),
+        &[
+            "--field-out",
+            field.to_str().expect("utf-8 path"),
+            "--density-out",
+            density.to_str().expect("utf-8 path"),
+        ],
     );
-    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../.venv/bin/python");
-    if !python.exists() {
-        eprintln!("no .venv: numpy check skipped (scripts/setup.sh makes it)");
-        return;
-    }
     // The uniform start puts mass on every cell that reaches the goal: ρ > 0 exactly where the
     // field has a cost-to-go > 0, 0 in the goal and where the goal is out of reach.
     let check = r#"
@@ -137,19 +140,5 @@ assert np.all(np.isfinite(rho)) and rho.min() >= 0.0
 assert np.all(rho[c > 0] > 0.0) and np.all(rho[c <= 0] == 0.0)
 print("ok")
 "#;
-    let out = Command::new(python)
-        .args([
-            "-c",
-            check,
-            density.to_str().expect("utf-8 path"),
-            field.to_str().expect("utf-8 path"),
-        ])
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success() && String::from_utf8_lossy(&out.stdout).trim() == "ok",
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    numpy_check(check, &[&density, &field]);
 }
