@@ -658,7 +658,7 @@ mod tests {
                 .iter()
                 .map(|f| f.len)
                 .sum::<usize>(),
-            57
+            58
         );
     }
 

@@ -192,7 +192,8 @@ def store_label(store: SweepStore) -> str:
     """A store's robot, estimator and engine, for legends and table rows."""
     spec = (store.stored_spec() or {}).get("spec", {})
     robot = Path(spec["robot"]).stem if spec.get("robot") else "ours"
-    return f"{robot}, {spec.get('estimator', '?')}, {spec.get('engine', DEFAULT_ENGINE)}"
+    estimator = spec.get("estimator") or "?"
+    return f"{robot}, {estimator}, {spec.get('engine', DEFAULT_ENGINE)}"
 
 
 def write_comparison(stores: list[SweepStore], out_dir: Path) -> Path:
