@@ -8,9 +8,8 @@
 //! end. `PF_BENCH_SCENARIOS=c_shape,pits` chooses the scenarios (default: c_shape and pits; the
 //! mountain pass has the same geometry as c_shape: no hard obstacles).
 
-use std::cell::RefCell;
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use criterion::Criterion;
 use pf_planner::basis::BasisKind;
@@ -18,39 +17,13 @@ use pf_planner::generators::Generators;
 use pf_planner::grid::PlanningGrid;
 use pf_planner::scenarios;
 
+mod support;
+use support::Recorder;
+
 /// RBF centres along the map's longer side.
 const CENTRES: usize = 32;
 /// Move directions (the planner's default).
 const DIRECTIONS: usize = 8;
-
-/// Per-iteration times of the samples of the last measurement, seconds.
-struct Recorder(RefCell<Vec<f64>>);
-
-impl Recorder {
-    /// Benchmarks `routine` under `name`; returns (minimum, median, maximum) of the samples.
-    fn measure(&self, c: &mut Criterion, name: &str, mut routine: impl FnMut()) -> [f64; 3] {
-        self.0.borrow_mut().clear();
-        c.bench_function(name, |b| {
-            b.iter_custom(|iters| {
-                let started = Instant::now();
-                for _ in 0..iters {
-                    routine();
-                }
-                let elapsed = started.elapsed();
-                self.0
-                    .borrow_mut()
-                    .push(elapsed.as_secs_f64() / iters as f64);
-                elapsed
-            })
-        });
-        let mut times = self.0.borrow().clone();
-        times.sort_by(f64::total_cmp);
-        match (times.first(), times.get(times.len() / 2), times.last()) {
-            (Some(&lo), Some(&mid), Some(&hi)) => [lo, mid, hi],
-            _ => [f64::NAN; 3],
-        }
-    }
-}
 
 fn ms(t: f64) -> String {
     format!("{:.0}", t * 1e3)
@@ -63,7 +36,7 @@ fn main() {
         .measurement_time(Duration::from_secs(4))
         .configure_from_args();
     let names = std::env::var("PF_BENCH_SCENARIOS").unwrap_or_else(|_| "c_shape,pits".into());
-    let rec = Recorder(RefCell::new(Vec::new()));
+    let rec = Recorder::default();
     let mut rows = Vec::new();
     for name in names.split(',').map(str::trim).filter(|n| !n.is_empty()) {
         let scenario = scenarios::by_name(name).expect("built-in scenario");

@@ -7,10 +7,9 @@
 //! `cargo bench -p pf-planner --bench pf` (about 3 minutes; Clarabel at 128² dominates).
 //! `PF_BENCH_SKIP_CLARABEL=1` leaves Clarabel out, `PF_BENCH_SKIP_RBF=1` the RBF rows.
 
-use std::cell::RefCell;
 use std::hint::black_box;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use criterion::Criterion;
 use pf_planner::basis::BasisKind;
@@ -26,37 +25,15 @@ use pf_planner::plan::{Method, PlannerOptions, PreparedMap};
 use pf_planner::scenarios;
 use pf_planner::traversability::{block_steep_cells, TraversabilityField, TraversabilityParams};
 
-const U_MAX: f64 = 1.0;
+mod support;
+use support::Recorder;
 
-/// Per-iteration times of the samples of the last measurement.
-struct Recorder(RefCell<Vec<f64>>);
-
-impl Recorder {
-    fn new() -> Self {
-        Self(RefCell::new(Vec::new()))
-    }
-
-    /// Benchmarks `routine` under `name` and returns its median time in seconds.
-    fn measure(&self, c: &mut Criterion, name: &str, mut routine: impl FnMut()) -> f64 {
-        self.0.borrow_mut().clear();
-        c.bench_function(name, |b| {
-            b.iter_custom(|iters| {
-                let started = Instant::now();
-                for _ in 0..iters {
-                    routine();
-                }
-                let elapsed = started.elapsed();
-                self.0
-                    .borrow_mut()
-                    .push(elapsed.as_secs_f64() / iters as f64);
-                elapsed
-            })
-        });
-        let mut times = self.0.borrow().clone();
-        times.sort_by(f64::total_cmp);
-        times.get(times.len() / 2).copied().unwrap_or(f64::NAN)
-    }
+/// `rec.measure`'s median, seconds.
+fn median(rec: &Recorder, c: &mut Criterion, name: &str, routine: impl FnMut()) -> f64 {
+    rec.measure(c, name, routine)[1]
 }
+
+const U_MAX: f64 = 1.0;
 
 #[derive(Default)]
 struct Row {
@@ -106,7 +83,7 @@ fn indicator_row(
 ) -> Row {
     let grid = grid_of(scenario, size);
     let basis = BasisKind::Indicator;
-    let generators = rec.measure(c, &format!("indicator {size}²: generators"), || {
+    let generators = median(rec, c, &format!("indicator {size}²: generators"), || {
         black_box(PfGenerators::build(&grid, &basis, 8).expect("generators"));
     });
     let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
@@ -120,31 +97,48 @@ fn indicator_row(
     .expect("prepared");
     let problem = prepared.problem(&gens, U_MAX);
     let exact_settings = settings(LpSolver::Exact);
-    let exact = rec.measure(c, &format!("indicator {size}²: exact solve"), || {
+    let exact = median(rec, c, &format!("indicator {size}²: exact solve"), || {
         black_box(lp::solve(&problem, &exact_settings).expect("exact"));
     });
-    let dijkstra = rec.measure(c, &format!("indicator {size}²: graph Dijkstra"), || {
-        black_box(distances_to_targets(
-            &grid,
-            &prepared.goal_cells,
-            Connectivity::Eight,
-        ));
-    });
+    let dijkstra = median(
+        rec,
+        c,
+        &format!("indicator {size}²: graph Dijkstra"),
+        || {
+            black_box(distances_to_targets(
+                &grid,
+                &prepared.goal_cells,
+                Connectivity::Eight,
+            ));
+        },
+    );
     let clarabel = with_clarabel.then(|| {
         let clarabel_settings = settings(LpSolver::Clarabel);
-        rec.measure(c, &format!("indicator {size}²: Clarabel solve"), || {
-            black_box(lp::solve(&problem, &clarabel_settings).expect("clarabel"));
-        })
+        median(
+            rec,
+            c,
+            &format!("indicator {size}²: Clarabel solve"),
+            || {
+                black_box(lp::solve(&problem, &clarabel_settings).expect("clarabel"));
+            },
+        )
     });
     let opts = PfOptions {
         u_max: U_MAX,
         start_density: StartDensity::UniformFree,
         ..PfOptions::default()
     };
-    let pipeline = rec.measure(c, &format!("indicator {size}²: generators + plan"), || {
-        let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
-        black_box(pf::solve(&gens, &grid, scenario.start, &scenario.goal, &opts).expect("plan"));
-    });
+    let pipeline = median(
+        rec,
+        c,
+        &format!("indicator {size}²: generators + plan"),
+        || {
+            let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
+            black_box(
+                pf::solve(&gens, &grid, scenario.start, &scenario.goal, &opts).expect("plan"),
+            );
+        },
+    );
     Row {
         case: format!("indicator {size}²"),
         dijkstra: Some(dijkstra),
@@ -165,7 +159,7 @@ fn rbf_row(
 ) -> Row {
     let grid = grid_of(scenario, size);
     let basis = BasisKind::DEFAULT_RBF;
-    let generators = rec.measure(c, &format!("RBF {size}²: generators"), || {
+    let generators = median(rec, c, &format!("RBF {size}²: generators"), || {
         black_box(PfGenerators::build(&grid, &basis, 8).expect("generators"));
     });
     let gens = PfGenerators::build(&grid, &basis, 8).expect("generators");
@@ -188,7 +182,7 @@ fn rbf_row(
         once.report.iterations,
         once.report.certificate.holds()
     );
-    let exact = rec.measure(c, &format!("RBF {size}²: solve"), || {
+    let exact = median(rec, c, &format!("RBF {size}²: solve"), || {
         black_box(lp::solve(&problem, &exact_settings).expect("solve"));
     });
     Row {
@@ -223,11 +217,11 @@ fn replan_rows(c: &mut Criterion, rec: &Recorder, scenario: &MapScenario) -> Vec
         gens.matches(&changed),
         "same geometry must reuse the generators"
     );
-    let new_p = rec.measure(c, "replan 128²: new p, cached generators", || {
+    let new_p = median(rec, c, "replan 128²: new p, cached generators", || {
         black_box(pf::solve(&gens, &changed, scenario.start, &scenario.goal, &opts).expect("plan"));
     });
     let moved = [scenario.start[0] + 1.0, scenario.start[1] + 0.5];
-    let new_start = rec.measure(c, "replan 128²: new start, cached generators", || {
+    let new_start = median(rec, c, "replan 128²: new start, cached generators", || {
         black_box(pf::solve(&gens, &grid, moved, &scenario.goal, &opts).expect("plan"));
     });
     // The walking robot's replan: the map with only its left half observed (the rest at the
@@ -259,7 +253,8 @@ fn replan_rows(c: &mut Criterion, rec: &Recorder, scenario: &MapScenario) -> Vec
         traversability: scenario.traversability,
         ..PlannerOptions::default()
     };
-    let revealed_plan = rec.measure(
+    let revealed_plan = median(
+        rec,
         c,
         "replan 128²: revealed map, PreparedMap::plan with the feedback field",
         || {
@@ -291,7 +286,8 @@ fn replan_rows(c: &mut Criterion, rec: &Recorder, scenario: &MapScenario) -> Vec
             slope_fit_radius_m: radius,
             ..scenario.traversability
         };
-        rec.measure(
+        median(
+            rec,
             c,
             &format!("sensed 128² cost model, slope fit radius {radius} m"),
             || {
@@ -347,7 +343,7 @@ fn main() {
         .configure_from_args();
     let with_clarabel = std::env::var_os("PF_BENCH_SKIP_CLARABEL").is_none();
     let scenario = scenarios::by_name("c_shape").expect("built-in scenario");
-    let rec = Recorder::new();
+    let rec = Recorder::default();
     let mut rows = vec![
         indicator_row(&mut c, &rec, &scenario, 128, with_clarabel, "solve ≤ 50 ms"),
         indicator_row(&mut c, &rec, &scenario, 256, false, "≤ 250 ms"),
