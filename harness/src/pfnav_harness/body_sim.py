@@ -34,7 +34,6 @@ import json
 import math
 import os
 import select
-import signal
 import struct
 import sys
 import time
@@ -50,6 +49,7 @@ from .body_sensors import BodySensorConfig, BodySensors
 from .engine import DEFAULT_ENGINE, ENGINE_NAMES, PhysicsEngine, make_engine
 from .errors import HarnessError
 from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, ROBOT, SIM_ROBOT_STATE_NAME
+from .process_signals import stop_requested_on_signals
 
 FloatArray = NDArray[np.float64]
 JOINTS = 12
@@ -477,14 +477,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     truth_every = round(1000.0 / args.truth_rate) if args.truth_rate > 0 else 0
     node = BodyNode(sim, lcm, Channels.with_prefix(args.channel_prefix), truth_every)
-    stopping = False
-
-    def request_stop(_signum: int, _frame: object) -> None:
-        nonlocal stopping
-        stopping = True
-
-    signal.signal(signal.SIGINT, request_stop)
-    signal.signal(signal.SIGTERM, request_stop)
+    stop_requested = stop_requested_on_signals()
     if not 0 <= args.priority <= 99:
         print("pfnav-sim: --priority must be 0 (ordinary scheduling) or 1..99", file=sys.stderr)
         return 2
@@ -495,9 +488,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"pfnav-sim: {mode}, {args.engine}, channels {node.channels.low_state} / {node.channels.low_cmd} on {args.lcm_url}", file=sys.stderr, flush=True)
     if args.lockstep:
         steps = None if args.duration is None else round(args.duration / sim.world.time_step)
-        node.run_lockstep(steps, lambda: stopping)
+        node.run_lockstep(steps, stop_requested)
     else:
-        node.run_realtime(args.duration, lambda: stopping)
+        node.run_realtime(args.duration, stop_requested)
     print(
         f"pfnav-sim: stopped at t={sim.time:.3f} s simulated; {node.timing.summary()}; {node.commands_received} commands, {node.commands_rejected} rejected",
         file=sys.stderr,

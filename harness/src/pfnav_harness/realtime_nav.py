@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import signal
 import struct
 import sys
 import time
@@ -31,6 +30,7 @@ from typing import Any
 from .errors import HarnessError
 from .follower import FieldFollower, FollowerLimits
 from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, ROBOT
+from .process_signals import stop_requested_on_signals
 from .reference_source import PlaneCache
 from .scenario import Scenario
 
@@ -215,16 +215,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         origin = (scenario.start[0], scenario.start[1], scenario.terrain.height_at(*scenario.start))
     navigator = Navigator(scenario, field, origin, _import_lcm().LCM(args.lcm_url), args.channel_prefix, args.stand_time)
-    stopping = False
-
-    def request_stop(_signum: int, _frame: object) -> None:
-        nonlocal stopping
-        stopping = True
-
-    signal.signal(signal.SIGINT, request_stop)
-    signal.signal(signal.SIGTERM, request_stop)
+    stop_requested = stop_requested_on_signals()
     print(f"pfnav-navigator: planned {scenario.name}; sending {navigator.channel}", file=sys.stderr, flush=True)
-    navigator.run(args.duration, lambda: stopping)
+    navigator.run(args.duration, stop_requested)
     s = navigator.state
     print(
         f"pfnav-navigator: stopped; {s.commands_sent} commands, {s.estimates_received} estimates, status {s.status}, reached {s.reached}",
