@@ -390,12 +390,7 @@ def main() -> int:
     from pfnav_harness.engine import DEFAULT_FRICTION
     from pfnav_harness.fmu_runner import read_contract
     from pfnav_harness.pipeline import export_scenario
-    from pfnav_harness.planner_client import (
-        DEFAULT_LCM_URL,
-        PlannerClient,
-        RequestOptions,
-        StartPose,
-    )
+    from pfnav_harness.planner_client import DEFAULT_LCM_URL, plan_answers
     from pfnav_harness.robot_fmu import robot_and_fmu
     from tqdm import tqdm
 
@@ -421,23 +416,22 @@ def main() -> int:
     if unknown:
         parser.error(f"the FMU has no parameter {', '.join(unknown)}")
     scenario = export_scenario(paths.pf_plan_path(), args.scenario, out / "scenarios")
-    with PlannerClient(
-        DEFAULT_LCM_URL, service_binary=paths.planner_service_path()
-    ) as client:
-        seq = client.publish_map(scenario.terrain)
-        answer = client.request_answer(
-            StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw),
-            scenario.goal,
-            "pf",
-            seq,
-            RequestOptions(),
-        )
+    answer = plan_answers(
+        scenario, ["pf"], DEFAULT_LCM_URL, service_binary=paths.planner_service_path()
+    )["pf"]
     plan = answer.plan_or_raise("pf")
     friction = DEFAULT_FRICTION if args.friction is None else args.friction
     if not friction > 0.0:
         parser.error(f"--friction must be > 0, got {friction:g}")
     shared = Shared(
-        scenario, plan, fmu, robot, out / "cache", friction, args.follow, answer.field
+        scenario,
+        plan,
+        fmu,
+        robot,
+        out / "cache",
+        friction,
+        args.follow,
+        answer.field if args.follow == "feedback" else None,
     )
     tasks = [
         Task(v, m, d, t)

@@ -574,6 +574,37 @@ class PlannerClient:
         raise PlannerError(f"the planner gave no {method} plan for {context or 'the request'} after {retries + 1} attempt(s): {last_error}")
 
 
+def plan_answers(
+    scenario: Scenario,
+    methods: Sequence[str],
+    lcm_url: str = DEFAULT_LCM_URL,
+    channel_prefix: str = DEFAULT_CHANNEL_PREFIX,
+    service_binary: Path | None = None,
+    service_log: Path | None = None,
+    speed: float = 0.0,
+    timeout: float = 60.0,
+    retries: int = 3,
+    footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
+) -> dict[str, PlanAnswer]:
+    """Publishes the scenario's map once and asks for one plan per method: each method's answer
+    (its plan, and the feedback field of a P-F plan). Raises PlannerError for a method without a plan."""
+    start = StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw)
+    with PlannerClient(lcm_url, channel_prefix, service_binary, service_log, footprint_radius=footprint_radius) as client:
+        if service_binary is None:
+            client.wait_for_service(timeout=min(timeout, 5.0))
+        seq = client.publish_map(scenario.terrain)
+        # Give the service a moment to ingest the map before the first request references it.
+        client._handle_for(0.05)
+        answers = {}
+        for method in methods:
+            answer = client.request_answer(
+                start, scenario.goal, method, seq, RequestOptions(speed=speed), timeout=timeout, retries=retries, context=f"'{scenario.name}'"
+            )
+            answer.plan_or_raise(method)
+            answers[method] = answer
+        return answers
+
+
 def plan_scenario(
     scenario: Scenario,
     methods: Sequence[str],
@@ -587,10 +618,5 @@ def plan_scenario(
     footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
 ) -> dict[str, Plan]:
     """Publishes the scenario's map once and requests one plan per method."""
-    with PlannerClient(lcm_url, channel_prefix, service_binary, service_log, footprint_radius=footprint_radius) as client:
-        if service_binary is None:
-            client.wait_for_service(timeout=min(timeout, 5.0))
-        seq = client.publish_map(scenario.terrain)
-        # Give the service a moment to ingest the map before the first request references it.
-        client._handle_for(0.05)
-        return {m: client.request_plan(scenario, m, seq, speed=speed, timeout=timeout, retries=retries) for m in methods}
+    answers = plan_answers(scenario, methods, lcm_url, channel_prefix, service_binary, service_log, speed, timeout, retries, footprint_radius)
+    return {method: answer.plan_or_raise(method) for method, answer in answers.items()}
