@@ -54,6 +54,11 @@ impl ReferenceGovernor {
         }
     }
 
+    /// A governor with the same recovery limit, started at `velocity` with no lead.
+    pub fn restarted_at(&self, velocity: [f64; 2]) -> Self {
+        Self::with_recovery_acceleration(velocity, self.recovery_acceleration)
+    }
+
     /// Whether the reference is bringing a pushed body back (see [`Self::absorb_push`]).
     pub fn recovering(&self) -> bool {
         self.recovering
@@ -277,7 +282,9 @@ mod tests {
     fn the_configured_recovery_acceleration_brakes() {
         let dt = 0.001;
         for limit in [1.0, RECOVERY_ACCELERATION, 6.0] {
-            let mut governor = ReferenceGovernor::with_recovery_acceleration([0.0, 0.0], limit);
+            // Restarted (as locomotion does on entry), it keeps its limit.
+            let mut governor = ReferenceGovernor::with_recovery_acceleration([5.0, 5.0], limit)
+                .restarted_at([0.0, 0.0]);
             assert!(governor.absorb_push([0.0, 0.0], [0.0, 0.0], [0.0, 2.0]));
             let start = 2.0 - DISTURBANCE_VELOCITY;
             let (_, velocity) = governor.step([0.0, 0.0], [0.0, 0.0], f64::INFINITY, dt);

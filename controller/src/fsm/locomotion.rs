@@ -34,8 +34,6 @@ pub struct Locomotion {
     /// Configured friction coefficient and the margin kept above tan(slope) (steep ground).
     mu: f64,
     mu_slope_margin: f64,
-    /// Largest acceleration of the reference while it brings a pushed body back, m/s².
-    recovery_acceleration: f64,
 }
 
 impl Locomotion {
@@ -48,10 +46,12 @@ impl Locomotion {
             swing_start: [Vector3::zeros(); NUM_LEGS],
             footholds: [Vector3::zeros(); NUM_LEGS],
             stance_anchor: [Vector3::zeros(); NUM_LEGS],
-            governor: ReferenceGovernor::default(),
+            governor: ReferenceGovernor::with_recovery_acceleration(
+                [0.0; 2],
+                config.recovery_acceleration,
+            ),
             mu: config.mu,
             mu_slope_margin: config.mu_slope_margin,
-            recovery_acceleration: config.recovery_acceleration,
         }
     }
 
@@ -61,10 +61,9 @@ impl Locomotion {
         self.stance_anchor = estimate.feet_world;
         self.swing_start = estimate.feet_world;
         self.footholds = estimate.feet_world;
-        self.governor = ReferenceGovernor::with_recovery_acceleration(
-            [estimate.velocity.x, estimate.velocity.y],
-            self.recovery_acceleration,
-        );
+        self.governor = self
+            .governor
+            .restarted_at([estimate.velocity.x, estimate.velocity.y]);
     }
 
     pub fn run(&mut self, stages: &mut Stages, tick: &Tick) -> Actuation {
