@@ -29,6 +29,14 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[1]
 
 
+# pfnav-robot's --trigger values, as the table names them.
+TRIGGER_LABELS = {
+    "deadline": "phase-locked deadline (default)",
+    "state": "state arrival (`--trigger state`)",
+    "clock": "fixed deadline (`--trigger clock`)",
+}
+
+
 @dataclass
 class Run:
     trigger: str
@@ -174,6 +182,44 @@ def run_once(args: argparse.Namespace, trigger: str, lcm_url: str, out: Path) ->
     )
 
 
+def measure_floor(args: argparse.Namespace, out: Path) -> dict[str, Any]:
+    """`pfnav-robot --measure-floor`: a bare loop with the node's period, priority and sleep
+    for `--duration` seconds, no FMU and no bus; the machine's own jitter and misses."""
+    from pfnav_harness import paths
+
+    out.mkdir(parents=True, exist_ok=True)
+    report = out / "floor.json"
+    with (out / "floor.log").open("w") as log:
+        subprocess.run(
+            [
+                str(paths.pfnav_robot_path()),
+                "--measure-floor",
+                "--duration",
+                str(args.duration),
+                "--report-json",
+                str(report),
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            check=True,
+            timeout=args.duration + 60.0,
+        )
+    result: dict[str, Any] = json.loads(report.read_text())
+    return result
+
+
+def floor_row(floor: dict[str, Any]) -> str:
+    """The bare loop's row of the table (the columns it has no figure for are dashes)."""
+    p, j = floor["period"], floor["jitter"]
+    cycles = max(1, int(floor["cycles"]))
+    return (
+        f"| the machine's floor: a bare loop, no FMU, no bus (`pfnav-robot --measure-floor`) | {floor['cycles']} | "
+        f"{_us(p['p50'])} / {_us(p['p99'])} / {_us(p['max'])} | {_us(j['p99'])} / {_us(j['max'])} | "
+        f"{floor['misses']} ({100.0 * floor['misses'] / cycles:.2f} %) | – | – | – | – | – | "
+        f"{_yes(floor['realtime_priority'])} / {_yes(floor['memory_locked'])} |"
+    )
+
+
 def _yes(granted: bool) -> str:
     return "yes" if granted else "no"
 
@@ -182,25 +228,23 @@ def _us(seconds: float) -> str:
     return f"{seconds * 1e6:.0f}"
 
 
-def table(runs: list[Run]) -> str:
+def table(runs: list[Run], floor: dict[str, Any] | None) -> str:
     lines = [
         (
             "| cycles started by | cycles | period p50 / p99 / max, µs | jitter p99 / max, µs | misses (> 1.3 T) | "
-            "latency p50 / p99 / max, µs | runtime p50 / p99, µs | by arriving state / waiting state / watchdog | "
+            "latency p50 / p99 / max, µs | runtime p50 / p99, µs | arriving state / state waiting / no fresh state | "
             "body ticks (overruns) | damping entries | SCHED_FIFO / mlockall: node, body |"
         ),
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    if floor is not None:
+        lines.append(floor_row(floor))
     for run in runs:
         r = run.robot
         cycles = max(1, int(r["cycles"]))
         p, j, lat, rt = r["period"], r["jitter"], r["latency"], r["runtime"]
         sim_ticks = f"{run.sim.get('ticks', 0)} ({run.sim.get('overruns', 0)})"
-        label = (
-            "state arrival (default)"
-            if run.trigger == "state"
-            else "fixed deadline (`--trigger clock`)"
-        )
+        label = TRIGGER_LABELS[run.trigger]
         lines.append(
             f"| {label} | {r['cycles']} | {_us(p['p50'])} / {_us(p['p99'])} / {_us(p['max'])} | {_us(j['p99'])} / {_us(j['max'])} | "
             f"{r['misses']} ({100.0 * r['misses'] / cycles:.2f} %) | {_us(lat['p50'])} / {_us(lat['p99'])} / {_us(lat['max'])} | "
@@ -221,7 +265,7 @@ def main() -> int:
     )
     parser.add_argument(
         "--triggers",
-        default="state,clock",
+        default="deadline,state,clock",
         help="comma-separated pfnav-robot --trigger values, run back to back",
     )
     parser.add_argument(
@@ -246,6 +290,11 @@ def main() -> int:
         help="logs and JSON reports",
     )
     parser.add_argument(
+        "--no-floor",
+        action="store_true",
+        help="skip the first row, the bare loop that measures the machine's own jitter and misses",
+    )
+    parser.add_argument(
         "--results-page",
         metavar="NAME",
         help="also write docs/results/NAME.md (stamped)",
@@ -254,8 +303,8 @@ def main() -> int:
     if not (1.0 <= args.duration <= 600.0):
         parser.error("--duration must be in 1 ..= 600 s")
     triggers = [t.strip() for t in args.triggers.split(",") if t.strip()]
-    if not triggers or any(t not in ("state", "clock") for t in triggers):
-        parser.error("--triggers: comma-separated from state, clock")
+    if not triggers or any(t not in TRIGGER_LABELS for t in triggers):
+        parser.error(f"--triggers: comma-separated from {', '.join(TRIGGER_LABELS)}")
 
     sys.path.insert(0, str(REPO / "harness" / "src"))
     from pfnav_harness import results_page
@@ -272,6 +321,12 @@ def main() -> int:
     stamp = results_page.collect_stamp() if args.results_page else None
     load_before = os.getloadavg()
     lcm_url = udpm_url(7667)
+    floor = None if args.no_floor else measure_floor(args, args.out.resolve())
+    if floor is not None:
+        print(
+            f"machine floor: jitter p99 {_us(floor['jitter']['p99'])} µs, misses {floor['misses']}/{floor['cycles']}",
+            flush=True,
+        )
     runs = []
     for trigger in triggers:
         run = run_once(args, trigger, lcm_url, args.out.resolve())
@@ -290,11 +345,12 @@ def main() -> int:
                 f"motor model) over `udpm://` on loopback in a private network namespace; this script is the navigator "
                 f"(nav_cmd_t every 20 ms: {'trot in place' if args.gait == 'trot' else 'stand'}). {args.duration:.0f} s per row, "
                 f"rows run back to back. Latency: from the LCM thread's receipt of a low_state_t to the sending of the command "
-                f"computed from it. A miss is a period longer than 1.3 T. Load average (1 min) "
+                f"computed from it. A miss is a period longer than 1.3 T. The first row is the machine itself: a loop with the node's period, "
+                f"SCHED_FIFO priority and sleep that does nothing else, the jitter and misses any loop here starts from. Load average (1 min) "
                 f"{load_before[0]:.2f} before, {load_after[0]:.2f} after (the machine is shared)."
             ),
             "",
-            table(runs),
+            table(runs, floor),
             "",
             "Targets of issue 37 (2-core machine, full stack): jitter p99 ≤ 250 µs, misses ≤ 0.1 %, latency p99 ≤ 1 ms.",
         ]

@@ -284,6 +284,9 @@ def sample_messages() -> list[Any]:
     robot_status.states_non_finite, robot_status.nav_cmds_received = 1, 3_000
     robot_status.malformed_messages = 12
     robot_status.realtime_priority, robot_status.memory_locked = False, True
+    robot_status.jitter_p99, robot_status.jitter_max = 6.5e-5, 4.0e-4
+    robot_status.latency_p50 = 3.1e-4
+    robot_status.window_overruns, robot_status.total_overruns = 1, 5
 
     estimate = robot_estimate_t()
     estimate.header = header(24)

@@ -211,6 +211,17 @@ impl Inbox {
         }
     }
 
+    /// The arrival time of the newest state if more than `accepted` states have been accepted
+    /// in all (a fresh one since the snapshot that counted `accepted`), without waiting.
+    pub fn fresh_state_arrival(&self, accepted: i64) -> Option<u64> {
+        let held = self.lock();
+        if held.snapshot.counters.states_received > accepted {
+            held.snapshot.state.map(|(_, at)| at)
+        } else {
+            None
+        }
+    }
+
     /// A `nav_cmd_t` packet received at `now_ns`; one with an unknown mode or a non-finite
     /// value counts as malformed.
     pub fn on_nav_cmd(&self, bytes: &[u8], now_ns: u64) {

@@ -16,8 +16,9 @@ pub mod fmu_host;
 pub mod inbox;
 pub mod model_description;
 pub mod node;
+pub mod platform;
 pub mod safety;
 pub mod schedule;
 pub mod stats;
 
-pub use node::{run, NodeConfig, RobotChannels, RunReport, MISS_FACTOR};
+pub use node::{run, LoopTrigger, NodeConfig, RobotChannels, RunReport, MISS_FACTOR};

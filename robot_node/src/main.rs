@@ -8,7 +8,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Parser;
 use lcm_transport::Lcm;
-use pfnav_robot::{NodeConfig, RobotChannels};
+use pfnav_robot::{platform, LoopTrigger, NodeConfig, RobotChannels};
 use tracing_subscriber::EnvFilter;
 
 /// The controller FMU as a real-time LCM node: low_state_t in, low_cmd_t out every period on
@@ -56,10 +56,17 @@ struct Args {
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
-    /// What starts a control cycle: `state` = the arrival of a fresh low_state_t (phase-locked
-    /// one-period slots, the slot's end as the watchdog); `clock` = fixed deadlines only.
-    #[arg(long, value_enum, default_value_t = TriggerArg::State)]
+    /// What starts a control cycle: `deadline` = a fixed point of one-period slots
+    /// phase-locked to the low_state_t stream, `--deadline-margin` after the states' arrival
+    /// (the node's clock sets the period); `state` = the arrival of a fresh low_state_t (the
+    /// slot's end as the watchdog; the stream's delivery sets the period); `clock` = fixed
+    /// deadlines whatever the states do.
+    #[arg(long, value_enum, default_value_t = TriggerArg::Deadline)]
     trigger: TriggerArg,
+    /// With `--trigger deadline`: how long after the states' arrival phase a cycle starts, as a
+    /// fraction of the period (0 < margin < 0.5); the room for the delivery's jitter.
+    #[arg(long, default_value_t = 0.25)]
+    deadline_margin: f64,
     /// The trunk's position X Y Z when the node starts, in the frame the controller should
     /// estimate in (e.g. the world frame of a map); default: the FMU's start values, a frame
     /// that starts where the robot stands.
@@ -68,10 +75,16 @@ struct Args {
     /// At exit, write the whole run's timing and counters to this JSON file.
     #[arg(long)]
     report_json: Option<PathBuf>,
+    /// Instead of the node, run a bare loop with the same period, priority and sleep for
+    /// `--duration` seconds (no FMU, no bus): the machine's own floor for period jitter and
+    /// misses (as cyclictest measures it).
+    #[arg(long, requires = "duration")]
+    measure_floor: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum TriggerArg {
+    Deadline,
     State,
     Clock,
 }
@@ -126,7 +139,17 @@ fn main() -> anyhow::Result<()> {
         config.duration = Some(Duration::from_secs_f64(seconds));
     }
 
-    config.align_to_state = args.trigger == TriggerArg::State;
+    anyhow::ensure!(
+        args.deadline_margin > 0.0 && args.deadline_margin < 0.5,
+        "--deadline-margin must be a fraction of the period in (0, 0.5)"
+    );
+    config.trigger = match args.trigger {
+        TriggerArg::Deadline => LoopTrigger::Deadline {
+            margin: config.period.mul_f64(args.deadline_margin),
+        },
+        TriggerArg::State => LoopTrigger::StateArrival,
+        TriggerArg::Clock => LoopTrigger::Clock,
+    };
     if let Some(position) = &args.initial_position {
         anyhow::ensure!(
             position.len() == 3 && position.iter().all(|v| v.is_finite()),
@@ -135,15 +158,34 @@ fn main() -> anyhow::Result<()> {
         config.initial_position = Some([position[0], position[1], position[2]]);
     }
 
-    let url = args
-        .lcm_url
-        .unwrap_or_else(|| lcm_transport::url_from_env_or(lcm_types::channels::DEFAULT_URL));
-    let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);
     let shutdown = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(signal, Arc::clone(&shutdown))
             .with_context(|| format!("installing the handler of signal {signal}"))?;
     }
+    if args.measure_floor {
+        let duration = config
+            .duration
+            .context("--measure-floor needs --duration")?;
+        let report =
+            platform::measure_floor(config.period, duration, config.realtime_priority, &shutdown);
+        tracing::info!(
+            cycles = report.cycles,
+            misses = report.timing.misses,
+            jitter_p99_us = report.timing.jitter.percentile_ns(0.99) as f64 * 1e-3,
+            lateness_max_us = report.lateness.max_ns() as f64 * 1e-3,
+            "bare loop stopped"
+        );
+        return write_report(
+            args.report_json.as_deref(),
+            &report.to_json(config_period_s(args.rate)),
+        );
+    }
+
+    let url = args
+        .lcm_url
+        .unwrap_or_else(|| lcm_transport::url_from_env_or(lcm_types::channels::DEFAULT_URL));
+    let lcm = Arc::new(Lcm::open(&url).with_context(|| format!("opening LCM at {url}"))?);
     let report = pfnav_robot::run(lcm, config, shutdown)?;
     let timing = &report.timing;
     tracing::info!(
@@ -155,13 +197,20 @@ fn main() -> anyhow::Result<()> {
         damping_entries = report.damping_entries,
         "stopped"
     );
-    if let Some(path) = &args.report_json {
-        let text = serde_json::to_string_pretty(&report.to_json(config_period_s(args.rate)))
-            .context("encoding the run report")?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("writing the run report {}", path.display()))?;
-    }
-    Ok(())
+    write_report(
+        args.report_json.as_deref(),
+        &report.to_json(config_period_s(args.rate)),
+    )
+}
+
+/// Writes a run's JSON report to `path` (nothing without one).
+fn write_report(path: Option<&std::path::Path>, report: &serde_json::Value) -> anyhow::Result<()> {
+    let Some(path) = path else {
+        return Ok(());
+    };
+    let text = serde_json::to_string_pretty(report).context("encoding the run report")?;
+    std::fs::write(path, text + "\n")
+        .with_context(|| format!("writing the run report {}", path.display()))
 }
 
 fn config_period_s(rate: u32) -> f64 {

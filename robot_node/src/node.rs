@@ -88,9 +88,28 @@ pub struct NodeConfig {
     /// The trunk's position when the node starts, in the frame the controller should work in
     /// (None: the FMU's start values, a frame starting where the robot stands).
     pub initial_position: Option<[f64; 3]>,
-    /// Start each cycle when a fresh state arrives (phase-locked slots, `schedule`); false: on
-    /// fixed deadlines, the slot centres, whatever the states do.
-    pub align_to_state: bool,
+    /// What starts a cycle (`schedule`).
+    pub trigger: LoopTrigger,
+}
+
+/// What starts the control cycles (see `schedule` for the slots they run in).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LoopTrigger {
+    /// A deadline `margin` after the centre of a slot phase-locked to the state stream: the
+    /// period keeps the node's clock, the states arrive about `margin` before their cycle.
+    Deadline { margin: Duration },
+    /// The arrival of a fresh state (phase-locked slots, the slot's end as the watchdog): the
+    /// least latency, the period of the stream's delivery.
+    StateArrival,
+    /// Fixed deadlines, the slot centres, whatever the states do.
+    Clock,
+}
+
+impl LoopTrigger {
+    /// The default deadline margin: a quarter period.
+    pub fn deadline(period: Duration) -> Self {
+        LoopTrigger::Deadline { margin: period / 4 }
+    }
 }
 
 impl NodeConfig {
@@ -111,7 +130,7 @@ impl NodeConfig {
             estimate_every: 10,
             realtime_priority: Some(80),
             duration: None,
-            align_to_state: true,
+            trigger: LoopTrigger::deadline(Duration::from_millis(1)),
             initial_position: None,
         }
     }
@@ -127,6 +146,13 @@ impl NodeConfig {
             "damping kd must be finite and >= 0"
         );
         anyhow::ensure!(!self.status_period.is_zero(), "status period must be > 0");
+        if let LoopTrigger::Deadline { margin } = self.trigger {
+            anyhow::ensure!(
+                margin < self.period / 2,
+                "the deadline margin {margin:?} must be below half the period {:?}",
+                self.period
+            );
+        }
         anyhow::ensure!(
             self.estimate_every > 0,
             "estimate interval must be > 0 cycles"
@@ -168,6 +194,7 @@ impl RunReport {
             "period_nominal": period_s,
             "cycles": self.cycles,
             "misses": t.misses,
+            "overruns": t.overruns,
             "period": percentiles(&t.period),
             "jitter": percentiles(&t.jitter),
             "runtime": percentiles(&t.runtime),
@@ -338,17 +365,25 @@ fn control_loop(
     );
 
     while !shutdown.load(Ordering::Relaxed) {
-        let trigger = if config.align_to_state {
-            let open = schedule.open_ns();
-            clock::sleep_until_ns(open);
-            match inbox.wait_for_state(states_seen, schedule.close_ns()) {
-                Some(arrival) if arrival > open => Trigger::StateArrived(arrival),
-                Some(arrival) => Trigger::StateWaiting(arrival),
-                None => Trigger::Watchdog,
+        let trigger = match config.trigger {
+            LoopTrigger::Deadline { margin } => {
+                let margin_ns = u64::try_from(margin.as_nanos()).unwrap_or(u64::MAX);
+                clock::sleep_until_ns(schedule.deadline_ns(margin_ns));
+                Trigger::Deadline(inbox.fresh_state_arrival(states_seen))
             }
-        } else {
-            clock::sleep_until_ns(schedule.centre_ns());
-            Trigger::Clock
+            LoopTrigger::StateArrival => {
+                let open = schedule.open_ns();
+                clock::sleep_until_ns(open);
+                match inbox.wait_for_state(states_seen, schedule.close_ns()) {
+                    Some(arrival) if arrival > open => Trigger::StateArrived(arrival),
+                    Some(arrival) => Trigger::StateWaiting(arrival),
+                    None => Trigger::Watchdog,
+                }
+            }
+            LoopTrigger::Clock => {
+                clock::sleep_until_ns(schedule.centre_ns());
+                Trigger::Clock
+            }
         };
         let cycle_start = clock::now_ns();
         if end_ns.is_some_and(|end| cycle_start - start_ns >= end) {
@@ -438,6 +473,10 @@ fn control_loop(
         let runtime = sent.saturating_sub(cycle_start);
         window.runtime.record(runtime);
         total.runtime.record(runtime);
+        if runtime > period_ns {
+            window.overruns += 1;
+            total.overruns += 1;
+        }
         if let Some(arrived) = fresh_state_arrival {
             let latency = sent.saturating_sub(arrived);
             window.latency.record(latency);
@@ -497,6 +536,11 @@ fn control_loop(
                 malformed_messages: counters.malformed_messages,
                 realtime_priority: realtime.fifo_priority,
                 memory_locked: realtime.memory_locked,
+                jitter_p99: seconds(window.jitter.percentile_ns(0.99)),
+                jitter_max: seconds(window.jitter.max_ns()),
+                latency_p50: seconds(window.latency.percentile_ns(0.5)),
+                window_overruns: i64::try_from(window.overruns).unwrap_or(i64::MAX),
+                total_overruns: i64::try_from(total.overruns).unwrap_or(i64::MAX),
             };
             status_seq += 1;
             match status.encode() {

@@ -23,6 +23,14 @@
 //! 0.2 % of the elapsed time. The loop's average rate stays within 0.2 % of the nominal rate
 //! whatever the body does, and the FMU's time (one step per cycle) stays wall-clock time. A
 //! paced body needs far less: same-machine clocks do not drift, crystal clocks by ppm.
+//!
+//! With a phase-locked deadline (`--trigger deadline`) the same slots are kept, but the cycle
+//! always starts at a fixed point of its slot, `centre + margin`, with the newest state it has:
+//! the period then has the jitter of the node's own clock, not that of the state stream's
+//! delivery, while the phase-locked loop keeps the states arriving about `margin` before the
+//! cycle that uses them (the latency is the margin plus the cycle's work). A state that arrives
+//! after its deadline is used by the next cycle; its phase error is taken modulo the period, so
+//! a late state pulls the slots later, not a period earlier.
 
 /// Fraction of a stream state's phase error (arrival − slot centre) applied to the next slot.
 pub const PHASE_GAIN: f64 = 0.125;
@@ -46,6 +54,9 @@ pub enum Trigger {
     /// The loop runs on the slot centres alone, not aligned to the states (`--trigger clock`:
     /// a fixed-deadline loop, kept for comparison and for bodies that send no states).
     Clock,
+    /// The cycle started at its slot's phase-locked deadline (`--trigger deadline`); with the
+    /// arrival time of the fresh state it found, None when none had come.
+    Deadline(Option<u64>),
 }
 
 /// The slot grid of the control loop (pure arithmetic on CLOCK_MONOTONIC nanoseconds; the
@@ -86,13 +97,28 @@ impl SlotSchedule {
         self.centre_ns + self.period_ns - self.period_ns / 2
     }
 
+    /// The start of the current slot's cycle with a phase-locked deadline `margin_ns` after the
+    /// slot's centre (`margin_ns` below half a period).
+    pub fn deadline_ns(&self, margin_ns: u64) -> u64 {
+        self.centre_ns + margin_ns.min(self.period_ns / 2)
+    }
+
     /// The phase correction a cycle started by `trigger` asks of the next slot's centre
     /// (before the budget): a fraction of the state's arrival − the slot's centre, bounded.
     pub fn correction_ns(&self, trigger: Trigger) -> i64 {
-        let (Trigger::StateArrived(arrival) | Trigger::StateWaiting(arrival)) = trigger else {
-            return 0;
+        let error = match trigger {
+            Trigger::StateArrived(arrival) | Trigger::StateWaiting(arrival) => {
+                arrival as i64 - self.centre_ns as i64
+            }
+            // Modulo the period: a state that missed its deadline shows up in the next slot,
+            // a period before that slot's centre plus its delay.
+            Trigger::Deadline(Some(arrival)) => {
+                let period = self.period_ns as i64;
+                (arrival as i64 - self.centre_ns as i64 + period / 2).rem_euclid(period)
+                    - period / 2
+            }
+            Trigger::Deadline(None) | Trigger::Watchdog | Trigger::Clock => return 0,
         };
-        let error = arrival as i64 - self.centre_ns as i64;
         let limit = (self.period_ns as f64 * MAX_CORRECTION) as i64;
         ((error as f64 * PHASE_GAIN) as i64).clamp(-limit, limit)
     }
@@ -323,6 +349,159 @@ mod tests {
             schedule.correction_ns(Trigger::StateArrived(centre - T / 2)),
             -50_000
         );
+    }
+}
+
+#[cfg(test)]
+mod deadline_tests {
+    use super::*;
+
+    const T: u64 = 1_000_000;
+    const MARGIN: u64 = T / 4;
+
+    /// One cycle of a phase-locked deadline loop: its start and the index of the fresh state it
+    /// used (None: no fresh one had arrived).
+    type Cycle = (u64, Option<usize>);
+
+    /// Runs the deadline loop against states arriving at `arrivals` (sorted, ns), `work_ns`
+    /// per cycle, until `end_ns`.
+    fn simulate(arrivals: &[u64], work_ns: u64, end_ns: u64) -> Vec<Cycle> {
+        let mut schedule = SlotSchedule::new(T, 0);
+        let mut used: Option<usize> = None;
+        let mut cycles = Vec::new();
+        loop {
+            let start = schedule.deadline_ns(MARGIN);
+            if start >= end_ns {
+                return cycles;
+            }
+            let fresh = arrivals
+                .iter()
+                .rposition(|&a| a <= start)
+                .filter(|&i| used.is_none_or(|u| i > u));
+            if fresh.is_some() {
+                used = fresh;
+            }
+            cycles.push((start, fresh));
+            schedule.advance(
+                Trigger::Deadline(fresh.map(|i| arrivals[i])),
+                start + work_ns,
+            );
+        }
+    }
+
+    fn settled_delays(cycles: &[Cycle], arrivals: &[u64]) -> Vec<u64> {
+        cycles
+            .iter()
+            .map(|&(start, state)| start - arrivals[state.expect("a fresh state every cycle")])
+            .collect()
+    }
+
+    #[test]
+    fn a_paced_stream_at_any_phase_is_used_a_margin_after_its_arrival_every_period() {
+        for phase in [
+            0,
+            T / 10,
+            T / 3,
+            T / 2,
+            T / 2 + 1,
+            2 * T / 3,
+            9 * T / 10,
+            T - 1,
+        ] {
+            let arrivals: Vec<u64> = (0..620).map(|k| k * T + phase).collect();
+            let cycles = simulate(&arrivals, 300_000, 600 * T);
+            let settled = &cycles[300..];
+            for delay in settled_delays(settled, &arrivals) {
+                assert!(
+                    delay.abs_diff(MARGIN) < T / 50,
+                    "phase {phase}: delay {delay} ns"
+                );
+            }
+            // One state per cycle, each used once.
+            assert!(settled
+                .windows(2)
+                .all(|w| w[1].1.zip(w[0].1).is_some_and(|(b, a)| b == a + 1)));
+            assert!(settled.windows(2).all(|w| w[1].0 - w[0].0 == T));
+        }
+    }
+
+    #[test]
+    fn a_jittery_stream_jitters_the_periods_of_state_arrival_cycles_but_not_the_deadlines() {
+        // Settled at T/3, then up to ±0.2 T of delivery jitter (deterministic pattern).
+        let jitter = [
+            0i64, 200_000, -200_000, 150_000, -120_000, 180_000, -190_000,
+        ];
+        let arrivals: Vec<u64> = (0..820u64)
+            .map(|k| {
+                let offset = if k > 300 { jitter[k as usize % 7] } else { 0 };
+                (k * T + T / 3).saturating_add_signed(offset)
+            })
+            .collect();
+        let cycles = simulate(&arrivals, 50_000, 800 * T);
+        let jittery: Vec<_> = cycles.iter().filter(|c| c.0 > 320 * T).copied().collect();
+        let worst = jittery
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0).abs_diff(T))
+            .max()
+            .unwrap();
+        // The loop follows the jitter by the PLL's bounded correction only.
+        assert!(
+            worst <= (T as f64 * MAX_CORRECTION) as u64,
+            "period jitter {worst} ns"
+        );
+        // Every state still arrives before the deadline of its own cycle.
+        assert!(jittery.iter().all(|c| c.1.is_some()));
+        let delays = settled_delays(&jittery, &arrivals);
+        assert!(delays.iter().all(|&d| d < MARGIN + T / 4));
+        // Cycles started by the arrivals themselves would have the stream's full jitter.
+        let stream = jittery
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (arrivals[w[0].1.unwrap()], arrivals[w[1].1.unwrap()]);
+                (b - a).abs_diff(T)
+            })
+            .max()
+            .unwrap();
+        assert!(stream >= 350_000, "stream jitter {stream} ns");
+    }
+
+    #[test]
+    fn a_stream_that_starts_missing_its_deadlines_is_locked_again_a_margin_before_them() {
+        // Locked at phase T/3, then the stream arrives 0.4 T later for good: after the margin of
+        // T/4, so each state first meets the next cycle.
+        let arrivals: Vec<u64> = (0..820u64)
+            .map(|k| k * T + T / 3 + if k >= 300 { 2 * T / 5 } else { 0 })
+            .collect();
+        let cycles = simulate(&arrivals, 50_000, 800 * T);
+        let relocked: Vec<_> = cycles.iter().filter(|c| c.0 > 500 * T).copied().collect();
+        for delay in settled_delays(&relocked, &arrivals) {
+            assert!(delay.abs_diff(MARGIN) < T / 50, "delay {delay} ns");
+        }
+    }
+
+    #[test]
+    fn a_deadline_cycle_takes_the_phase_error_modulo_the_period() {
+        let schedule = SlotSchedule::new(T, 0);
+        let centre = schedule.centre_ns();
+        assert_eq!(schedule.deadline_ns(MARGIN), centre + MARGIN);
+        assert_eq!(
+            schedule.deadline_ns(T),
+            centre + T / 2,
+            "at most half a period"
+        );
+        // A state of the previous slot that arrived 0.3 T after its centre, after that cycle's
+        // deadline: late, so the slots move later (a slot-start trigger would move them earlier).
+        let late = centre - T + 3 * T / 10;
+        assert_eq!(
+            schedule.correction_ns(Trigger::Deadline(Some(late))),
+            37_500
+        );
+        assert_eq!(schedule.correction_ns(Trigger::StateWaiting(late)), -50_000);
+        assert_eq!(
+            schedule.correction_ns(Trigger::Deadline(Some(centre - 80_000))),
+            -10_000
+        );
+        assert_eq!(schedule.correction_ns(Trigger::Deadline(None)), 0);
     }
 }
 

@@ -91,12 +91,16 @@ pub struct LoopTiming {
     pub latency: Histogram,
     /// Cycles whose period exceeded the miss threshold.
     pub misses: u64,
+    /// Cycles whose work took longer than the nominal period.
+    pub overruns: u64,
     /// Cycles started by a state that arrived while the loop waited for it.
     pub state_arrived: u64,
-    /// Cycles started at their slot's opening because a fresh state was already waiting.
+    /// Cycles that found a fresh state waiting when they started: at their slot's opening, or
+    /// at the phase-locked deadline.
     pub state_waiting: u64,
-    /// Cycles started by the watchdog (the slot ended without a fresh state), or by the clock
-    /// alone when the loop is not aligned to the states.
+    /// Cycles started by the watchdog (the slot ended without a fresh state), by the clock
+    /// alone when the loop is not aligned to the states, or at a phase-locked deadline that
+    /// found no fresh state.
     pub watchdog: u64,
     /// Slots without a cycle because the loop was still busy when they closed.
     pub skipped_slots: u64,
@@ -106,8 +110,8 @@ impl LoopTiming {
     pub fn count_trigger(&mut self, trigger: Trigger) {
         match trigger {
             Trigger::StateArrived(_) => self.state_arrived += 1,
-            Trigger::StateWaiting(_) => self.state_waiting += 1,
-            Trigger::Watchdog | Trigger::Clock => self.watchdog += 1,
+            Trigger::StateWaiting(_) | Trigger::Deadline(Some(_)) => self.state_waiting += 1,
+            Trigger::Watchdog | Trigger::Clock | Trigger::Deadline(None) => self.watchdog += 1,
         }
     }
 
@@ -118,6 +122,7 @@ impl LoopTiming {
         self.runtime.clear();
         self.latency.clear();
         self.misses = 0;
+        self.overruns = 0;
         self.state_arrived = 0;
         self.state_waiting = 0;
         self.watchdog = 0;

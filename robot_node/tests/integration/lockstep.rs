@@ -3,6 +3,7 @@
 use std::time::Duration;
 
 use lcm_types::pfnav::RobotStatus;
+use pfnav_robot::{LoopTrigger, RunReport};
 
 use crate::support::{Pacing, Rig};
 
@@ -92,16 +93,14 @@ fn keeps_1_khz_in_lockstep_and_its_torques_are_finite() {
     assert!(commands.iter().all(|c| c.finite), "every command is finite");
 }
 
-#[test]
-fn a_body_on_its_own_clock_starts_the_cycles_and_each_command_answers_the_newest_state() {
-    let rig = Rig::start_paced(
-        "PACED_",
-        Pacing::Clock(Duration::from_millis(1)),
-        |config| {
-            config.safety.state_timeout_ns = 500_000_000;
-            config.safety.nav_timeout_ns = 2_000_000_000;
-        },
-    );
+/// A body on its own 1 kHz clock driving a node with `trigger`: the run's report, and the
+/// state seqs its torque commands answered, in order.
+fn paced_run(prefix: &str, trigger: LoopTrigger) -> (RunReport, Vec<i64>) {
+    let rig = Rig::start_paced(prefix, Pacing::Clock(Duration::from_millis(1)), |config| {
+        config.trigger = trigger;
+        config.safety.state_timeout_ns = 500_000_000;
+        config.safety.nav_timeout_ns = 2_000_000_000;
+    });
     let first_ok = rig.wait_status("torque control", -1, Duration::from_secs(10), |s| {
         s.safety == RobotStatus::SAFETY_OK
     });
@@ -114,6 +113,33 @@ fn a_body_on_its_own_clock_starts_the_cycles_and_each_command_answers_the_newest
     );
     let commands = rig.commands.clone();
     let report = rig.stop();
+    assert_eq!(report.damping_entries, 0, "no fault in a healthy run");
+    let commands = commands.lock().unwrap();
+    let answered: Vec<i64> = commands
+        .iter()
+        .filter(|c| !c.damping && c.state_seq >= 0)
+        .map(|c| c.state_seq)
+        .collect();
+    assert!(answered.len() > 1_500, "{} torque commands", answered.len());
+    (report, answered)
+}
+
+/// Every state is answered once: the commands' state seqs increase one by one, apart from the
+/// few a late wake-up merged.
+fn assert_answered_one_by_one(answered: &[i64]) {
+    let steps: Vec<i64> = answered.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(steps.iter().all(|&d| d >= 0), "state seqs never go back");
+    let one_by_one = steps.iter().filter(|&&d| d == 1).count();
+    assert!(
+        one_by_one * 10 > steps.len() * 8,
+        "{one_by_one} of {} commands answered the next state",
+        steps.len()
+    );
+}
+
+#[test]
+fn a_body_on_its_own_clock_starts_the_cycles_and_each_command_answers_the_newest_state() {
+    let (report, answered) = paced_run("PACED_", LoopTrigger::StateArrival);
     let timing = &report.timing;
     // The loop waits for the body's state and runs when it arrives; only a state delayed by
     // more than half a period (a starved scheduler) leaves a cycle to the watchdog. Before the
@@ -126,23 +152,29 @@ fn a_body_on_its_own_clock_starts_the_cycles_and_each_command_answers_the_newest
         timing.state_waiting,
         timing.watchdog
     );
-    assert_eq!(report.damping_entries, 0, "no fault in a healthy run");
-    // Every state is answered once: the commands' state seqs increase one by one, apart from
-    // the few a late wake-up merged.
-    let commands = commands.lock().unwrap();
-    let answered: Vec<i64> = commands
-        .iter()
-        .filter(|c| !c.damping && c.state_seq >= 0)
-        .map(|c| c.state_seq)
-        .collect();
-    assert!(answered.len() > 1_500, "{} torque commands", answered.len());
-    let steps: Vec<i64> = answered.windows(2).map(|w| w[1] - w[0]).collect();
-    assert!(steps.iter().all(|&d| d >= 0), "state seqs never go back");
-    let one_by_one = steps.iter().filter(|&&d| d == 1).count();
+    assert_answered_one_by_one(&answered);
+}
+
+#[test]
+fn with_a_phase_locked_deadline_each_cycle_finds_its_state_waiting_a_margin_before() {
+    let margin = Duration::from_micros(250);
+    let (report, answered) = paced_run("DEADLINE_", LoopTrigger::Deadline { margin });
+    let timing = &report.timing;
+    assert_eq!(timing.state_arrived, 0, "no cycle waits for a state");
     assert!(
-        one_by_one * 10 > steps.len() * 8,
-        "{one_by_one} of {} commands answered the next state",
-        steps.len()
+        timing.state_waiting * 2 > report.cycles,
+        "{} of {} cycles found a fresh state ({} without)",
+        timing.state_waiting,
+        report.cycles,
+        timing.watchdog
+    );
+    assert_answered_one_by_one(&answered);
+    // Locked to the stream, a state waits about the margin for its cycle: the median latency
+    // is the margin plus a cycle's work, not the half period of an unaligned clock.
+    let latency = timing.latency.percentile_ns(0.5);
+    assert!(
+        (200_000..450_000).contains(&latency),
+        "median latency {latency} ns with a {margin:?} margin"
     );
 }
 
