@@ -31,8 +31,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 # pfnav-robot's --trigger values, as the table names them.
 TRIGGER_LABELS = {
-    "deadline": "phase-locked deadline (default)",
-    "state": "state arrival (`--trigger state`)",
+    "state": "state arrival (default)",
+    "deadline": "phase-locked deadline (`--trigger deadline`)",
     "clock": "fixed deadline (`--trigger clock`)",
 }
 
@@ -265,7 +265,7 @@ def main() -> int:
     )
     parser.add_argument(
         "--triggers",
-        default="deadline,state,clock",
+        default="state,deadline,clock",
         help="comma-separated pfnav-robot --trigger values, run back to back",
     )
     parser.add_argument(

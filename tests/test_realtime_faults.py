@@ -35,6 +35,9 @@ pytestmark = pytest.mark.timeout(600)
 # stall of the relay must not read as a fault; the bound checked is timeout + 25 ms either way.
 STATE_TIMEOUT_MS = 50.0
 NAV_TIMEOUT_MS = 300.0
+# States later than this by the body's clock damp the node (its --max-state-delay-ms); as
+# generous as the timeout, for the same reason.
+MAX_STATE_DELAY_MS = 50.0
 # The issue's bound: damping no later than this after the timeout.
 DAMPING_MARGIN_MS = 25.0
 WAIT = 60.0
@@ -63,6 +66,9 @@ class Relay:
 
     hold_states: bool = False
     drop_every_other: bool = False
+    # Each state forwarded this long after it came (seconds; 0: at once), in order.
+    delay: float = 0.0
+    delayed: list[tuple[float, bytes]] = field(default_factory=list)
     held: list[bytes] = field(default_factory=list)
     forwarded: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -85,6 +91,8 @@ class Stack:
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
+        self.releaser = threading.Thread(target=self._release_delayed, daemon=True)
+        self.releaser.start()
         self.logs = tmp / "logs"
         self.logs.mkdir(exist_ok=True)
         self.env = {**os.environ, "LCM_DEFAULT_URL": lcm_url}
@@ -101,6 +109,8 @@ class Stack:
                 str(STATE_TIMEOUT_MS),
                 "--nav-timeout-ms",
                 str(NAV_TIMEOUT_MS),
+                "--max-state-delay-ms",
+                str(MAX_STATE_DELAY_MS),
                 "--recover-cycles",
                 "100",
                 "--status-period",
@@ -124,7 +134,22 @@ class Stack:
                 return
             if relay.drop_every_other and relay.forwarded % 2:
                 return
+            if relay.delay > 0.0 or relay.delayed:
+                relay.delayed.append((time.monotonic() + relay.delay, data))
+                return
         self.bus.publish(self.node_prefix + ROBOT.low_state, data)
+
+    def _release_delayed(self) -> None:
+        """Forwards the delayed states whose time has come (every millisecond)."""
+        while not self.stop.wait(0.001):
+            now = time.monotonic()
+            with self.relay.lock:
+                due = [data for at, data in self.relay.delayed if at <= now]
+                self.relay.delayed = [
+                    (at, data) for at, data in self.relay.delayed if at > now
+                ]
+            for data in due:
+                self.bus.publish(self.node_prefix + ROBOT.low_state, data)
 
     def _on_node_command(self, _channel: str, data: bytes) -> None:
         self.bus.publish(self.sim_prefix + ROBOT.low_cmd, data)
@@ -228,6 +253,7 @@ class Stack:
                 process.wait()
         self.stop.set()
         self.thread.join(timeout=5)
+        self.releaser.join(timeout=5)
 
 
 def detection_delay_ms(reason: str) -> tuple[float, float]:
@@ -337,3 +363,41 @@ def test_held_dropped_and_garbled_states_damp_or_pass_as_they_should(
     assert stack.sim.poll() is None, "the body survives garbage commands"
     assert stack.navigator.poll() is None
     assert final.states_received > ok.states_received
+
+
+def test_a_constant_delay_of_the_states_damps_above_the_limit_and_passes_below_it(
+    stack: Stack,
+) -> None:
+    ok = stack.torque("torque control at start")
+
+    # 10 ms late, every state: a gap of 10 ms at the onset and late states after it, both
+    # within the limits.
+    with stack.relay.lock:
+        stack.relay.delay = 0.010
+    later = stack.wait_status("10 ms of delay", ok.header.seq + 20, lambda _s: True)
+    assert later.damping_entries == ok.damping_entries, later.reason
+    assert later.safety == stack.types.robot_status_t.SAFETY_OK
+
+    # 150 ms late: the onset is a gap (the state timeout), then the states flow again but late
+    # by the body's clock, which keeps the motors damped.
+    with stack.relay.lock:
+        stack.relay.delay = 0.150
+    delayed = stack.damping(
+        "150 ms of delay", later.header.seq, "low_state_t delayed by"
+    )
+    match = re.search(r"delayed by ([0-9.]+) ms \(limit ([0-9.]+) ms\)", delayed.reason)
+    assert match, delayed.reason
+    assert 140.0 <= float(match.group(1)) <= 150.0 + DAMPING_MARGIN_MS + 20.0, (
+        delayed.reason
+    )
+    still = stack.wait_status(
+        "a second later", delayed.header.seq + 20, lambda _s: True
+    )
+    assert still.safety == stack.types.robot_status_t.SAFETY_DAMPING, (
+        "no recovery on late states"
+    )
+
+    with stack.relay.lock:
+        stack.relay.delay = 0.0
+    recovered = stack.torque("recovery when the delay ends", still.header.seq)
+    assert recovered.states_received > still.states_received

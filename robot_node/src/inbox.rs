@@ -8,6 +8,8 @@ use std::time::Duration;
 use lcm_types::pfnav::{LowState, NavCmd};
 use lcm_types::Message;
 
+use crate::delay::DelayTracker;
+
 /// A `low_state_t` as the controller uses it (no heap: the control loop copies it).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct BodyState {
@@ -122,12 +124,15 @@ pub struct Snapshot {
     /// A state with a seq at or below the last accepted one arrived since the previous
     /// snapshot: (its seq, the last accepted seq).
     pub out_of_order: Option<(i64, i64)>,
+    /// How late the newest accepted state arrived by the body's clock (`delay`), ns.
+    pub state_delay_ns: u64,
     pub counters: Counters,
 }
 
 #[derive(Debug, Default)]
 struct Held {
     snapshot: Snapshot,
+    delay: DelayTracker,
 }
 
 /// Shared between the LCM thread (writer) and the control loop (reader); each side holds the
@@ -185,6 +190,8 @@ impl Inbox {
         }
         snapshot.counters.states_received += 1;
         snapshot.state = Some((BodyState::from_message(&message), now_ns));
+        let delay_ns = held.delay.observe(message.tick, now_ns);
+        held.snapshot.state_delay_ns = delay_ns;
         drop(held);
         self.state_accepted.notify_one();
     }

@@ -12,6 +12,7 @@
 
 pub mod clock;
 pub mod controller;
+pub mod delay;
 pub mod fmu_host;
 pub mod inbox;
 pub mod model_description;

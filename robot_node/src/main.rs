@@ -34,6 +34,10 @@ struct Args {
     /// Damping after this long without a low_state_t, ms.
     #[arg(long, default_value_t = 20.0)]
     state_timeout_ms: f64,
+    /// Damping while the states arrive later than this by the body's clock (`low_state_t.tick`,
+    /// ms; it must count the body's milliseconds, as a robot's does), ms; default: not checked.
+    #[arg(long)]
+    max_state_delay_ms: Option<f64>,
     /// Damping after this long without a nav_cmd_t, ms.
     #[arg(long, default_value_t = 500.0)]
     nav_timeout_ms: f64,
@@ -56,12 +60,12 @@ struct Args {
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
-    /// What starts a control cycle: `deadline` = a fixed point of one-period slots
-    /// phase-locked to the low_state_t stream, `--deadline-margin` after the states' arrival
-    /// (the node's clock sets the period); `state` = the arrival of a fresh low_state_t (the
-    /// slot's end as the watchdog; the stream's delivery sets the period); `clock` = fixed
-    /// deadlines whatever the states do.
-    #[arg(long, value_enum, default_value_t = TriggerArg::Deadline)]
+    /// What starts a control cycle: `state` = the arrival of a fresh low_state_t (one-period
+    /// slots phase-locked to the stream, the slot's end as the watchdog; the stream's delivery
+    /// sets the period); `deadline` = a fixed point of those slots, `--deadline-margin` after
+    /// the states' arrival (the node's clock sets the period); `clock` = fixed deadlines
+    /// whatever the states do.
+    #[arg(long, value_enum, default_value_t = TriggerArg::State)]
     trigger: TriggerArg,
     /// With `--trigger deadline`: how long after the states' arrival phase a cycle starts, as a
     /// fraction of the period (0 < margin < 0.5); the room for the delivery's jitter.
@@ -84,8 +88,8 @@ struct Args {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum TriggerArg {
-    Deadline,
     State,
+    Deadline,
     Clock,
 }
 
@@ -118,6 +122,10 @@ fn main() -> anyhow::Result<()> {
     config.period = Duration::from_secs_f64(1.0 / f64::from(args.rate));
     config.safety.state_timeout_ns = milliseconds(args.state_timeout_ms, "--state-timeout-ms")?;
     config.safety.nav_timeout_ns = milliseconds(args.nav_timeout_ms, "--nav-timeout-ms")?;
+    config.safety.max_state_delay_ns = args
+        .max_state_delay_ms
+        .map(|ms| milliseconds(ms, "--max-state-delay-ms"))
+        .transpose()?;
     config.safety.recover_cycles = args.recover_cycles;
     config.damping_kd = args.damping_kd;
     anyhow::ensure!(

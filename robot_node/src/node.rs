@@ -95,21 +95,14 @@ pub struct NodeConfig {
 /// What starts the control cycles (see `schedule` for the slots they run in).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LoopTrigger {
+    /// The arrival of a fresh state (phase-locked slots, the slot's end as the watchdog): the
+    /// least latency; the period follows the stream's delivery.
+    StateArrival,
     /// A deadline `margin` after the centre of a slot phase-locked to the state stream: the
     /// period keeps the node's clock, the states arrive about `margin` before their cycle.
     Deadline { margin: Duration },
-    /// The arrival of a fresh state (phase-locked slots, the slot's end as the watchdog): the
-    /// least latency, the period of the stream's delivery.
-    StateArrival,
     /// Fixed deadlines, the slot centres, whatever the states do.
     Clock,
-}
-
-impl LoopTrigger {
-    /// The default deadline margin: a quarter period.
-    pub fn deadline(period: Duration) -> Self {
-        LoopTrigger::Deadline { margin: period / 4 }
-    }
 }
 
 impl NodeConfig {
@@ -122,6 +115,7 @@ impl NodeConfig {
             period: Duration::from_millis(1),
             safety: SafetyConfig {
                 state_timeout_ns: 20_000_000,
+                max_state_delay_ns: None,
                 nav_timeout_ns: 500_000_000,
                 recover_cycles: 20,
             },
@@ -130,7 +124,7 @@ impl NodeConfig {
             estimate_every: 10,
             realtime_priority: Some(80),
             duration: None,
-            trigger: LoopTrigger::deadline(Duration::from_millis(1)),
+            trigger: LoopTrigger::StateArrival,
             initial_position: None,
         }
     }

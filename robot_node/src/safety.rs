@@ -1,6 +1,7 @@
 //! The safety monitor: decides every cycle whether the controller's torques may go to the
-//! motors or the motors are damped, and why. Faults: no state for the state timeout, a state
-//! with a non-finite value, an out-of-order or repeated state seq, no navigator command for the
+//! motors or the motors are damped, and why. Faults: no state for the state timeout, states
+//! arriving later than the delay limit by the body's clock (when set), a state with a
+//! non-finite value, an out-of-order or repeated state seq, no navigator command for the
 //! navigator timeout, a failed controller step. Damping ends after `recover_cycles` cycles in a
 //! row without a fault (a flapping link does not toggle the motors every cycle); a controller
 //! failure is final (the FMU instance is in its error state).
@@ -10,6 +11,9 @@ use crate::inbox::Snapshot;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SafetyConfig {
     pub state_timeout_ns: u64,
+    /// Damping when the newest state arrived later than this by the body's clock (`delay`);
+    /// None: not checked (a body whose `tick` is not a clock, e.g. one in lockstep).
+    pub max_state_delay_ns: Option<u64>,
     pub nav_timeout_ns: u64,
     pub recover_cycles: u32,
 }
@@ -27,6 +31,7 @@ enum Fault {
     Controller,
     NoStateYet,
     StateTimeout,
+    StateDelayed,
     NonFiniteState,
     OutOfOrderState,
     NoNavYet,
@@ -107,6 +112,18 @@ impl SafetyMonitor {
             }
             Some(_) => {}
         }
+        if let Some(limit) = self.config.max_state_delay_ns {
+            if snapshot.state_delay_ns > limit {
+                return Some((
+                    Fault::StateDelayed,
+                    format!(
+                        "low_state_t delayed by {:.1} ms (limit {:.1} ms)",
+                        snapshot.state_delay_ns as f64 * 1e-6,
+                        limit as f64 * 1e-6
+                    ),
+                ));
+            }
+        }
         if snapshot.non_finite_state {
             return Some((
                 Fault::NonFiniteState,
@@ -180,6 +197,7 @@ mod tests {
     fn config() -> SafetyConfig {
         SafetyConfig {
             state_timeout_ns: 20 * MS,
+            max_state_delay_ns: Some(30 * MS),
             nav_timeout_ns: 500 * MS,
             recover_cycles: 3,
         }
@@ -223,6 +241,13 @@ mod tests {
                 "no low_state_t for 21.0 ms",
                 Box::new(|now| Snapshot {
                     state: Some((BodyState::default(), now - 21 * MS)),
+                    ..healthy(now)
+                }),
+            ),
+            (
+                "low_state_t delayed by 31.5 ms (limit 30.0 ms)",
+                Box::new(|now| Snapshot {
+                    state_delay_ns: 31_500_000,
                     ..healthy(now)
                 }),
             ),

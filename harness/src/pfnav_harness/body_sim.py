@@ -11,12 +11,14 @@ drives instead of a robot.
 Two timings:
 
 * **real time** (default): ticks on absolute `CLOCK_MONOTONIC` deadlines, the body's own clock.
-  A tick sends the state measured at the end of the previous tick, waits up to half a period
-  for the command answering it (a motor driver applies a command when it arrives), then steps
-  with the newest command: the states leave on the clock, and a prompt answer acts on the step
-  after its own state, a late one a tick later. A tick that overruns its period is counted,
-  and the clock continues on its grid after the present rather than running the missed ticks
-  back to back.
+  A tick sends the state measured at the end of the previous tick (stamped with the tick's
+  time in ms, the body's clock), waits up to half a period (`--command-wait`) for the command
+  answering it (a motor driver applies a command when it arrives), then steps with the newest
+  command: the states leave on the clock, and a prompt answer acts on the step after its own
+  state, a late one a tick later (`--command-wait 0`: every answer a tick later, as a motor
+  board applying the newest command at its tick; the ticks are shorter). A tick that overruns
+  its period is counted, and the clock continues on its grid after the present rather than
+  running the missed ticks back to back.
 * **lockstep** (`--lockstep`, for tests): the body waits for the command answering its last
   state (`low_cmd_t.state_seq`) before the next step, so a slow machine slows the run down
   instead of changing it.
@@ -196,8 +198,8 @@ class BodySimulation:
         message.reference = [0.0] * 7
         return message
 
-    def low_state(self, seq: int) -> Any:
-        """The body sensors now, as a low_state_t with header.seq = `seq`."""
+    def low_state(self, seq: int, tick_ms: int | None = None) -> Any:
+        """The body sensors now, as a low_state_t with header.seq = `seq` and tick `tick_ms` (None: the simulated time, ms)."""
         s = self.state
         readings = self.sensors.sample(self.time, s)
         message = self._types.low_state_t()
@@ -206,7 +208,7 @@ class BodySimulation:
         header.seq = seq
         header.frame_id = "body"
         message.header = header
-        message.tick = round(self.time * 1e3)
+        message.tick = round(self.time * 1e3) if tick_ms is None else tick_ms
         message.imu_quaternion = s[3:7].tolist()
         message.imu_gyroscope = readings.gyro.tolist()
         message.imu_accelerometer = readings.acc.tolist()
@@ -276,10 +278,10 @@ class BodyNode:
             self.lcm.handle()
             wait = 0.0
 
-    def next_state(self) -> bytes:
-        """The encoded low_state_t of the body now, with the next seq."""
+    def next_state(self, tick_ms: int | None = None) -> bytes:
+        """The encoded low_state_t of the body now, with the next seq (and `tick_ms` as its tick; None: the simulated time)."""
         self.seq += 1
-        return bytes(self.sim.low_state(self.seq).encode())
+        return bytes(self.sim.low_state(self.seq, tick_ms).encode())
 
     def _drain_until_answer(self, seq: int, until_ns: int) -> None:
         """Handles commands until one answers state `seq` or CLOCK_MONOTONIC reaches `until_ns`."""
@@ -299,8 +301,11 @@ class BodyNode:
         """Ticks at `rate` Hz on absolute deadlines until `stop()` or `duration` seconds of wall time.
 
         `command_wait`: fraction of the period a tick waits for the command answering its state
-        before it steps with the newest command it has.
+        before it steps with the newest command it has (0: it steps at once, as a robot's motor
+        board applies the newest command at its tick).
         """
+        if not 0.0 <= command_wait < 1.0:
+            raise HarnessError(f"the command wait must be a fraction of the period in [0, 1), got {command_wait}")
         period_ns = round(1e9 / rate)
         if abs(period_ns * 1e-9 - self.sim.world.time_step) > 1e-12:
             raise HarnessError(f"the tick ({period_ns * 1e-6} ms) must equal the physics step ({self.sim.world.time_step * 1e3} ms)")
@@ -314,7 +319,7 @@ class BodyNode:
         # arrives: in time, the step runs with the torque computed from this very state (the
         # delay is the node's latency, not a tick); late, with the previous command.
         wait_ns = round(command_wait * period_ns)
-        state = self.next_state()
+        state = self.next_state(0)
         # The cyclic garbage collector off while ticking (the loop makes no reference cycles; a
         # pass over the heap with the physics world in it stalls a tick by milliseconds), and
         # what exists now moved out of its sight for good.
@@ -329,6 +334,7 @@ class BodyNode:
 
     def _tick_realtime(self, state: bytes, period_ns: int, wait_ns: int, deadline: int, end: int | None, stop: Callable[[], bool]) -> None:
         clock = time.monotonic_ns
+        start = deadline
         previous: int | None = None
         timing = self.timing
         while not stop():
@@ -347,7 +353,9 @@ class BodyNode:
             if self.last_answered_seq >= self.seq:
                 timing.answered_in_time += 1
             self.sim.step()
-            state = self.next_state()
+            # Stamped with the body's clock, the tick grid in ms, as a robot's board stamps its
+            # states.
+            state = self.next_state((deadline + period_ns - start) // 1_000_000)
             if self.truth_every and self.sim.steps % self.truth_every == 0:
                 self.lcm.publish(self.channels.truth, self.sim.truth().encode())
             done = clock()
@@ -452,6 +460,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="also publish the true state (robot_state_t, channel of [simulation] robot_state) at this rate, Hz (0: never)",
     )
+    p.add_argument(
+        "--command-wait",
+        type=float,
+        default=0.5,
+        help=(
+            "real time: fraction of a period a tick waits for the command answering its state before it steps "
+            "(0: it steps at once with the newest command, one tick of actuation delay)"
+        ),
+    )
     p.add_argument("--priority", type=int, default=0, help="SCHED_FIFO priority (1..99) and mlockall for the real-time loop; 0: neither")
     p.add_argument("--report-json", type=Path, help="at exit, write the tick statistics and counters to this JSON file")
     return p
@@ -490,7 +507,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         steps = None if args.duration is None else round(args.duration / sim.world.time_step)
         node.run_lockstep(steps, stop_requested)
     else:
-        node.run_realtime(args.duration, stop_requested)
+        node.run_realtime(args.duration, stop_requested, command_wait=args.command_wait)
     print(
         f"pfnav-sim: stopped at t={sim.time:.3f} s simulated; {node.timing.summary()}; {node.commands_received} commands, {node.commands_rejected} rejected",
         file=sys.stderr,

@@ -66,7 +66,21 @@ def _stop(process: subprocess.Popen[bytes] | None, timeout: float = 20.0) -> Non
         process.wait()
 
 
-def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: bool, stand_time: float = 3.0) -> RealtimeOutcome:
+# pfnav-robot's --trigger values; the first is its default.
+ROBOT_TRIGGERS = ("state", "deadline", "clock")
+
+
+def run_scenario(
+    name: str,
+    out: Path,
+    lcm_url: str,
+    max_walk: float,
+    cosim: bool,
+    stand_time: float = 3.0,
+    trigger: str = ROBOT_TRIGGERS[0],
+    sim_priority: int = 70,
+    command_wait: float = 0.5,
+) -> RealtimeOutcome:
     from . import paths
     from .pipeline import export_scenario
     from .planner_client import PlannerClient, RequestOptions, StartPose, _import_lcm, _import_types
@@ -119,7 +133,9 @@ def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: boo
                 "--truth-rate",
                 "50",
                 "--priority",
-                "70",
+                str(sim_priority),
+                "--command-wait",
+                str(command_wait),
                 "--out",
                 str(out),
                 "--report-json",
@@ -137,7 +153,7 @@ def run_scenario(name: str, out: Path, lcm_url: str, max_walk: float, cosim: boo
         # true first pose too): the controller, the navigator and the map share the world frame.
         initial = [f"{v:.6f}" for v in truth[-1][1].position]
         robot_args = [str(paths.pfnav_robot_path()), "--fmu", str(paths.fmu_path()), "--channel-prefix", prefix, "--report-json", str(robot_json)]
-        robot = spawn("robot", [*robot_args, "--nav-timeout-ms", "1000", "--initial-position", *initial])
+        robot = spawn("robot", [*robot_args, "--trigger", trigger, "--nav-timeout-ms", "1000", "--initial-position", *initial])
         navigator_args = [sys.executable, "-m", "pfnav_harness.realtime_nav", "--scenario", name, "--channel-prefix", prefix, "--planner-prefix", prefix]
         navigator = spawn("navigator", [*navigator_args, "--out", str(out), "--lcm-url", lcm_url, "--origin", "0", "0", "0", "--stand-time", str(stand_time)])
         terrain, goal, fall = scenario.terrain, scenario.goal, FallThresholds()
@@ -251,6 +267,9 @@ def add_realtime_command(sub: Any) -> None:
         "--stand-time", type=float, default=3.0, help="seconds the navigator asks the robot to stand (after the node's first torque cycle) before walking"
     )
     p.add_argument("--cosim", action="store_true", help="also co-simulate each scenario (feedback mode, kalman) for comparison")
+    p.add_argument("--trigger", choices=ROBOT_TRIGGERS, default=ROBOT_TRIGGERS[0], help="what starts pfnav-robot's cycles (its --trigger)")
+    p.add_argument("--command-wait", type=float, default=0.5, help="pfnav-sim's --command-wait (fraction of a period it waits for the answer)")
+    p.add_argument("--sim-priority", type=int, default=70, help="pfnav-sim's SCHED_FIFO priority (pfnav-robot runs at 80; 0: ordinary scheduling)")
     p.add_argument("--out", type=Path, default=Path("out/realtime"), help="output folder (logs, LCM logs, report.md)")
     p.add_argument("--results-page", metavar="NAME", help="also write docs/results/NAME.md (stamped)")
 
@@ -276,14 +295,15 @@ def run_realtime(args: Any) -> int:
     load_before = os.getloadavg()
     outcomes = []
     for name in args.scenario or paper_scenario_names():
-        outcome = run_scenario(name, out, udpm_url(7667), args.max_walk, args.cosim, args.stand_time)
+        outcome = run_scenario(name, out, udpm_url(7667), args.max_walk, args.cosim, args.stand_time, args.trigger, args.sim_priority, args.command_wait)
         outcomes.append(outcome)
         print(table([outcome]).splitlines()[-1], flush=True)
     load_after = os.getloadavg()
     text = "\n".join(
         [
             (
-                "Planner service, pfnav-robot (controller FMU, 1 kHz, state-triggered cycles), pfnav-sim (DART, real time, 1 kHz) and "
+                f"Planner service, pfnav-robot (controller FMU, 1 kHz, `--trigger {args.trigger}`), pfnav-sim (DART, real time, 1 kHz, "
+                f"SCHED_FIFO priority {args.sim_priority}) and "
                 "the navigator (feedback field on the robot's estimate, nav_cmd_t at 50 Hz) as four processes over udpm:// in a private "
                 "network namespace; lcm-logger records each run (OUT/logs/SCENARIO.lcmlog). Goal: the true trunk enters the goal "
                 "disc, as the co-simulation judges it; fall: the co-simulation's height and tilt thresholds. Path deviation: RMS "
