@@ -114,6 +114,9 @@ def test_in_lockstep_the_body_steps_once_per_answer_and_follows_a_pd_command(bod
     # rounding of q, 0.38 mrad × KP).
     np.testing.assert_allclose(tau, KP * (target - q) - KD * dq, atol=KP * 4e-4 + 1e-3)
     assert list(last.foot_contact) == [-1] * 4 and last.tick == 599
+    # Standing: the four force sensors carry the body's weight.
+    assert min(last.foot_force) > 0.0
+    assert sum(last.foot_force) == pytest.approx(body.world.mass * 9.81, rel=0.15)
     # At rest on the ground the accelerometer's specific force is +g along the trunk's up axis.
     assert np.linalg.norm(np.array(last.imu_accelerometer)) == pytest.approx(9.81, abs=0.5)
 

@@ -88,6 +88,11 @@ def test_a_standing_robot_rests_on_the_map_s_surface(engine: str, tmp_path: Path
     s = world.state()
     assert world.foot_contacts().all()
     assert world.touching_links() == []
+    # The feet carry the robot: every foot pushes, and together they hold its weight.
+    forces = np.zeros(4)
+    world.write_foot_forces(forces)
+    assert (forces > 0.05 * world.mass * 9.81).all(), forces
+    assert forces.sum() == pytest.approx(world.mass * 9.81, rel=0.1)
     assert 0.18 < s.position[2] - terrain.height_at(float(s.position[0]), float(s.position[1])) < 0.32
     assert math.hypot(s.position[0] - 2.0, s.position[1] - 1.5) < 0.1
     feet = world.foot_positions()
@@ -123,6 +128,9 @@ def test_a_free_falling_robot_gains_momentum_m_g_t(engine: str, tmp_path: Path) 
         world.apply_torques(np.zeros(12))
         world.step()
         assert not world.foot_contacts().any()
+    forces = np.full(4, np.nan)
+    world.write_foot_forces(forces)
+    assert (forces == 0.0).all(), "no force in the air"
     elapsed = world.time - t0
     assert elapsed == pytest.approx(0.2)
     np.testing.assert_allclose(world.linear_momentum(), start + world.mass * GRAVITY * elapsed, atol=1e-9)

@@ -23,9 +23,10 @@ Two timings:
   state (`low_cmd_t.state_seq`) before the next step, so a slow machine slows the run down
   instead of changing it.
 
-Not modelled: the foot force sensors (`foot_force` is 0; `foot_contact` is −1, "unknown", unless
-`--contact-sensor` reports the engine's contacts as an ideal binary sensor), motor dynamics
-beyond the torque law, and the transport's own delay.
+The foot force sensors are ideal: `foot_force` is the magnitude of the engine's contact force
+on each foot in the last step, N (0 in the air). Not modelled: a contact switch (`foot_contact`
+is −1, "unknown", unless `--contact-sensor` reports the engine's contacts as an ideal binary
+sensor), motor dynamics beyond the torque law, and the transport's own delay.
 """
 
 from __future__ import annotations
@@ -163,6 +164,7 @@ class BodySimulation:
         self.state = np.zeros(37)
         self._read_state = world.state_reader(self.state)
         self._contacts = np.zeros(4, dtype=np.int8)
+        self._foot_forces = np.zeros(4)
         self.steps = 0
         self._types = _types()
         self._read_state()
@@ -215,7 +217,8 @@ class BodySimulation:
         message.q = readings.joint_q.tolist()
         message.dq = readings.joint_dq.tolist()
         message.tau_est = self.motors.torque.tolist()
-        message.foot_force = [0.0] * 4
+        self.world.write_foot_forces(self._foot_forces)
+        message.foot_force = self._foot_forces.tolist()
         if self.contact_sensor:
             self.world.write_foot_contacts(self._contacts)
             message.foot_contact = [int(c) for c in self._contacts]

@@ -127,6 +127,11 @@ class PhysicsEngine(Protocol):
 
     def write_foot_contacts(self, out: NDArray[np.generic]) -> None: ...
 
+    def write_foot_forces(self, out: NDArray[np.float64]) -> None:
+        """The magnitude of the contact force on each foot in the last physics step (N, legs in
+        the config's order; 0 in the air, and after a restore until the next step)."""
+        ...
+
     def touching_links(self) -> list[str]:
         """Robot links other than the feet that touched anything in the last collision check."""
         ...

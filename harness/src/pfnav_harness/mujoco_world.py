@@ -225,6 +225,8 @@ class MujocoWorld:
             np.copyto if isinstance(actuators, slice) else lambda ctrl, torques: ctrl.__setitem__(self._actuators, torques)
         )
         self._foot_ids = np.array([model.body(name).id for name in robot.foot_links], dtype=np.int64)
+        self._leg_of_body = {int(body): leg for leg, body in enumerate(self._foot_ids)}
+        self._contact_wrench = np.zeros(6)
         # The foot contact sensors' counts, a live view of the data (legs in the config's order:
         # the sensors were added so, one value each).
         first = int(model.sensor_adr[model.sensor(f"{FOOT_CONTACT_SENSOR}{robot.foot_links[0]}").id])
@@ -565,6 +567,27 @@ class MujocoWorld:
             return
         # Into a boolean `out` without a cast (the co-simulation passes a boolean view of its log row).
         np.greater(self._foot_contact_counts, 0.0, out=out)
+
+    def write_foot_forces(self, out: NDArray[np.float64]) -> None:
+        out[:] = 0.0
+        if self._restored_contacts is not None:
+            return
+        data, model = self.data, self.model
+        if data.ncon == 0:
+            return
+        wrench = self._contact_wrench
+        forces = np.zeros((len(self._foot_ids), 3))
+        for i in range(data.ncon):
+            contact = data.contact[i]
+            for geom in (contact.geom1, contact.geom2):
+                leg = self._leg_of_body.get(int(model.geom_bodyid[geom]))
+                if leg is not None:
+                    # Normal and tangential components in the contact's frame, whose rows are
+                    # the axes (the sign does not matter for the magnitude).
+                    mujoco.mj_contactForce(model, data, i, wrench)
+                    forces[leg] += contact.frame.reshape(3, 3).T @ wrench[:3]
+                    break
+        out[:] = np.linalg.norm(forces, axis=1)
 
     def touching_links(self) -> list[str]:
         feet = set(self.description.foot_links)

@@ -490,6 +490,11 @@ class QuadrupedWorld:
                 add_foot_sphere(foot, self.foot_radius, offset)
         if not all(leg.has_foot_sphere for leg in robot.legs):
             log.info("%s: foot links without a sphere collision get a sphere of foot_radius %.4g m at the foot point", robot.config_path, self.foot_radius)
+        # The collision shapes of each foot, by their (unique) shape node names, for the contact forces.
+        self._leg_of_shape_frame = {
+            foot.getShapeNode(k).getName(): leg for leg, foot in enumerate(self.feet) for k in range(foot.getNumShapeNodes())
+        }
+        self._leg_of_collision_object: dict[object, int] = {}
         # The trunk: the base and every link welded to it; a payload joins the heaviest of them.
         self.trunk_bodies = welded_bodies(self.base)
         self.trunk_body = max(self.trunk_bodies, key=lambda body: body.getMass())
@@ -813,6 +818,36 @@ class QuadrupedWorld:
         touching = np.zeros(len(self.feet), dtype=bool)
         self.write_foot_contacts(touching)
         return touching
+
+    def write_foot_forces(self, out: NDArray[np.float64]) -> None:
+        out[:] = 0.0
+        if self._restored_contacts is not None:
+            return
+        result = self.world.getLastCollisionResult()
+        count = result.getNumContacts()
+        if count == 0:
+            return
+        forces = np.zeros((len(self.feet), 3))
+        for i in range(count):
+            contact = result.getContact(i)
+            leg = self._leg_of_object(contact.collisionObject1)
+            if leg < 0:
+                leg = self._leg_of_object(contact.collisionObject2)
+            if leg >= 0:
+                # Which side the force acts on does not matter for its magnitude.
+                forces[leg] += contact.force
+        out[:] = np.linalg.norm(forces, axis=1)
+
+    def _leg_of_object(self, collision_object: object) -> int:
+        """The leg whose foot `collision_object` belongs to, −1 for none. dartpy hands out the same
+        Python object for a collision object while one is alive, so the answer is kept by it (the
+        name lookup behind it costs more than the rest of a contact)."""
+        leg = self._leg_of_collision_object.get(collision_object)
+        if leg is None:
+            name = collision_object.getShapeFrame().getName()  # type: ignore[attr-defined]
+            leg = self._leg_of_shape_frame.get(name, -1)
+            self._leg_of_collision_object[collision_object] = leg
+        return leg
 
     def write_foot_contacts(self, out: NDArray[np.generic]) -> None:
         """`foot_contacts()` into `out` (one entry per leg), without allocating."""
