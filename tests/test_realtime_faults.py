@@ -23,10 +23,12 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
+import numpy as np
 import pytest
 from pfnav_harness import paths
-from pfnav_harness.lcm_channels import ROBOT
+from pfnav_harness.lcm_channels import ROBOT, udpm_url
 from pfnav_harness.planner_client import _import_lcm, _import_types
 
 pytestmark = pytest.mark.timeout(600)
@@ -401,3 +403,146 @@ def test_a_constant_delay_of_the_states_damps_above_the_limit_and_passes_below_i
         stack.relay.delay = 0.0
     recovered = stack.torque("recovery when the delay ends", still.header.seq)
     assert recovered.states_received > still.states_received
+
+
+def _recorded_channels(log_file: Path) -> list[str]:
+    """Channels of the events in an LCM log so far (a partly written last event ends the list)."""
+    channels: list[str] = []
+    if not log_file.exists():
+        return channels
+    try:
+        for event in _import_lcm().EventLog(str(log_file), "r"):
+            channels.append(event.channel)
+    except (OSError, ValueError):
+        pass
+    return channels
+
+
+def test_a_recorded_session_replays_through_lcm_logplayer_into_a_fresh_node(
+    stack: Stack, tmp_path: Path
+) -> None:
+    """lcm-logger records the node's inputs while the stack stands; lcm-logplayer replays them on
+    another bus, where a fresh pfnav-robot takes them as a body and a navigator: it enters torque
+    control and answers the recorded states one by one."""
+    bin_dir = paths.repo_root() / "build" / "lcm" / "bin"
+    log_file = tmp_path / "session.lcmlog"
+    logger = subprocess.Popen(
+        [
+            str(bin_dir / "lcm-logger"),
+            "--quiet",
+            "--force",
+            f"--lcm-url={stack.url}",
+            str(log_file),
+        ],
+        stdout=(stack.logs / "logger.log").open("w"),
+        stderr=subprocess.STDOUT,
+    )
+    try:
+        ok = stack.torque("torque control at start")
+        # Two seconds of standing in the log.
+        stack.wait_status("two seconds later", ok.header.seq + 40, lambda _s: True)
+    finally:
+        logger.send_signal(signal.SIGINT)
+        logger.wait(timeout=20)
+    states = stack.node_prefix + ROBOT.low_state
+    recorded = _recorded_channels(log_file)
+    assert recorded.count(states) > 1_000, "the logger recorded the states"
+    assert stack.node_prefix + ROBOT.nav_cmd in recorded
+
+    # Another port: the replay's bus is apart from the live stack's.
+    replay_url = udpm_url((urlsplit(stack.url).port or 7600) + 100)
+    replay_prefix = stack.node_prefix
+    types = stack.types
+    bus = _import_lcm().LCM(replay_url)
+    commands: list[Any] = []
+    statuses: list[Any] = []
+    bus.subscribe(
+        replay_prefix + ROBOT.low_cmd,
+        lambda _c, d: commands.append(types.low_cmd_t.decode(d)),
+    )
+    bus.subscribe(
+        replay_prefix + ROBOT.robot_status,
+        lambda _c, d: statuses.append(types.robot_status_t.decode(d)),
+    )
+    node = subprocess.Popen(
+        [
+            str(paths.pfnav_robot_path()),
+            "--fmu",
+            str(paths.fmu_path()),
+            "--lcm-url",
+            replay_url,
+            "--channel-prefix",
+            replay_prefix,
+            "--state-timeout-ms",
+            str(STATE_TIMEOUT_MS),
+            "--recover-cycles",
+            "20",
+            "--status-period",
+            "0.05",
+        ],
+        stdout=(stack.logs / "replay_node.log").open("w"),
+        stderr=subprocess.STDOUT,
+    )
+
+    def pump_until(predicate: Callable[[], bool], timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline or node.poll() is not None:
+                return False
+            bus.handle_timeout(20)
+        return True
+
+    try:
+        assert pump_until(lambda: bool(statuses), WAIT), "the fresh node's first status"
+        # Played while this test keeps reading the node's commands (a socket buffer would not
+        # hold seconds of them).
+        player = subprocess.Popen(
+            [
+                str(bin_dir / "lcm-logplayer"),
+                f"--lcm-url={replay_url}",
+                "-e",
+                f"{replay_prefix}(LOW_STATE|NAV_CMD)",
+                str(log_file),
+            ],
+            stdout=(stack.logs / "logplayer.log").open("w"),
+            stderr=subprocess.STDOUT,
+        )
+        try:
+            assert pump_until(lambda: player.poll() is not None, 120.0), (
+                "lcm-logplayer did not finish"
+            )
+        finally:
+            if player.poll() is None:
+                player.kill()
+            player.wait()
+        assert player.returncode == 0
+        # The log has ended: the node falls back to damping for want of states.
+        assert pump_until(
+            lambda: (
+                any(s.safety == types.robot_status_t.SAFETY_OK for s in statuses)
+                and statuses[-1].safety == types.robot_status_t.SAFETY_DAMPING
+            ),
+            WAIT,
+        ), [(s.safety, s.reason) for s in statuses[-3:]]
+        assert node.poll() is None, "the replayed node keeps running"
+    finally:
+        node.send_signal(signal.SIGTERM)
+        node.wait(timeout=20)
+    assert node.returncode in (0, -signal.SIGTERM)
+    assert any(s.safety == types.robot_status_t.SAFETY_OK for s in statuses), (
+        "torque control on the replayed inputs"
+    )
+    answered = [
+        c.state_seq
+        for c in commands
+        if c.state_seq >= 0 and any(t != 0.0 for t in c.tau)
+    ]
+    assert len(answered) > 1_000, f"{len(answered)} torque commands"
+    steps = np.diff(answered)
+    assert (steps >= 0).all(), "the replayed states keep their order"
+    assert (steps == 1).mean() > 0.8, (
+        "the commands answer the recorded states one by one"
+    )
+    # Torque on the recorded states, then damping once the log ends.
+    assert statuses[-1].safety == types.robot_status_t.SAFETY_DAMPING
+    assert "no low_state_t" in statuses[-1].reason
