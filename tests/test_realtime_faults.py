@@ -437,14 +437,18 @@ def test_a_recorded_session_replays_through_lcm_logplayer_into_a_fresh_node(
         stdout=(stack.logs / "logger.log").open("w"),
         stderr=subprocess.STDOUT,
     )
+    states = stack.node_prefix + ROBOT.low_state
     try:
-        ok = stack.torque("torque control at start")
-        # Two seconds of standing in the log.
-        stack.wait_status("two seconds later", ok.header.seq + 40, lambda _s: True)
+        stack.torque("torque control at start")
+        # At least 1 000 states of standing in the log (about a second; longer on a loaded machine).
+        deadline = time.monotonic() + WAIT
+        while _recorded_channels(log_file).count(states) <= 1_000:
+            assert time.monotonic() < deadline, "lcm-logger did not record 1 000 states"
+            assert logger.poll() is None, "lcm-logger exited"
+            time.sleep(0.1)
     finally:
         logger.send_signal(signal.SIGINT)
         logger.wait(timeout=20)
-    states = stack.node_prefix + ROBOT.low_state
     recorded = _recorded_channels(log_file)
     assert recorded.count(states) > 1_000, "the logger recorded the states"
     assert stack.node_prefix + ROBOT.nav_cmd in recorded
@@ -540,8 +544,17 @@ def test_a_recorded_session_replays_through_lcm_logplayer_into_a_fresh_node(
     assert len(answered) > 1_000, f"{len(answered)} torque commands"
     steps = np.diff(answered)
     assert (steps >= 0).all(), "the replayed states keep their order"
-    assert (steps == 1).mean() > 0.8, (
-        "the commands answer the recorded states one by one"
+    recorded_seqs = {
+        types.low_state_t.decode(event.data).header.seq
+        for event in _import_lcm().EventLog(str(log_file), "r")
+        if event.channel == states
+    }
+    assert set(answered) <= recorded_seqs, "every command answers a recorded state"
+    # A loaded machine may hand the replayed states over in bursts (the node then answers the
+    # newest of a burst); more than half of them get their own answer.
+    assert len(set(answered)) > 0.5 * len(recorded_seqs), (
+        len(set(answered)),
+        len(recorded_seqs),
     )
     # Torque on the recorded states, then damping once the log ends.
     assert statuses[-1].safety == types.robot_status_t.SAFETY_DAMPING
