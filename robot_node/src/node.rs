@@ -175,24 +175,15 @@ impl RunReport {
     /// The whole run's figures (seconds, counts) as JSON, for benchmarks.
     pub fn to_json(&self, period_s: f64) -> serde_json::Value {
         let t = &self.timing;
-        let s = |ns: u64| ns as f64 * 1e-9;
-        let percentiles = |h: &crate::stats::Histogram| {
-            serde_json::json!({
-                "count": h.count(),
-                "p50": s(h.percentile_ns(0.5)),
-                "p99": s(h.percentile_ns(0.99)),
-                "max": s(h.max_ns()),
-            })
-        };
         serde_json::json!({
             "period_nominal": period_s,
             "cycles": self.cycles,
             "misses": t.misses,
             "overruns": t.overruns,
-            "period": percentiles(&t.period),
-            "jitter": percentiles(&t.jitter),
-            "runtime": percentiles(&t.runtime),
-            "latency": percentiles(&t.latency),
+            "period": t.period.to_json(),
+            "jitter": t.jitter.to_json(),
+            "runtime": t.runtime.to_json(),
+            "latency": t.latency.to_json(),
             "cycles_state_arrived": t.state_arrived,
             "cycles_state_waiting": t.state_waiting,
             "cycles_watchdog": t.watchdog,

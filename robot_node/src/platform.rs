@@ -24,22 +24,13 @@ pub struct FloorReport {
 
 impl FloorReport {
     pub fn to_json(&self, period_s: f64) -> serde_json::Value {
-        let s = |ns: u64| ns as f64 * 1e-9;
-        let percentiles = |h: &Histogram| {
-            serde_json::json!({
-                "count": h.count(),
-                "p50": s(h.percentile_ns(0.5)),
-                "p99": s(h.percentile_ns(0.99)),
-                "max": s(h.max_ns()),
-            })
-        };
         serde_json::json!({
             "period_nominal": period_s,
             "cycles": self.cycles,
             "misses": self.timing.misses,
-            "period": percentiles(&self.timing.period),
-            "jitter": percentiles(&self.timing.jitter),
-            "lateness": percentiles(&self.lateness),
+            "period": self.timing.period.to_json(),
+            "jitter": self.timing.jitter.to_json(),
+            "lateness": self.lateness.to_json(),
             "realtime_priority": self.realtime.fifo_priority,
             "memory_locked": self.realtime.memory_locked,
         })

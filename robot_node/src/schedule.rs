@@ -150,6 +150,38 @@ impl SlotSchedule {
     }
 }
 
+/// Phases of a state stream within a period of `period` ns that the tests start from: the
+/// edges, the middle and both sides of it.
+#[cfg(test)]
+fn stream_phases(period: u64) -> [u64; 8] {
+    [
+        0,
+        period / 10,
+        period / 3,
+        period / 2,
+        period / 2 + 1,
+        2 * period / 3,
+        9 * period / 10,
+        period - 1,
+    ]
+}
+
+/// `count` state arrivals, one per `period` at `phase` (ns), those after the `settled`-th
+/// shifted by `jitter[k % jitter.len()]` (a deterministic delivery jitter).
+#[cfg(test)]
+fn jittered_stream(count: u64, period: u64, phase: u64, settled: u64, jitter: &[i64]) -> Vec<u64> {
+    (0..count)
+        .map(|k| {
+            let offset = if k > settled {
+                jitter[k as usize % jitter.len()]
+            } else {
+                0
+            };
+            (k * period + phase).saturating_add_signed(offset)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -211,16 +243,7 @@ mod tests {
 
     #[test]
     fn a_paced_stream_at_any_phase_ends_up_triggering_every_cycle_in_mid_slot() {
-        for phase in [
-            0,
-            T / 10,
-            T / 3,
-            T / 2,
-            T / 2 + 1,
-            2 * T / 3,
-            9 * T / 10,
-            T - 1,
-        ] {
+        for phase in stream_phases(T) {
             let arrivals: Vec<u64> = (0..420).map(|k| k * T + phase).collect();
             let cycles = simulate(&arrivals, None, 50_000, 400 * T);
             let settled = &cycles[100..];
@@ -288,15 +311,7 @@ mod tests {
         let jitter = [
             0i64, 400_000, -400_000, 150_000, -250_000, 399_000, -399_000,
         ];
-        let arrivals: Vec<u64> = (0..600u64)
-            .map(|k| {
-                (k * T + T / 3).saturating_add_signed(if k > 200 {
-                    jitter[k as usize % 7]
-                } else {
-                    0
-                })
-            })
-            .collect();
+        let arrivals = jittered_stream(600, T, T / 3, 200, &jitter);
         let cycles = simulate(&arrivals, None, 50_000, 600 * T);
         let late: Vec<_> = cycles.iter().filter(|c| c.0 > 210 * T).collect();
         let triggered = late
@@ -398,16 +413,7 @@ mod deadline_tests {
 
     #[test]
     fn a_paced_stream_at_any_phase_is_used_a_margin_after_its_arrival_every_period() {
-        for phase in [
-            0,
-            T / 10,
-            T / 3,
-            T / 2,
-            T / 2 + 1,
-            2 * T / 3,
-            9 * T / 10,
-            T - 1,
-        ] {
+        for phase in stream_phases(T) {
             let arrivals: Vec<u64> = (0..620).map(|k| k * T + phase).collect();
             let cycles = simulate(&arrivals, 300_000, 600 * T);
             let settled = &cycles[300..];
@@ -431,12 +437,7 @@ mod deadline_tests {
         let jitter = [
             0i64, 200_000, -200_000, 150_000, -120_000, 180_000, -190_000,
         ];
-        let arrivals: Vec<u64> = (0..820u64)
-            .map(|k| {
-                let offset = if k > 300 { jitter[k as usize % 7] } else { 0 };
-                (k * T + T / 3).saturating_add_signed(offset)
-            })
-            .collect();
+        let arrivals = jittered_stream(820, T, T / 3, 300, &jitter);
         let cycles = simulate(&arrivals, 50_000, 800 * T);
         let jittery: Vec<_> = cycles.iter().filter(|c| c.0 > 320 * T).copied().collect();
         let worst = jittery

@@ -50,6 +50,17 @@ impl Histogram {
         self.total
     }
 
+    /// Count, median, 99th percentile and maximum, in seconds, as JSON (the benchmarks' form).
+    pub fn to_json(&self) -> serde_json::Value {
+        let s = |ns: u64| ns as f64 * 1e-9;
+        serde_json::json!({
+            "count": self.count(),
+            "p50": s(self.percentile_ns(0.5)),
+            "p99": s(self.percentile_ns(0.99)),
+            "max": s(self.max_ns()),
+        })
+    }
+
     pub fn max_ns(&self) -> u64 {
         self.max_ns
     }
