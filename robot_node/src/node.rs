@@ -14,7 +14,7 @@ use lcm_types::pfnav::{Header, LowCmd, RobotEstimate, RobotStatus};
 use lcm_types::Message;
 
 use crate::clock::{self, RealtimeSettings};
-use crate::controller::HostedController;
+use crate::controller::{Estimate, HostedController};
 use crate::inbox::{Counters, Inbox};
 use crate::safety::{Mode, SafetyConfig, SafetyMonitor};
 use crate::schedule::{SlotSchedule, Trigger};
@@ -219,6 +219,19 @@ fn header(seq: i64) -> Header {
     }
 }
 
+/// Encodes `message` into `bytes` (reusing its allocation) and publishes it on `channel`; a
+/// failure is logged, never fatal to the loop.
+fn send<M: Message>(lcm: &Lcm, channel: &str, message: &M, bytes: &mut Vec<u8>) {
+    match message.encode_into(bytes) {
+        Ok(()) => {
+            if let Err(error) = lcm.publish(channel, bytes) {
+                tracing::error!(%error, channel, "could not send {}", M::TYPE_NAME);
+            }
+        }
+        Err(error) => tracing::error!(%error, channel, "could not encode {}", M::TYPE_NAME),
+    }
+}
+
 fn seconds(ns: u64) -> f64 {
     ns as f64 * 1e-9
 }
@@ -314,7 +327,10 @@ fn control_loop(
     let mut command_bytes = Vec::new();
     let mut status_seq = 0i64;
     let mut fsm_state = -1i8;
-    // The newest estimate, sent every `estimate_every` cycles (its bytes reused like the command's).
+    // The controller's newest estimate and the state seq it came from (None before its first
+    // step), sent every `estimate_every` cycles in `estimate` (its bytes reused like the
+    // command's).
+    let mut latest_estimate: Option<(i64, Estimate)> = None;
     let mut estimate = RobotEstimate {
         header: Header {
             frame_id: "controller".to_owned(),
@@ -326,6 +342,7 @@ fn control_loop(
         ..RobotEstimate::default()
     };
     let mut estimate_bytes = Vec::new();
+    let mut status_bytes = Vec::new();
     let mut estimate_seq = 0i64;
     let mut last_used_state_seq: Option<i64> = None;
     let mut counters = Counters::default();
@@ -412,13 +429,7 @@ fn control_loop(
                         command.kd = [0.0; 12];
                         fsm_state = i8::try_from(output.fsm_state).unwrap_or(-1);
                         command.state_seq = state.seq;
-                        let e = &output.estimate;
-                        estimate.state_seq = state.seq;
-                        estimate.position = e.position;
-                        estimate.velocity = e.velocity;
-                        estimate.rpy = e.rpy;
-                        estimate.position_variance = e.position_variance;
-                        estimate.estimator_status = e.status;
+                        latest_estimate = Some((state.seq, output.estimate));
                         if last_used_state_seq != Some(state.seq) {
                             fresh_state_arrival = Some(arrived);
                             last_used_state_seq = Some(state.seq);
@@ -446,14 +457,7 @@ fn control_loop(
         command.header.seq = command_seq;
         command.header.utime = wall_utime();
         command_seq += 1;
-        match command.encode_into(&mut command_bytes) {
-            Ok(()) => {
-                if let Err(error) = lcm.publish(&config.channels.low_cmd, &command_bytes) {
-                    tracing::error!(%error, "could not send low_cmd_t");
-                }
-            }
-            Err(error) => tracing::error!(%error, "could not encode low_cmd_t"),
-        }
+        send(lcm, &config.channels.low_cmd, &command, &mut command_bytes);
         let sent = clock::now_ns();
         let runtime = sent.saturating_sub(cycle_start);
         window.runtime.record(runtime);
@@ -470,23 +474,26 @@ fn control_loop(
         window_cycles += 1;
         cycles += 1;
 
-        if cycles % u64::from(config.estimate_every) == 0 && estimate.state_seq >= 0 {
+        if let Some((state_seq, e)) =
+            latest_estimate.filter(|_| cycles % u64::from(config.estimate_every) == 0)
+        {
             estimate.header.seq = estimate_seq;
             estimate.header.utime = wall_utime();
+            estimate.state_seq = state_seq;
+            estimate.position = e.position;
+            estimate.velocity = e.velocity;
+            estimate.rpy = e.rpy;
+            estimate.position_variance = e.position_variance;
+            estimate.estimator_status = e.status;
             estimate.fsm_state = fsm_state;
-            estimate.safety = match mode {
-                Mode::Torque => RobotStatus::SAFETY_OK,
-                Mode::Damping => RobotStatus::SAFETY_DAMPING,
-            };
+            estimate.safety = mode.safety_code();
             estimate_seq += 1;
-            match estimate.encode_into(&mut estimate_bytes) {
-                Ok(()) => {
-                    if let Err(error) = lcm.publish(&config.channels.estimate, &estimate_bytes) {
-                        tracing::error!(%error, "could not send robot_estimate_t");
-                    }
-                }
-                Err(error) => tracing::error!(%error, "could not encode robot_estimate_t"),
-            }
+            send(
+                lcm,
+                &config.channels.estimate,
+                &estimate,
+                &mut estimate_bytes,
+            );
         }
 
         if sent >= next_status {
@@ -506,10 +513,7 @@ fn control_loop(
                 runtime_max: seconds(window.runtime.max_ns()),
                 latency_p99: seconds(window.latency.percentile_ns(0.99)),
                 latency_max: seconds(window.latency.max_ns()),
-                safety: match safety.mode() {
-                    Mode::Torque => RobotStatus::SAFETY_OK,
-                    Mode::Damping => RobotStatus::SAFETY_DAMPING,
-                },
+                safety: safety.mode().safety_code(),
                 safety_since: seconds(safety.since_ns().saturating_sub(start_ns)),
                 reason: safety.reason().to_owned(),
                 damping_entries: safety.damping_entries(),
@@ -528,14 +532,7 @@ fn control_loop(
                 total_overruns: i64::try_from(total.overruns).unwrap_or(i64::MAX),
             };
             status_seq += 1;
-            match status.encode() {
-                Ok(bytes) => {
-                    if let Err(error) = lcm.publish(&config.channels.status, &bytes) {
-                        tracing::error!(%error, "could not send robot_status_t");
-                    }
-                }
-                Err(error) => tracing::error!(%error, "could not encode robot_status_t"),
-            }
+            send(lcm, &config.channels.status, &status, &mut status_bytes);
             window.clear();
             window_cycles = 0;
             next_status += status_ns;

@@ -24,18 +24,30 @@ pub enum Mode {
     Damping,
 }
 
-/// The kinds of fault: while one persists its first reason is kept (the age of the last state
-/// when damping began, not a growing one), a different one replaces it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+impl Mode {
+    /// The mode as the messages' `safety` field says it (`robot_status_t.SAFETY_*`).
+    pub fn safety_code(self) -> i8 {
+        match self {
+            Mode::Torque => lcm_types::pfnav::RobotStatus::SAFETY_OK,
+            Mode::Damping => lcm_types::pfnav::RobotStatus::SAFETY_DAMPING,
+        }
+    }
+}
+
+/// A fault and what its reason says (the ages and values when it was seen). While a fault of
+/// one kind persists the reason it began with is kept (the age of the last state when damping
+/// began, not a growing one); a fault of another kind replaces it. Plain data: the control loop
+/// formats a reason only when the kind changes.
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum Fault {
     Controller,
     NoStateYet,
-    StateTimeout,
-    StateDelayed,
+    StateTimeout { age_ns: u64 },
+    StateDelayed { delay_ns: u64 },
     NonFiniteState,
-    OutOfOrderState,
+    OutOfOrderState { seq: i64, last: i64 },
     NoNavYet,
-    NavTimeout,
+    NavTimeout { age_ns: u64 },
 }
 
 #[derive(Debug)]
@@ -86,88 +98,97 @@ impl SafetyMonitor {
 
     /// The controller failed: damping from now on, with `reason`.
     pub fn controller_failed(&mut self, reason: String, now_ns: u64) {
-        let reason = format!("controller failed: {reason}");
-        self.controller_failure = Some(reason.clone());
-        self.enter_damping(Fault::Controller, reason, now_ns);
+        self.controller_failure = Some(format!("controller failed: {reason}"));
+        self.enter_damping(Fault::Controller, now_ns);
     }
 
-    fn fault(&self, snapshot: &Snapshot, now_ns: u64) -> Option<(Fault, String)> {
-        if let Some(failure) = &self.controller_failure {
-            return Some((Fault::Controller, failure.clone()));
+    fn fault(&self, snapshot: &Snapshot, now_ns: u64) -> Option<Fault> {
+        if self.controller_failure.is_some() {
+            return Some(Fault::Controller);
         }
-        let age_ms = |at: u64| now_ns.saturating_sub(at) as f64 * 1e-6;
         match snapshot.state {
-            None => {
-                return Some((Fault::NoStateYet, "no low_state_t received yet".to_owned()));
-            }
+            None => return Some(Fault::NoStateYet),
             Some((_, at)) if now_ns.saturating_sub(at) > self.config.state_timeout_ns => {
-                return Some((
-                    Fault::StateTimeout,
-                    format!(
-                        "no low_state_t for {:.1} ms (timeout {:.1} ms)",
-                        age_ms(at),
-                        self.config.state_timeout_ns as f64 * 1e-6
-                    ),
-                ))
+                return Some(Fault::StateTimeout {
+                    age_ns: now_ns.saturating_sub(at),
+                })
             }
             Some(_) => {}
         }
         if let Some(limit) = self.config.max_state_delay_ns {
             if snapshot.state_delay_ns > limit {
-                return Some((
-                    Fault::StateDelayed,
-                    format!(
-                        "low_state_t delayed by {:.1} ms (limit {:.1} ms)",
-                        snapshot.state_delay_ns as f64 * 1e-6,
-                        limit as f64 * 1e-6
-                    ),
-                ));
+                return Some(Fault::StateDelayed {
+                    delay_ns: snapshot.state_delay_ns,
+                });
             }
         }
         if snapshot.non_finite_state {
-            return Some((
-                Fault::NonFiniteState,
-                "non-finite value in low_state_t".to_owned(),
-            ));
+            return Some(Fault::NonFiniteState);
         }
         if let Some((seq, last)) = snapshot.out_of_order {
-            return Some((
-                Fault::OutOfOrderState,
-                format!("out-of-order low_state_t seq {seq} after {last}"),
-            ));
+            return Some(Fault::OutOfOrderState { seq, last });
         }
         match snapshot.nav {
-            None => Some((Fault::NoNavYet, "no nav_cmd_t received yet".to_owned())),
-            Some((_, at)) if now_ns.saturating_sub(at) > self.config.nav_timeout_ns => Some((
-                Fault::NavTimeout,
-                format!(
-                    "no nav_cmd_t for {:.1} ms (timeout {:.1} ms)",
-                    age_ms(at),
-                    self.config.nav_timeout_ns as f64 * 1e-6
-                ),
-            )),
+            None => Some(Fault::NoNavYet),
+            Some((_, at)) if now_ns.saturating_sub(at) > self.config.nav_timeout_ns => {
+                Some(Fault::NavTimeout {
+                    age_ns: now_ns.saturating_sub(at),
+                })
+            }
             Some(_) => None,
         }
     }
 
-    fn enter_damping(&mut self, fault: Fault, reason: String, now_ns: u64) {
+    /// The reason a fault gives in the status message.
+    fn describe(&self, fault: Fault) -> String {
+        let ms = |ns: u64| ns as f64 * 1e-6;
+        match fault {
+            Fault::Controller => self.controller_failure.clone().unwrap_or_default(),
+            Fault::NoStateYet => "no low_state_t received yet".to_owned(),
+            Fault::StateTimeout { age_ns } => format!(
+                "no low_state_t for {:.1} ms (timeout {:.1} ms)",
+                ms(age_ns),
+                ms(self.config.state_timeout_ns)
+            ),
+            Fault::StateDelayed { delay_ns } => format!(
+                "low_state_t delayed by {:.1} ms (limit {:.1} ms)",
+                ms(delay_ns),
+                ms(self.config.max_state_delay_ns.unwrap_or_default())
+            ),
+            Fault::NonFiniteState => "non-finite value in low_state_t".to_owned(),
+            Fault::OutOfOrderState { seq, last } => {
+                format!("out-of-order low_state_t seq {seq} after {last}")
+            }
+            Fault::NoNavYet => "no nav_cmd_t received yet".to_owned(),
+            Fault::NavTimeout { age_ns } => format!(
+                "no nav_cmd_t for {:.1} ms (timeout {:.1} ms)",
+                ms(age_ns),
+                ms(self.config.nav_timeout_ns)
+            ),
+        }
+    }
+
+    fn enter_damping(&mut self, fault: Fault, now_ns: u64) {
         self.good_cycles = 0;
+        let same_kind = self
+            .fault
+            .is_some_and(|kept| std::mem::discriminant(&kept) == std::mem::discriminant(&fault));
+        if !same_kind {
+            self.fault = Some(fault);
+            self.reason = self.describe(fault);
+        }
         if self.mode == Mode::Torque {
             self.mode = Mode::Damping;
             self.since_ns = now_ns;
             self.damping_entries += 1;
-            tracing::warn!(%reason, "damping");
-        }
-        if self.fault != Some(fault) {
-            self.fault = Some(fault);
-            self.reason = reason;
+            tracing::warn!(reason = %self.reason, "damping");
         }
     }
 
     /// The mode of this cycle, given the inbox's snapshot at `now_ns`.
     pub fn update(&mut self, snapshot: &Snapshot, now_ns: u64) -> Mode {
         match self.fault(snapshot, now_ns) {
-            Some((fault, reason)) => self.enter_damping(fault, reason, now_ns),
+            Some(fault) => self.enter_damping(fault, now_ns),
             None if self.mode == Mode::Damping => {
                 self.good_cycles += 1;
                 if self.good_cycles >= self.config.recover_cycles {

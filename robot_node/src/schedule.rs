@@ -79,10 +79,6 @@ impl SlotSchedule {
         }
     }
 
-    pub fn period_ns(&self) -> u64 {
-        self.period_ns
-    }
-
     pub fn centre_ns(&self) -> u64 {
         self.centre_ns
     }
@@ -121,11 +117,6 @@ impl SlotSchedule {
         };
         let limit = (self.period_ns as f64 * MAX_CORRECTION) as i64;
         ((error as f64 * PHASE_GAIN) as i64).clamp(-limit, limit)
-    }
-
-    /// The budget left for phase corrections, ns.
-    pub fn budget_ns(&self) -> f64 {
-        self.budget_ns
     }
 
     /// The current slot's cycle was started by `trigger` and its work ended at `now_ns`: moves
