@@ -76,6 +76,7 @@ def run_once(args: argparse.Namespace, trigger: str, lcm_url: str, out: Path) ->
     from pfnav_harness import paths
     from pfnav_harness.lcm_channels import ROBOT
     from pfnav_harness.planner_client import _import_lcm, _import_types
+    from pfnav_harness.process_signals import stop_processes
 
     lcm_module, types = _import_lcm(), _import_types()
     prefix = f"BENCH{trigger.upper()}_"
@@ -158,14 +159,7 @@ def run_once(args: argparse.Namespace, trigger: str, lcm_url: str, out: Path) ->
                 )
         finally:
             stop.set()
-            for process in (robot, sim):
-                if process is not None and process.poll() is None:
-                    process.terminate()
-                    try:
-                        process.wait(timeout=20)
-                    except subprocess.TimeoutExpired:
-                        process.kill()
-                        process.wait()
+            stop_processes([robot, sim])
     final = statuses[-1] if statuses else None
     return Run(
         trigger,
@@ -261,7 +255,7 @@ def main() -> int:
         "--duration",
         type=float,
         default=30.0,
-        help="seconds of each pfnav-robot run (10–60 s)",
+        help="seconds of each pfnav-robot run (1–600 s)",
     )
     parser.add_argument(
         "--triggers",

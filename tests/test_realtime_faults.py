@@ -30,6 +30,7 @@ import pytest
 from pfnav_harness import paths
 from pfnav_harness.lcm_channels import ROBOT, udpm_url
 from pfnav_harness.planner_client import _import_lcm, _import_types
+from pfnav_harness.process_signals import stop_processes
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -244,15 +245,7 @@ class Stack:
         )
 
     def close(self) -> None:
-        for process in (self.node, self.navigator, self.sim):
-            if process.poll() is None:
-                process.send_signal(signal.SIGTERM)
-        for process in (self.node, self.navigator, self.sim):
-            try:
-                process.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        stop_processes([self.node, self.navigator, self.sim])
         self.stop.set()
         self.thread.join(timeout=5)
         self.releaser.join(timeout=5)
@@ -530,8 +523,7 @@ def test_a_recorded_session_replays_through_lcm_logplayer_into_a_fresh_node(
         ), [(s.safety, s.reason) for s in statuses[-3:]]
         assert node.poll() is None, "the replayed node keeps running"
     finally:
-        node.send_signal(signal.SIGTERM)
-        node.wait(timeout=20)
+        stop_processes([node])
     assert node.returncode in (0, -signal.SIGTERM)
     assert any(s.safety == types.robot_status_t.SAFETY_OK for s in statuses), (
         "torque control on the replayed inputs"

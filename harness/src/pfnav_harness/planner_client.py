@@ -11,7 +11,6 @@ import contextlib
 import json
 import os
 import select
-import signal
 import subprocess
 import sys
 import time
@@ -27,6 +26,7 @@ from .errors import HarnessError, PlannerError
 from .feedback_field import FeedbackField
 from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, PLANNER
 from .paths import repo_root
+from .process_signals import stop_processes
 from .scenario import GoalRegion, Scenario, Terrain
 
 # Planning methods by name; the wire code of each is the schema's constant
@@ -407,13 +407,7 @@ class PlannerClient:
             with contextlib.suppress(Exception):  # closing: nothing useful to do on failure
                 self.lc.unsubscribe(sub)
         self._subs = []
-        if self.process is not None and self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout=5.0)
+        stop_processes([self.process], timeout=5.0)
         self.process = None
         if self._service_log is not None:
             self._service_log.close()

@@ -30,6 +30,7 @@ import numpy as np
 from .errors import HarnessError
 from .lcm_channels import ROBOT, SIM_ROBOT_STATE_NAME
 from .metrics import FallThresholds, distance_to_polyline, roll_pitch_yaw
+from .process_signals import stop_processes
 
 # The run ends once the robot has stood this long inside the goal disc, or this long after it
 # first entered it (it may stop just outside by its own estimate).
@@ -53,17 +54,6 @@ class RealtimeOutcome:
     cosim_path_rms: float | None = None
     cosim_reached: bool | None = None
     cosim_fell: bool | None = None
-
-
-def _stop(process: subprocess.Popen[bytes] | None, timeout: float = 20.0) -> None:
-    if process is None or process.poll() is not None:
-        return
-    process.send_signal(signal.SIGTERM)
-    try:
-        process.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
 
 
 # pfnav-robot's --trigger values; the first is its default.
@@ -194,8 +184,9 @@ def run_scenario(
                 break
         walk_seconds = 0.0 if walk_started is None else time.monotonic() - walk_started
     finally:
+        # One after the other, the logger last: it records the others' final messages.
         for process in reversed(processes):
-            _stop(process)
+            stop_processes([process])
         client.close()
     states = [s for _, s in truth]
     if not states:
