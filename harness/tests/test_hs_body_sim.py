@@ -65,7 +65,7 @@ def body(ramp_scenario: Scenario, tmp_path: Path) -> BodySimulation:
     world = make_engine("dart", ramp_scenario.terrain, robot, tmp_path / "cache")
     world.place(ramp_scenario.start[0], ramp_scenario.start[1], 0.0)
     sensors = BodySensors(BodySensorConfig(seed=3, imu_noise_scale=0.0), world.time_step)
-    return BodySimulation(world, sensors)
+    return BodySimulation(world, sensors, foot_force_sensor=True)
 
 
 KP, KD = 200.0, 4.0
@@ -129,3 +129,12 @@ def test_in_lockstep_the_body_stops_when_no_answer_comes(body: BodySimulation) -
     assert body.steps == 0
     assert time.monotonic() - started < 30.0
     node.close()
+
+
+def test_without_the_foot_force_sensor_the_forces_read_zero(body: BodySimulation) -> None:
+    body.foot_force_sensor = False
+    for _ in range(300):
+        body.step()
+    assert list(body.low_state(1).foot_force) == [0.0] * 4
+    body.foot_force_sensor = True
+    assert sum(body.low_state(2).foot_force) > 0.0, "standing, the sensor would read the weight"

@@ -9,8 +9,11 @@ import numpy as np
 
 from pfnav_harness.feedback_field import FeedbackField
 from pfnav_harness.planner_client import _import_types
-from pfnav_harness.realtime_nav import MODE_LOCOMOTION, MODE_STAND, Navigator
+from pfnav_harness.realtime_nav import Navigator
 from pfnav_harness.scenario import Scenario
+
+MODE_STAND = _import_types().nav_cmd_t.MODE_STAND
+MODE_LOCOMOTION = _import_types().nav_cmd_t.MODE_LOCOMOTION
 
 
 class FakeBus:

@@ -23,10 +23,11 @@ Two timings:
   state (`low_cmd_t.state_seq`) before the next step, so a slow machine slows the run down
   instead of changing it.
 
-The foot force sensors are ideal: `foot_force` is the magnitude of the engine's contact force
-on each foot in the last step, N (0 in the air). Not modelled: a contact switch (`foot_contact`
-is −1, "unknown", unless `--contact-sensor` reports the engine's contacts as an ideal binary
-sensor), motor dynamics beyond the torque law, and the transport's own delay.
+Sensors the controller does not read are off unless asked for: `--foot-force-sensor` reports
+`foot_force` as the magnitude of the engine's contact force on each foot in the last step, N (0
+in the air; an ideal sensor, about 13 µs a tick with DART; else 0), and `--contact-sensor` the
+engine's contacts as an ideal binary `foot_contact` (else −1, "unknown"). Not modelled: motor
+dynamics beyond the torque law, and the transport's own delay.
 """
 
 from __future__ import annotations
@@ -56,15 +57,17 @@ from .process_signals import stop_requested_on_signals
 
 FloatArray = NDArray[np.float64]
 JOINTS = 12
-# low_cmd_t's motor modes (lcm_types/low_cmd_t.lcm).
-MODE_IDLE = 0
-MODE_SERVO = 10
 
 
 def _types() -> Any:
     from .planner_client import _import_types
 
     return _import_types()
+
+
+# low_cmd_t's motor modes, as lcm_types/low_cmd_t.lcm declares them.
+MODE_IDLE = int(_types().low_cmd_t.MODE_IDLE)
+MODE_SERVO = int(_types().low_cmd_t.MODE_SERVO)
 
 
 @dataclass
@@ -155,10 +158,11 @@ class SimTiming:
 class BodySimulation:
     """The robot in a physics world, driven by low_cmd_t and reporting low_state_t (no transport: see `BodyNode`)."""
 
-    def __init__(self, world: PhysicsEngine, sensors: BodySensors, contact_sensor: bool = False) -> None:
+    def __init__(self, world: PhysicsEngine, sensors: BodySensors, contact_sensor: bool = False, foot_force_sensor: bool = False) -> None:
         self.world = world
         self.sensors = sensors
         self.contact_sensor = contact_sensor
+        self.foot_force_sensor = foot_force_sensor
         self.motors = MotorModel(world.effort_limits)
         self.command = MotorCommand()
         self.state = np.zeros(37)
@@ -217,7 +221,8 @@ class BodySimulation:
         message.q = readings.joint_q.tolist()
         message.dq = readings.joint_dq.tolist()
         message.tau_est = self.motors.torque.tolist()
-        self.world.write_foot_forces(self._foot_forces)
+        if self.foot_force_sensor:
+            self.world.write_foot_forces(self._foot_forces)
         message.foot_force = self._foot_forces.tolist()
         if self.contact_sensor:
             self.world.write_foot_contacts(self._contacts)
@@ -423,6 +428,7 @@ def build_body(
     imu_noise_scale: float = 1.0,
     contact_sensor: bool = False,
     start: tuple[float, float, float] | None = None,
+    foot_force_sensor: bool = False,
 ) -> BodySimulation:
     """The robot of `robot_config` (None: the default) placed at the scenario's start (or `start` = x, y, yaw) in engine `engine`."""
     from . import paths
@@ -437,7 +443,7 @@ def build_body(
     x, y, yaw = start if start is not None else (scenario.start[0], scenario.start[1], scenario.start_yaw)
     world.place(x, y, yaw)
     sensors = BodySensors(BodySensorConfig(seed=seed, imu_noise_scale=imu_noise_scale, contact_sensor=contact_sensor), world.time_step)
-    return BodySimulation(world, sensors, contact_sensor)
+    return BodySimulation(world, sensors, contact_sensor, foot_force_sensor)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -456,6 +462,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the IMU noise")
     p.add_argument("--imu-noise-scale", type=float, default=1.0, help="multiplies the IMU's noise and bias (0: ideal)")
     p.add_argument("--contact-sensor", action="store_true", help="report the engine's foot contacts (else foot_contact = -1)")
+    p.add_argument(
+        "--foot-force-sensor", action="store_true", help="report each foot's contact force magnitude, N (else foot_force = 0; ~13 µs a tick)"
+    )
     p.add_argument("--out", type=Path, default=Path("out/sim"), help="folder of the exported scenario and the mesh cache")
     p.add_argument(
         "--truth-rate",
@@ -487,7 +496,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         check_lcm_url(args.lcm_url, allow_host_network=False)
-        sim = build_body(args.scenario, args.robot, args.out, args.engine, args.seed, args.imu_noise_scale, args.contact_sensor, args.start)
+        sim = build_body(
+            args.scenario, args.robot, args.out, args.engine, args.seed, args.imu_noise_scale, args.contact_sensor, args.start, args.foot_force_sensor
+        )
     except HarnessError as err:
         print(f"pfnav-sim: {err}", file=sys.stderr)
         return 2

@@ -39,7 +39,7 @@ from .online import OnlineNavigator, map_snapshot_log, replan_field_log
 from .perception import SensedMap
 from .planner_client import Plan
 from .pushes import PushSchedule
-from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, VX, VY, YAW, YAW_RATE, X, Y
+from .reference import N_COLUMNS, T_DZDX, T_DZDY, T_HEIGHT, TERRAIN_PLANE_RADIUS, VX, VY, YAW, YAW_RATE, X, Y
 from .reference_source import FOLLOW_MODES, FieldSource, TrajectorySource, yaw_of
 from .robot import RobotDescription
 from .scenario import Scenario
@@ -86,7 +86,7 @@ class CoSimConfig:
     friction: float = DEFAULT_FRICTION
     # Desired base height above the terrain; ≤ 0 lets the controller use its own nominal height.
     body_height: float = 0.0
-    plane_radius: float = 0.3
+    plane_radius: float = TERRAIN_PLANE_RADIUS
     # Moving-average window (s) over the plan's heading and velocity feed-forward (positions untouched).
     heading_smoothing: float = 1.0
     # Feed the controller the local elevation map (mesh vertices around the base).

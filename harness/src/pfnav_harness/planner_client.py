@@ -579,13 +579,17 @@ def plan_answers(
     timeout: float = 60.0,
     retries: int = 3,
     footprint_radius: float = ROBOT_FOOTPRINT_RADIUS,
+    service_wait: float = 5.0,
 ) -> dict[str, PlanAnswer]:
     """Publishes the scenario's map once and asks for one plan per method: each method's answer
-    (its plan, and the feedback field of a P-F plan). Raises PlannerError for a method without a plan."""
+    (its plan, and the feedback field of a P-F plan). Raises PlannerError for a method without a plan.
+
+    Without `service_binary` a running service is used; it must answer within `service_wait` s
+    (at most `timeout`)."""
     start = StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw)
     with PlannerClient(lcm_url, channel_prefix, service_binary, service_log, footprint_radius=footprint_radius) as client:
         if service_binary is None:
-            client.wait_for_service(timeout=min(timeout, 5.0))
+            client.wait_for_service(timeout=min(timeout, service_wait))
         seq = client.publish_map(scenario.terrain)
         # Give the service a moment to ingest the map before the first request references it.
         client._handle_for(0.05)

@@ -31,15 +31,9 @@ from .errors import HarnessError
 from .follower import FieldFollower, FollowerLimits
 from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, ROBOT
 from .process_signals import stop_requested_on_signals
+from .reference import TERRAIN_PLANE_RADIUS
 from .reference_source import PlaneCache
 from .scenario import Scenario
-
-# nav_cmd_t modes (lcm_types/nav_cmd_t.lcm).
-MODE_STAND = 1
-MODE_LOCOMOTION = 2
-SAFETY_OK = 0
-# Terrain plane fit radius around the robot, m (CoSimConfig.plane_radius's default).
-PLANE_RADIUS = 0.3
 
 
 @dataclass
@@ -70,7 +64,7 @@ class Navigator:
         self.types = _import_types()
         self.scenario = scenario
         self.follower = FieldFollower(field, FollowerLimits())
-        self.planes = PlaneCache(scenario.terrain, PLANE_RADIUS)
+        self.planes = PlaneCache(scenario.terrain, TERRAIN_PLANE_RADIUS)
         self.origin = origin
         self.lcm = lcm
         self.channel = prefix + ROBOT.nav_cmd
@@ -83,10 +77,8 @@ class Navigator:
         self._subscription = lcm.subscribe(prefix + ROBOT.robot_estimate, self._on_estimate)
 
     def _on_estimate(self, _channel: str, data: bytes) -> None:
-        from .planner_client import _import_types
-
         try:
-            estimate = _import_types().robot_estimate_t.decode(data)
+            estimate = self.types.robot_estimate_t.decode(data)
         except (ValueError, struct.error, IndexError, UnicodeDecodeError, OverflowError):
             return
         values = [*estimate.position, *estimate.velocity, *estimate.rpy]
@@ -103,13 +95,13 @@ class Navigator:
         m.header.seq = self.seq
         m.header.frame_id = "controller"
         self.seq += 1
-        m.mode = MODE_STAND
+        m.mode = m.MODE_STAND
         m.x = m.y = m.z = m.yaw = m.vx = m.vy = m.yaw_rate = 0.0
         m.body_height = m.terrain_dzdx = m.terrain_dzdy = 0.0
         e = self.estimate
         if e is None:
             return m
-        if e.safety != SAFETY_OK:
+        if e.safety != self.types.robot_status_t.SAFETY_OK:
             # A damped robot is not walking; after it recovers it stands again first.
             self.torque_since = None
             self.state.status = "robot damped"
@@ -130,7 +122,7 @@ class Navigator:
         cmd = self.follower.command(world_x, world_y, yaw, self.period)
         self.state.reached = cmd.reached
         self.state.status = cmd.status
-        m.mode = MODE_LOCOMOTION
+        m.mode = m.MODE_LOCOMOTION
         m.yaw, m.vx, m.vy, m.yaw_rate = cmd.yaw, cmd.vx, cmd.vy, cmd.yaw_rate
         return m
 
@@ -161,18 +153,13 @@ class Navigator:
 
 
 def plan_field(scenario: Scenario, lcm_url: str, planner_prefix: str, timeout: float) -> Any:
-    """The P-F feedback field for the scenario from a running planner service."""
-    from .planner_client import PlannerClient, StartPose
+    """The P-F feedback field for the scenario from a running planner service (waited for up to `timeout` s)."""
+    from .planner_client import plan_answers
 
-    with PlannerClient(lcm_url, planner_prefix) as client:
-        client.wait_for_service(timeout=timeout)
-        seq = client.publish_map(scenario.terrain)
-        answer = client.request_answer(
-            StartPose(scenario.start[0], scenario.start[1], scenario.start_yaw), scenario.goal, "pf", seq, timeout=timeout, retries=2
-        )
-        if answer.field is None:
-            raise HarnessError("the planner's P-F answer carried no feedback field")
-        return answer.field
+    answer = plan_answers(scenario, ["pf"], lcm_url, planner_prefix, timeout=timeout, retries=2, service_wait=timeout)["pf"]
+    if answer.field is None:
+        raise HarnessError("the planner's P-F answer carried no feedback field")
+    return answer.field
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -28,10 +28,14 @@ def _moving_average(values: NDArray[np.float64], window: int) -> NDArray[np.floa
     return np.convolve(padded, np.ones(window) / window, mode="valid")
 
 
+# Radius of the terrain plane fitted under the robot for its reference height and slopes, m.
+TERRAIN_PLANE_RADIUS = 0.3
+
+
 class ReferenceTrajectory:
     """Reference at plan time τ: linear interpolation between samples, held before 0 and after the end."""
 
-    def __init__(self, plan: Plan, terrain: Terrain, plane_radius: float = 0.3, heading_smoothing: float = 0.0) -> None:
+    def __init__(self, plan: Plan, terrain: Terrain, plane_radius: float = TERRAIN_PLANE_RADIUS, heading_smoothing: float = 0.0) -> None:
         """`heading_smoothing` > 0: moving-average window (s) over the heading and velocity feed-forward.
 
         Grid-graph paths zig-zag between neighbour directions; their per-sample heading jumps
