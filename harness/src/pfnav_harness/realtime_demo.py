@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from .errors import HarnessError
+from .fmu_runner import read_contract
 from .lcm_channels import ROBOT, SIM_ROBOT_STATE_NAME
 from .metrics import FallThresholds, distance_to_polyline, roll_pitch_yaw
 from .process_signals import stop_processes
@@ -147,6 +148,8 @@ def run_scenario(
         navigator_args = [sys.executable, "-m", "pfnav_harness.realtime_nav", "--scenario", name, "--channel-prefix", prefix, "--planner-prefix", prefix]
         navigator = spawn("navigator", [*navigator_args, "--out", str(out), "--lcm-url", lcm_url, "--origin", "0", "0", "0", "--stand-time", str(stand_time)])
         terrain, goal, fall = scenario.terrain, scenario.goal, FallThresholds()
+        # The walk begins when the node reports torque control in the FMU's locomotion state.
+        safety_ok, locomotion = types.robot_status_t.SAFETY_OK, int(read_contract(paths.fmu_path()).fsm.Locomotion)
         walk_started: float | None = None
         in_goal_since: float | None = None
         reached = fell = False
@@ -158,7 +161,7 @@ def run_scenario(
             for process, label in ((sim, "pfnav-sim"), (robot, "pfnav-robot"), (navigator, "the navigator")):
                 if process.poll() is not None:
                     raise HarnessError(f"{label} exited with {process.returncode} (logs: {logs})")
-            if walk_started is None and statuses and statuses[-1].safety == 0 and statuses[-1].fsm_state == 3:
+            if walk_started is None and statuses and statuses[-1].safety == safety_ok and statuses[-1].fsm_state == locomotion:
                 walk_started = time.monotonic()
             if not truth:
                 continue
@@ -166,7 +169,7 @@ def run_scenario(
             x, y, z = state.position
             roll, pitch, _ = (float(a[0]) for a in roll_pitch_yaw(np.array([state.orientation])))
             height = z - terrain.height_at(x, y)
-            if walk_started is not None and (fall.too_low(height) or fall.too_rolled(roll) or fall.too_pitched(pitch)):
+            if walk_started is not None and fall.fallen(height, roll, pitch):
                 fell, fall_reason = True, f"base {height:.2f} m above ground, roll {math.degrees(roll):.0f}°, pitch {math.degrees(pitch):.0f}°"
                 break
             if math.hypot(x - goal.center[0], y - goal.center[1]) <= goal.radius:
