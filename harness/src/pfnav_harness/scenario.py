@@ -39,6 +39,16 @@ class GoalRegion:
     radius: float
 
 
+def grid_triangles(rows: int, cols: int) -> NDArray[np.int64]:
+    """Vertex indices of the two triangles of every cell of a `rows` × `cols` grid of vertices
+    (vertex index row · cols + column), counter-clockwise seen from +z (ODE needs that)."""
+    iy, ix = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (iy * cols + ix).ravel()
+    lower = np.stack([a, a + 1, a + cols + 1], axis=1)
+    upper = np.stack([a, a + cols + 1, a + cols], axis=1)
+    return np.concatenate([lower, upper], axis=0).astype(np.int64)
+
+
 @dataclass(frozen=True)
 class TerrainPlane:
     """z = height + dzdx·(x − x0) + dzdy·(y − y0) around the query point (x0, y0)."""
@@ -98,15 +108,7 @@ class Terrain:
 
     def triangles(self) -> NDArray[np.int64]:
         """Vertex indices of the triangles, counter-clockwise seen from +z (ODE needs that)."""
-        ny, nx = self.shape
-        iy, ix = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
-        a = (iy * nx + ix).ravel()
-        b = a + 1
-        c = a + nx + 1
-        d = a + nx
-        lower = np.stack([a, b, c], axis=1)
-        upper = np.stack([a, c, d], axis=1)
-        return np.concatenate([lower, upper], axis=0).astype(np.int64)
+        return grid_triangles(*self.shape)
 
     def _locate(self, x: FloatArray, y: FloatArray) -> tuple[NDArray[np.int64], NDArray[np.int64], FloatArray, FloatArray]:
         ny, nx = self.shape

@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from ..feedback_field import FeedbackField
 from ..robot import JOINT_ROLES, LEG_LABELS, RobotDescription
-from ..scenario import Scenario, Terrain
+from ..scenario import Scenario, Terrain, grid_triangles
 from .density import DensityResult, OccupationDensity
 from .kinematics import LegKinematics
 from .run_log import RunLog, estimated_quaternions, frame_steps, fsm_state_names, fsm_transitions, horizontal_tracking_error, window_max
@@ -125,10 +125,7 @@ def sensed_map_mesh(
     ys = terrain.origin[1] + (np.arange(0, ny, stride) + 0.5) * res
     gx, gy = np.meshgrid(xs, ys)
     vertices = np.stack([gx.ravel(), gy.ravel(), np.where(known, heights, 0.0).ravel()], axis=1)
-    rows, cols = heights.shape
-    iy, ix = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
-    a = (iy * cols + ix).ravel()
-    triangles = np.concatenate([np.stack([a, a + 1, a + cols + 1], axis=1), np.stack([a, a + cols + 1, a + cols], axis=1)])
+    triangles = grid_triangles(*heights.shape)
     # Only triangles whose three corners were sensed.
     triangles = triangles[known.ravel()[triangles].all(axis=1)]
     sigma = np.sqrt(np.where(known, variances, 0.0))
@@ -154,9 +151,7 @@ def density_mesh(density: OccupationDensity, terrain: Terrain) -> rr.Mesh3D | No
     gx, gy = np.meshgrid(xs, ys)
     vertices = np.stack([gx.ravel(), gy.ravel(), terrain.height(gx.ravel(), gy.ravel()) + 0.5 * LIFT], axis=1)
     visited = (rho >= top * 10.0**-DENSITY_DECADES).ravel()
-    iy, ix = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
-    a = (iy * nx + ix).ravel()
-    triangles = np.concatenate([np.stack([a, a + 1, a + nx + 1], axis=1), np.stack([a, a + nx + 1, a + nx], axis=1)])
+    triangles = grid_triangles(ny, nx)
     triangles = triangles[visited[triangles].all(axis=1)]
     scaled = 1.0 + np.log10(np.maximum(rho, top * 10.0**-DENSITY_DECADES) / top) / DENSITY_DECADES
     colours = (matplotlib.colormaps["inferno"](np.clip(scaled, 0.0, 1.0))[..., :3] * 255).astype(np.uint8).reshape(-1, 3)
