@@ -17,14 +17,17 @@ from ..engine import DEFAULT_ENGINE
 from .stats import (
     FACTOR_COLUMNS,
     IMPULSE_EDGES,
+    NO_FALL_IMPULSE,
     VELOCITY_CHANGE_EDGES,
     FallRate,
     binned_fall_rates,
     factor_breakdown,
     fall_rate,
     falls_up_to,
+    float_column,
     outcome_counts,
     push_impulses,
+    row_outcomes,
     velocity_changes,
 )
 from .store import SweepStore
@@ -70,7 +73,7 @@ def plot_fall_rate(rates: list[FallRate], xlabel: str, path: Path) -> None:
 
 def impulse_rates(table: pa.Table) -> list[FallRate]:
     """Fall rate per push-impulse bin (`IMPULSE_EDGES`, N·s)."""
-    return binned_fall_rates(push_impulses(table), np.asarray(table["outcome"].to_pylist(), dtype=object), IMPULSE_EDGES, "N·s")
+    return binned_fall_rates(push_impulses(table), row_outcomes(table), IMPULSE_EDGES, "N·s")
 
 
 def velocity_change_rates(table: pa.Table) -> list[FallRate]:
@@ -78,13 +81,13 @@ def velocity_change_rates(table: pa.Table) -> list[FallRate]:
     changes = velocity_changes(table)
     if not np.isfinite(changes).any():
         return []
-    return binned_fall_rates(changes, np.asarray(table["outcome"].to_pylist(), dtype=object), VELOCITY_CHANGE_EDGES, "m/s")
+    return binned_fall_rates(changes, row_outcomes(table), VELOCITY_CHANGE_EDGES, "m/s")
 
 
 def plot_tracking_errors(table: pa.Table, path: Path) -> bool:
     """RMS tracking error histograms, one per outcome; False when no run has one."""
     errors = np.asarray(table["rms_tracking_error"].to_pylist(), dtype=np.float64)
-    outcomes = np.asarray(table["outcome"].to_pylist(), dtype=object)
+    outcomes = row_outcomes(table)
     finite = np.isfinite(errors)
     if not finite.any():
         return False
@@ -116,7 +119,7 @@ def _fork_note(table: pa.Table) -> str:
 
 def _impulse_line(table: pa.Table) -> str:
     small = falls_up_to(table)
-    return f"Runs pushed with at most 18 N·s (90 N for 0.2 s, no push included): {small.falls} fell of {small.runs}."
+    return f"Runs pushed with at most {NO_FALL_IMPULSE:g} N·s (no push included): {small.falls} fell of {small.runs}."
 
 
 def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
@@ -127,7 +130,7 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
     stored = store.stored_spec() or {}
     spec = stored.get("spec", {})
     counts = outcome_counts(table)
-    overall = fall_rate(np.asarray(table["outcome"].to_pylist(), dtype=object))
+    overall = fall_rate(row_outcomes(table))
     lines = [
         f"# Robustness sweep: {spec.get('scenario', '?')}",
         "",
@@ -203,7 +206,7 @@ def write_comparison(stores: list[SweepStore], out_dir: Path) -> Path:
     lines = [
         "# Robustness sweeps compared: fall rate by push impulse",
         "",
-        "| sweep | store | spec hash | robot mass [kg] | trials | falls | fall rate | 95 % Wilson interval | falls at ≤ 18 N·s |",
+        f"| sweep | store | spec hash | robot mass [kg] | trials | falls | fall rate | 95 % Wilson interval | falls at ≤ {NO_FALL_IMPULSE:g} N·s |",
         "| --- | --- | --- | ---: | ---: | ---: | ---: | --- | ---: |",
     ]
     fig, (by_impulse, by_velocity) = plt.subplots(1, 2, figsize=(11, 4))
@@ -211,9 +214,9 @@ def write_comparison(stores: list[SweepStore], out_dir: Path) -> Path:
     for store in stores:
         table = store.table()
         label = store_label(store)
-        overall = fall_rate(np.asarray(table["outcome"].to_pylist(), dtype=object))
+        overall = fall_rate(row_outcomes(table))
         small = falls_up_to(table)
-        masses = {m for m in table["robot_mass"].to_pylist() if m is not None and math.isfinite(m)}
+        masses = {float(m) for m in float_column(table, "robot_mass") if math.isfinite(m)}
         mass = ", ".join(f"{m:.3f}" for m in sorted(masses)) or "–"
         lines.append(
             f"| {label} | `{store.folder.name}` | `{(store.stored_spec() or {}).get('hash', '?')}` | {mass} | {overall.runs} | {overall.falls} | "

@@ -82,7 +82,7 @@ def _format(value: float) -> str:
 def factor_breakdown(table: pa.Table, column: str) -> list[FallRate]:
     """Fall rate per level (few distinct values) or per equal-width bin of `column`; empty when it does not vary."""
     values = np.asarray(table[column].to_pylist(), dtype=object)
-    outcomes = np.asarray(table["outcome"].to_pylist(), dtype=object)
+    outcomes = row_outcomes(table)
     distinct = sorted(set(values.tolist()))
     if len(distinct) <= 1:
         return []
@@ -115,19 +115,28 @@ VELOCITY_CHANGE_EDGES = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5)
 NO_FALL_IMPULSE = 18.0
 
 
+def row_outcomes(table: pa.Table) -> np.ndarray:
+    """The rows' outcomes (OUTCOMES) as an object array, for masks."""
+    return np.asarray(table["outcome"].to_pylist(), dtype=object)
+
+
+def float_column(table: pa.Table, name: str) -> np.ndarray:
+    """A numeric column as floats, NaN where a row has none (rows stored before it was recorded)."""
+    return np.asarray([math.nan if v is None else v for v in table[name].to_pylist()], dtype=np.float64)
+
+
 def push_impulses(table: pa.Table) -> np.ndarray:
     """Each run's push impulse, N·s: the force applied (`push_force`; the magnitude in rows stored
     before forces were recorded) times the duration."""
     magnitude = np.asarray(table["push_magnitude"].to_pylist(), dtype=np.float64)
-    force = np.asarray([math.nan if f is None else f for f in table["push_force"].to_pylist()], dtype=np.float64)
+    force = float_column(table, "push_force")
     force = np.where(np.isnan(force), magnitude, force)
     return force * np.asarray(table["push_duration"].to_pylist(), dtype=np.float64)
 
 
 def velocity_changes(table: pa.Table) -> np.ndarray:
     """Each run's push impulse over the robot's mass, m/s (NaN where the mass was not recorded)."""
-    mass = np.asarray([math.nan if m is None else m for m in table["robot_mass"].to_pylist()], dtype=np.float64)
-    return push_impulses(table) / mass
+    return push_impulses(table) / float_column(table, "robot_mass")
 
 
 def binned_fall_rates(values: np.ndarray, outcomes: np.ndarray, edges: tuple[float, ...] | np.ndarray, unit: str) -> list[FallRate]:
@@ -149,5 +158,4 @@ def binned_fall_rates(values: np.ndarray, outcomes: np.ndarray, edges: tuple[flo
 
 def falls_up_to(table: pa.Table, impulse: float = NO_FALL_IMPULSE) -> FallRate:
     """The fall rate of the runs pushed with at most `impulse` N·s (no push included)."""
-    outcomes = np.asarray(table["outcome"].to_pylist(), dtype=object)
-    return fall_rate(outcomes[push_impulses(table) <= impulse + 1e-9], f"impulse ≤ {_format(impulse)} N·s")
+    return fall_rate(row_outcomes(table)[push_impulses(table) <= impulse + 1e-9], f"impulse ≤ {_format(impulse)} N·s")
