@@ -830,12 +830,15 @@ class QuadrupedWorld:
         forces = np.zeros((len(self.feet), 3))
         for i in range(count):
             contact = result.getContact(i)
+            # DART's contact force acts on the first object: a foot that is the second one gets
+            # its opposite (a foot's contacts are summed as vectors, so the sign matters).
             leg = self._leg_of_object(contact.collisionObject1)
-            if leg < 0:
-                leg = self._leg_of_object(contact.collisionObject2)
             if leg >= 0:
-                # Which side the force acts on does not matter for its magnitude.
                 forces[leg] += contact.force
+                continue
+            leg = self._leg_of_object(contact.collisionObject2)
+            if leg >= 0:
+                forces[leg] -= contact.force
         out[:] = np.linalg.norm(forces, axis=1)
 
     def _leg_of_object(self, collision_object: object) -> int:
