@@ -579,13 +579,14 @@ class MujocoWorld:
         forces = np.zeros((len(self._foot_ids), 3))
         for i in range(data.ncon):
             contact = data.contact[i]
-            for geom in (contact.geom1, contact.geom2):
+            # MuJoCo's contact force (normal and tangential components in the contact's frame,
+            # whose rows are the axes) acts on the second geom; a foot that is the first one gets
+            # its opposite (a foot's contacts are summed as vectors, so the sign matters).
+            for geom, sign in ((contact.geom2, 1.0), (contact.geom1, -1.0)):
                 leg = self._leg_of_body.get(int(model.geom_bodyid[geom]))
                 if leg is not None:
-                    # Normal and tangential components in the contact's frame, whose rows are
-                    # the axes (the sign does not matter for the magnitude).
                     mujoco.mj_contactForce(model, data, i, wrench)
-                    forces[leg] += contact.frame.reshape(3, 3).T @ wrench[:3]
+                    forces[leg] += sign * (contact.frame.reshape(3, 3).T @ wrench[:3])
                     break
         out[:] = np.linalg.norm(forces, axis=1)
 
