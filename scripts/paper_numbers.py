@@ -20,6 +20,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(REPO / "harness" / "src"))
+    from pfnav_harness.planner_client import ROBOT_FOOTPRINT_RADIUS
     from pfnav_harness.results_page import pf_plan_report_main
 
     return pf_plan_report_main(
@@ -31,6 +32,7 @@ def main(argv: list[str] | None = None) -> int:
         extra_help="--grid, --rbf-grid, --skip-large",
         argv=argv,
         echo_report=True,
+        fixed_args=["--footprint-radius", repr(ROBOT_FOOTPRINT_RADIUS)],
     )
 
 

@@ -176,11 +176,13 @@ def pf_plan_report_main(
     extra_help: str,
     argv: Sequence[str] | None,
     echo_report: bool = False,
+    fixed_args: Sequence[str] = (),
 ) -> int:
     """The command line of a script that runs `pf-plan SUBCOMMAND --out OUT [EXTRA…]` (which writes
     OUT/report.md) and, with `--results-page NAME`, publishes that report as docs/results/NAME.md
     with this module's stamp (taken before the run: the commit that ran and the load it ran under).
-    `echo_report`: print the report when no page is asked for."""
+    `echo_report`: print the report when no page is asked for; `fixed_args` go to `pf-plan` before
+    the user's own."""
     import argparse
     import sys
 
@@ -199,7 +201,7 @@ def pf_plan_report_main(
         print(f"{parser.prog}: error: {err}", file=sys.stderr)
         return err.exit_code
     stamp = collect_stamp() if args.results_page else None
-    proc = subprocess.run([str(pf_plan), subcommand, "--out", str(args.out), *args.extra], check=False, stdout=subprocess.DEVNULL if echo_report else None)
+    proc = subprocess.run([str(pf_plan), subcommand, "--out", str(args.out), *fixed_args, *args.extra], check=False, stdout=subprocess.DEVNULL if echo_report else None)
     if proc.returncode != 0:
         return proc.returncode
     report = (args.out / "report.md").read_text(encoding="utf-8")

@@ -102,6 +102,10 @@ enum Command {
         /// Leave out Clarabel and the exact solver at twice --grid (the prototype's 128² row).
         #[arg(long)]
         skip_large: bool,
+        /// The robot's footprint radius, metres, for the rows planned with it (the harness's
+        /// ROBOT_FOOTPRINT_RADIUS; scripts/paper_numbers.py passes it).
+        #[arg(long)]
+        footprint_radius: f64,
     },
 }
 
@@ -388,12 +392,14 @@ fn main() -> Result<()> {
             grid,
             rbf_grid,
             skip_large,
+            footprint_radius,
         } => paper::run(
             &out,
             &paper::PaperSizes {
                 grid,
                 rbf_grid,
                 large_clarabel: !skip_large,
+                footprint_radius,
             },
         ),
     }

@@ -30,8 +30,6 @@ const NOTE_PF_INDICATOR: f64 = 0.145;
 const NOTE_PF_RBF: [f64; 2] = [0.156, 0.166];
 const NOTE_EXPANDED_ADMISSIBLE: usize = 3459;
 const NOTE_EXPANDED_ASTAR: usize = 48;
-/// The robot's footprint radius in the co-simulation harness, metres.
-const ROBOT_FOOTPRINT_M: f64 = 0.25;
 /// A floor small enough to read as p_floor = 0 (the model requires p_floor > 0).
 const NEAR_ZERO_FLOOR: f64 = 1e-12;
 /// A small floor the LP still solves with, to show the optimum as p_floor → 0.
@@ -47,6 +45,8 @@ pub struct PaperSizes {
     pub rbf_grid: usize,
     /// Also time Clarabel on the indicator LP at 2 × `grid` (the prototype's 128² figure).
     pub large_clarabel: bool,
+    /// The robot's footprint radius, metres (the harness's, passed by scripts/paper_numbers.py).
+    pub footprint_radius: f64,
 }
 
 fn options(
@@ -199,6 +199,10 @@ pub fn report(sizes: &PaperSizes, progress: &dyn Fn(&str)) -> Result<String> {
     if n < 8 || m < 8 {
         bail!("--grid and --rbf-grid must be at least 8");
     }
+    let footprint_m = sizes.footprint_radius;
+    if !(footprint_m.is_finite() && footprint_m > 0.0) {
+        bail!("--footprint-radius must be a positive number of metres, got {footprint_m}");
+    }
     let exact = LpSolver::Exact;
     let transfer = BasisKind::DEFAULT_RBF;
     let ansdmd = BasisKind::ANSDMD_RBF;
@@ -217,7 +221,7 @@ pub fn report(sizes: &PaperSizes, progress: &dyn Fn(&str)) -> Result<String> {
     let (_, c_ansdmd) = plan(&c_shape, Method::Pf, &options(m, ansdmd, point, exact))?;
     progress("c_shape: the robot's footprint");
     let footprint = TraversabilityParams {
-        footprint_radius_m: ROBOT_FOOTPRINT_M,
+        footprint_radius_m: sizes.footprint_radius,
         ..point
     };
     let wide = options(n, BasisKind::Indicator, footprint, exact);
@@ -320,7 +324,7 @@ pub fn report(sizes: &PaperSizes, progress: &dyn Fn(&str)) -> Result<String> {
          p_floor, so ∫p ds ≥ p_floor × length; the paper's p = h/h_max is 0 on level ground at \
          the lowest height.\n\
          - **Footprint.** The paper plans for a point. The co-simulation plans with the robot's \
-         {ROBOT_FOOTPRINT_M} m footprint (each cell costs the largest p within that radius), \
+         {footprint_m} m footprint (each cell costs the largest p within that radius), \
          which widens the detours; rows marked *footprint* use it.\n\
          - **Baseline.** The paper's A* uses the Euclidean distance as heuristic, which \
          over-estimates the cost-to-go wherever p < 1 (inadmissible): its path is not the \
@@ -394,9 +398,7 @@ pub fn report(sizes: &PaperSizes, progress: &dyn Fn(&str)) -> Result<String> {
                 c(&f_pf),
                 c(&f_astar)
             ),
-            &format!(
-                "same methods, p maximised over {ROBOT_FOOTPRINT_M} m (measured on that field)"
-            ),
+            &format!("same methods, p maximised over {footprint_m} m (measured on that field)"),
         ],
     )?;
     row(

@@ -15,6 +15,8 @@ fn paper_numbers_writes_the_tables() {
             "--rbf-grid",
             "16",
             "--skip-large",
+            "--footprint-radius",
+            "0.25",
             "--out",
         ])
         .arg(&out)
