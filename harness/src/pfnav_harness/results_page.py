@@ -201,7 +201,8 @@ def pf_plan_report_main(
         print(f"{parser.prog}: error: {err}", file=sys.stderr)
         return err.exit_code
     stamp = collect_stamp() if args.results_page else None
-    proc = subprocess.run([str(pf_plan), subcommand, "--out", str(args.out), *fixed_args, *args.extra], check=False, stdout=subprocess.DEVNULL if echo_report else None)
+    command_line = [str(pf_plan), subcommand, "--out", str(args.out), *fixed_args, *args.extra]
+    proc = subprocess.run(command_line, check=False, stdout=subprocess.DEVNULL if echo_report else None)
     if proc.returncode != 0:
         return proc.returncode
     report = (args.out / "report.md").read_text(encoding="utf-8")
