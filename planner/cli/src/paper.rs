@@ -255,8 +255,10 @@ pub fn report(sizes: &PaperSizes, progress: &dyn Fn(&str)) -> Result<String> {
     progress("mountain_pass: the cost floor");
     let pass = scenarios::by_name("mountain_pass")?;
     let floor = pass.traversability.p_floor;
-    let (pass_planner, pass_pf) = plan(&pass, Method::Pf, &graph)?;
-    let (_, pass_astar) = plan(&pass, Method::AStar, &graph)?;
+    // Each map with its own cost model (the c_shape rows above used c_shape's).
+    let pass_graph = options(n, BasisKind::Indicator, pass.traversability, exact);
+    let (pass_planner, pass_pf) = plan(&pass, Method::Pf, &pass_graph)?;
+    let (_, pass_astar) = plan(&pass, Method::AStar, &pass_graph)?;
     let pass_pf_bare = without_floor(&pass_planner, &pass.traversability, &pass_pf)?;
     let small = TraversabilityParams {
         p_floor: SMALL_FLOOR,
@@ -268,15 +270,24 @@ pub fn report(sizes: &PaperSizes, progress: &dyn Fn(&str)) -> Result<String> {
         &options(n, BasisKind::Indicator, small, exact),
     )?;
     let pass_small_bare = without_floor(&small_planner, &small, &pass_small)?;
-    let (_, pass_transfer) = plan(&pass, Method::Pf, &options(m, transfer, point, exact))?;
-    let (_, pass_dijkstra) = plan(&pass, Method::Dijkstra, &graph)?;
+    let (_, pass_transfer) = plan(
+        &pass,
+        Method::Pf,
+        &options(m, transfer, pass.traversability, exact),
+    )?;
+    let (_, pass_dijkstra) = plan(&pass, Method::Dijkstra, &pass_graph)?;
 
     // Pits: mass of the density in the hard obstacles.
     progress("pits: P-F plans and the density in the obstacles");
     let pits = scenarios::by_name("pits")?;
-    let (_, pits_pf) = plan(&pits, Method::Pf, &graph)?;
-    let (_, pits_transfer) = plan(&pits, Method::Pf, &options(m, transfer, point, exact))?;
-    let (_, pits_dijkstra) = plan(&pits, Method::Dijkstra, &graph)?;
+    let pits_graph = options(n, BasisKind::Indicator, pits.traversability, exact);
+    let (_, pits_pf) = plan(&pits, Method::Pf, &pits_graph)?;
+    let (_, pits_transfer) = plan(
+        &pits,
+        Method::Pf,
+        &options(m, transfer, pits.traversability, exact),
+    )?;
+    let (_, pits_dijkstra) = plan(&pits, Method::Dijkstra, &pits_graph)?;
     let mut masses = Vec::new();
     for (basis, size) in [(BasisKind::Indicator, n), (transfer, m), (ansdmd, m)] {
         for (density, density_label) in [
