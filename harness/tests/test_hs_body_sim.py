@@ -138,3 +138,12 @@ def test_without_the_foot_force_sensor_the_forces_read_zero(body: BodySimulation
     assert list(body.low_state(1).foot_force) == [0.0] * 4
     body.foot_force_sensor = True
     assert sum(body.low_state(2).foot_force) > 0.0, "standing, the sensor would read the weight"
+
+
+def test_the_tick_statistics_count_the_ticks_by_the_age_of_their_command() -> None:
+    from pfnav_harness.body_sim import SimTiming
+
+    timing = SimTiming(command_age=[0, 0, 1, 2, 3, 9, 10, 557])
+    assert timing.command_age_counts() == {"0": 2, "1": 1, "2": 1, "3-9": 2, "10+": 2, "max": 557}
+    assert SimTiming().command_age_counts()["max"] == 0
+    assert timing.to_json()["command_age"]["10+"] == 2

@@ -19,6 +19,9 @@ const REAL_INPUTS: usize = 4 + 3 + 3 + JOINTS + JOINTS + 8 + 2;
 /// cmd.mode and contact[1..4].
 const INTEGER_INPUTS: usize = 1 + 4;
 
+/// The most periods one `fmi2DoStep` spans: the FMU refuses a step whose ticks could take too
+/// long (its work budget), and allows at least 8 ticks for any configuration it accepts.
+pub const PERIODS_PER_DO_STEP: u32 = 4;
 /// est.pos (3), est.vel (3), est.rpy (3), est.posVar (3).
 const ESTIMATE_OUTPUTS: usize = 12;
 
@@ -54,7 +57,7 @@ pub struct HostedController {
     integer_outputs: [u32; 2],
     /// FMU ModeRequest codes of nav_cmd_t's MODE_PASSIVE, MODE_STAND, MODE_LOCOMOTION.
     mode_codes: [i32; 3],
-    /// Steps taken: the communication point is steps × step, free of summed rounding.
+    /// Periods stepped: the communication point is steps × step, free of summed rounding.
     steps: u64,
     step: f64,
 }
@@ -177,13 +180,16 @@ impl HostedController {
         })
     }
 
-    /// Copies `state` and `nav` into the inputs, runs one `fmi2DoStep` of the step length and
-    /// reads the outputs. Allocation-free.
+    /// Copies `state` and `nav` into the inputs, steps the FMU `periods` (≥ 1) step lengths
+    /// (it runs that many control ticks on these inputs; `fmi2DoStep`s of at most
+    /// [`PERIODS_PER_DO_STEP`]) and reads the outputs. Allocation-free.
     pub fn step(
         &mut self,
         state: &BodyState,
         nav: &NavReference,
+        periods: u32,
     ) -> anyhow::Result<ControllerOutput> {
+        anyhow::ensure!(periods >= 1, "a controller step spans at least one period");
         let mut values = [0.0f64; REAL_INPUTS];
         let sensors = state
             .imu_quaternion
@@ -218,8 +224,14 @@ impl HostedController {
         let integers = [mode, contact[0], contact[1], contact[2], contact[3]];
         self.fmu.set_real(&self.real_inputs, &values)?;
         self.fmu.set_integer(&self.integer_inputs, &integers)?;
-        self.fmu.do_step(self.steps as f64 * self.step, self.step)?;
-        self.steps += 1;
+        let mut left = periods;
+        while left > 0 {
+            let chunk = left.min(PERIODS_PER_DO_STEP);
+            self.fmu
+                .do_step(self.steps as f64 * self.step, f64::from(chunk) * self.step)?;
+            self.steps += u64::from(chunk);
+            left -= chunk;
+        }
         let mut output = ControllerOutput {
             torques: [0.0; JOINTS],
             fsm_state: 0,

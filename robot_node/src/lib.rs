@@ -22,4 +22,6 @@ pub mod safety;
 pub mod schedule;
 pub mod stats;
 
-pub use node::{run, LoopTrigger, NodeConfig, RobotChannels, RunReport, MISS_FACTOR};
+pub use node::{
+    run, LoopTrigger, NodeConfig, RobotChannels, RunReport, MAX_CATCH_UP_PERIODS, MISS_FACTOR,
+};

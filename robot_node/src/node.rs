@@ -24,6 +24,23 @@ use crate::stats::LoopTiming;
 /// PeriodicTask criterion).
 pub const MISS_FACTOR: f64 = 1.3;
 
+/// The most periods one controller step spans when states were lost in between (the FMU runs
+/// that many control ticks on the newest state): 20 ms at 1 kHz, the default state timeout.
+/// A longer gap (a seq jump) steps this many; the cycle's work stays bounded.
+pub const MAX_CATCH_UP_PERIODS: u32 = 20;
+
+/// Periods of body time between the state the controller last stepped on (`last_seq`) and a
+/// fresh one (`seq`): the body sends one state per tick and numbers them, so a gap in the
+/// numbers is ticks whose states were lost, and the controller's clock must cover them too. A
+/// number at or below the last (a restarted body) or no last step counts one period.
+pub fn periods_since(last_seq: Option<i64>, seq: i64) -> u32 {
+    match last_seq {
+        Some(last) if seq > last => u32::try_from(seq.saturating_sub(last))
+            .map_or(MAX_CATCH_UP_PERIODS, |gap| gap.min(MAX_CATCH_UP_PERIODS)),
+        _ => 1,
+    }
+}
+
 /// The node's channels: `<prefix>` + the names of `[robot]` in channels.toml.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RobotChannels {
@@ -164,6 +181,8 @@ impl NodeConfig {
 pub struct RunReport {
     pub timing: LoopTiming,
     pub cycles: u64,
+    /// Periods the controller was stepped in all (its clock; the body's ticks it has seen).
+    pub controller_periods: u64,
     pub damping_entries: i64,
     pub counters: Counters,
     pub realtime: RealtimeSettings,
@@ -178,6 +197,7 @@ impl RunReport {
         serde_json::json!({
             "period_nominal": period_s,
             "cycles": self.cycles,
+            "controller_periods": self.controller_periods,
             "misses": t.misses,
             "overruns": t.overruns,
             "period": t.period.to_json(),
@@ -188,6 +208,7 @@ impl RunReport {
             "cycles_state_waiting": t.state_waiting,
             "cycles_watchdog": t.watchdog,
             "skipped_slots": t.skipped_slots,
+            "cycles_held": t.held_cycles,
             "damping_entries": self.damping_entries,
             "states_received": self.counters.states_received,
             "states_out_of_order": self.counters.states_out_of_order,
@@ -322,6 +343,7 @@ fn control_loop(
     let mut total = LoopTiming::default();
     let mut window_cycles = 0i64;
     let mut cycles = 0u64;
+    let mut controller_periods = 0u64;
     let mut command_seq = 0i64;
     // The command's bytes, reused every cycle: the loop allocates nothing once it has run.
     let mut command_bytes = Vec::new();
@@ -421,8 +443,25 @@ fn control_loop(
         if mode == Mode::Torque {
             // The monitor's torque mode implies both are present.
             if let (Some((state, arrived)), Some((nav, _))) = (snapshot.state, snapshot.nav) {
-                match controller.step(&state, &nav) {
-                    Ok(output) if output.torques.iter().all(|t| t.is_finite()) => {
+                let fresh = last_used_state_seq != Some(state.seq);
+                let step = if fresh {
+                    let periods = periods_since(last_used_state_seq, state.seq);
+                    let result = controller.step(&state, &nav, periods);
+                    if result.is_ok() {
+                        controller_periods += u64::from(periods);
+                    }
+                    Some(result)
+                } else {
+                    // No state since the last step: the body's clock has not been seen to move
+                    // (a simulated body that overran its tick, a late packet), so the
+                    // controller's does not either; the command it answered is sent again.
+                    window.held_cycles += 1;
+                    total.held_cycles += 1;
+                    None
+                };
+                match step {
+                    None => {}
+                    Some(Ok(output)) if output.torques.iter().all(|t| t.is_finite()) => {
                         for (slot, torque) in command.tau.iter_mut().zip(output.torques) {
                             *slot = torque as f32;
                         }
@@ -430,19 +469,17 @@ fn control_loop(
                         fsm_state = i8::try_from(output.fsm_state).unwrap_or(-1);
                         command.state_seq = state.seq;
                         latest_estimate = Some((state.seq, output.estimate));
-                        if last_used_state_seq != Some(state.seq) {
-                            fresh_state_arrival = Some(arrived);
-                            last_used_state_seq = Some(state.seq);
-                        }
+                        fresh_state_arrival = Some(arrived);
+                        last_used_state_seq = Some(state.seq);
                     }
-                    Ok(output) => {
+                    Some(Ok(output)) => {
                         safety.controller_failed(
                             format!("non-finite torque {:?}", output.torques),
                             cycle_start,
                         );
                         mode = Mode::Damping;
                     }
-                    Err(error) => {
+                    Some(Err(error)) => {
                         safety.controller_failed(format!("{error:#}"), cycle_start);
                         mode = Mode::Damping;
                     }
@@ -450,6 +487,8 @@ fn control_loop(
             }
         }
         if mode == Mode::Damping {
+            // The controller's clock restarts with the next torque cycle's state.
+            last_used_state_seq = None;
             command.tau = [0.0; 12];
             command.kd = [config.damping_kd; 12];
             command.state_seq = snapshot.state.map_or(-1, |(s, _)| s.seq);
@@ -548,10 +587,33 @@ fn control_loop(
     Ok(RunReport {
         timing: total,
         cycles,
+        controller_periods,
         damping_entries: safety.damping_entries(),
         counters,
         realtime,
         final_mode: safety.mode(),
         final_reason: safety.reason().to_owned(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_controller_steps_one_period_per_body_tick() {
+        assert_eq!(periods_since(None, 7), 1);
+        assert_eq!(periods_since(Some(6), 7), 1);
+        // Two states lost in between: the body lived three ticks.
+        assert_eq!(periods_since(Some(4), 7), 3);
+        assert_eq!(periods_since(Some(0), 25), MAX_CATCH_UP_PERIODS);
+        assert_eq!(periods_since(Some(0), i64::MAX), MAX_CATCH_UP_PERIODS);
+        assert_eq!(
+            periods_since(Some(i64::MIN), i64::MAX),
+            MAX_CATCH_UP_PERIODS
+        );
+        // A restarted body numbers from the start again.
+        assert_eq!(periods_since(Some(900), 1), 1);
+        assert_eq!(periods_since(Some(7), 7), 1);
+    }
 }

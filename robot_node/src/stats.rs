@@ -115,6 +115,9 @@ pub struct LoopTiming {
     pub watchdog: u64,
     /// Slots without a cycle because the loop was still busy when they closed.
     pub skipped_slots: u64,
+    /// Torque cycles without a fresh state: the controller was not stepped and its last
+    /// command was sent again.
+    pub held_cycles: u64,
 }
 
 impl LoopTiming {
@@ -138,6 +141,7 @@ impl LoopTiming {
         self.state_waiting = 0;
         self.watchdog = 0;
         self.skipped_slots = 0;
+        self.held_cycles = 0;
     }
 }
 

@@ -126,6 +126,9 @@ class SimTiming:
     overruns: int = 0
     # Ticks whose step ran with the command answering that tick's state.
     answered_in_time: int = 0
+    # Per tick, how many states older than the tick's own the command it stepped with answers
+    # (0: its own state's answer; a link or node stall shows as a run of growing ages).
+    command_age: list[int] = field(default_factory=list)
     work: list[float] = field(default_factory=list)
     period: list[float] = field(default_factory=list)
 
@@ -140,8 +143,23 @@ class SimTiming:
             "ticks": self.ticks,
             "overruns": self.overruns,
             "answered_in_time": self.answered_in_time,
+            "command_age": self.command_age_counts(),
             "work": stats(self.work),
             "period": stats(self.period),
+        }
+
+    def command_age_counts(self) -> dict[str, int]:
+        """Ticks by the age of the command they stepped with, in states: 0, 1, 2, 3-9, 10+, and the largest."""
+        ages = np.array(self.command_age, dtype=np.int64)
+        if ages.size == 0:
+            return {"0": 0, "1": 0, "2": 0, "3-9": 0, "10+": 0, "max": 0}
+        return {
+            "0": int((ages == 0).sum()),
+            "1": int((ages == 1).sum()),
+            "2": int((ages == 2).sum()),
+            "3-9": int(((ages >= 3) & (ages <= 9)).sum()),
+            "10+": int((ages >= 10).sum()),
+            "max": int(ages.max()),
         }
 
     def summary(self) -> str:
@@ -358,7 +376,9 @@ class BodyNode:
             previous = tick_start
             self.lcm.publish(self.channels.low_state, state)
             self._drain_until_answer(self.seq, tick_start + wait_ns)
-            if self.last_answered_seq >= self.seq:
+            age = max(0, self.seq - self.last_answered_seq)
+            timing.command_age.append(age)
+            if age == 0:
                 timing.answered_in_time += 1
             self.sim.step()
             # Stamped with the body's clock, the tick grid in ms, as a robot's board stamps its

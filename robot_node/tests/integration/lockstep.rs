@@ -5,7 +5,7 @@ use std::time::Duration;
 use lcm_types::pfnav::RobotStatus;
 use pfnav_robot::{LoopTrigger, RunReport};
 
-use crate::support::{Pacing, Rig};
+use crate::support::{Body, Pacing, Rig};
 
 #[test]
 fn keeps_1_khz_in_lockstep_and_its_torques_are_finite() {
@@ -96,11 +96,17 @@ fn keeps_1_khz_in_lockstep_and_its_torques_are_finite() {
 /// A body on its own 1 kHz clock driving a node with `trigger`: the run's report, and the
 /// state seqs its torque commands answered, in order.
 fn paced_run(prefix: &str, trigger: LoopTrigger) -> (RunReport, Vec<i64>) {
+    paced_run_of(prefix, trigger, Body::Answer)
+}
+
+/// `paced_run` with the body behaving as `body` throughout.
+fn paced_run_of(prefix: &str, trigger: LoopTrigger, body: Body) -> (RunReport, Vec<i64>) {
     let rig = Rig::start_paced(prefix, Pacing::Clock(Duration::from_millis(1)), |config| {
         config.trigger = trigger;
         config.safety.state_timeout_ns = 500_000_000;
         config.safety.nav_timeout_ns = 2_000_000_000;
     });
+    rig.set_body(body);
     let first_ok = rig.wait_status("torque control", -1, Duration::from_secs(10), |s| {
         s.safety == RobotStatus::SAFETY_OK
     });
@@ -204,4 +210,56 @@ fn an_initial_position_sets_the_frame_of_the_estimate() {
         "{:?}",
         last.position
     );
+}
+
+/// Periods of the last steps, whose commands may not have reached the body before the run
+/// stopped.
+const UNSEEN_LAST_STEP: u64 = 4;
+
+/// The controller's clock counts the body's ticks covered by the torque commands' answered
+/// states, from the first answered seq to the last.
+fn assert_clock_follows_body(report: &RunReport, answered: &[i64], trigger: LoopTrigger) {
+    let first = answered.first().copied().unwrap_or(0);
+    let last = answered.last().copied().unwrap_or(0);
+    let body_ticks = u64::try_from(last - first + 1).unwrap_or(0);
+    let periods = report.controller_periods;
+    assert!(
+        periods >= body_ticks && periods <= body_ticks + UNSEEN_LAST_STEP,
+        "{trigger:?}: the controller stepped {periods} periods over {body_ticks} body ticks \
+         ({} cycles, {} held)",
+        report.cycles,
+        report.timing.held_cycles
+    );
+}
+
+#[test]
+fn the_controller_steps_once_per_body_tick_when_the_body_stalls_or_its_states_are_lost() {
+    for trigger in [
+        LoopTrigger::StateArrival,
+        LoopTrigger::Deadline {
+            margin: Duration::from_micros(250),
+        },
+    ] {
+        // Every 7th tick the body does not run: no state, and its time does not move. The
+        // cycles without a state send the last command again and do not step the controller
+        // (before, each stepped it a period, and its clock ran ahead of the body's).
+        let (report, answered) = paced_run_of("STALL_", trigger, Body::StallEvery(7));
+        assert_clock_follows_body(&report, &answered, trigger);
+        assert!(
+            report.timing.held_cycles * 10 > report.cycles,
+            "{trigger:?}: {} of {} cycles held",
+            report.timing.held_cycles,
+            report.cycles
+        );
+
+        // Every 7th state is lost on the way: the body's time moved, and the step after the
+        // gap covers both ticks.
+        let (report, answered) = paced_run_of("LOSSY_", trigger, Body::LoseEvery(7));
+        assert_clock_follows_body(&report, &answered, trigger);
+        let gaps = answered.windows(2).filter(|w| w[1] - w[0] == 2).count();
+        assert!(
+            gaps * 20 > answered.len(),
+            "{trigger:?}: {gaps} gaps of two"
+        );
+    }
 }

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -46,6 +46,12 @@ pub enum Body {
     OutOfOrderOnce,
     /// Answer with garbage bytes instead of a state.
     Garbage,
+    /// Skip every n-th tick: no state and no seq for it (a simulated body that overran its
+    /// tick: its time did not move).
+    StallEvery(i64),
+    /// Lose every n-th state: its seq is used, the packet never arrives (a lossy link: the
+    /// body's time moved).
+    LoseEvery(i64),
 }
 
 /// One command as the body received it.
@@ -72,7 +78,12 @@ pub struct Rig {
     node: Option<JoinHandle<anyhow::Result<RunReport>>>,
     navigator: Option<JoinHandle<()>>,
     body_clock: Option<JoinHandle<()>>,
+    _alone: MutexGuard<'static, ()>,
 }
+
+/// One rig at a time: each test measures how the node's cycles meet its body, which another
+/// rig's node, body and navigator threads beside it would disturb on a small machine.
+static RIGS: Mutex<()> = Mutex::new(());
 
 fn standing_state(fmu: &std::path::Path) -> LowState {
     let unpacked = UnpackedFmu::open(fmu).expect("FMU unpacks");
@@ -114,6 +125,8 @@ struct FakeBody {
     behaviour: Arc<Mutex<Body>>,
     last_state_ns: Arc<Mutex<u64>>,
     seq: i64,
+    /// Ticks the body has had (sent or not).
+    ticks: i64,
     garbage_seed: u64,
 }
 
@@ -121,13 +134,20 @@ impl FakeBody {
     /// The next packet to send on the state channel (None: the body is silent).
     fn next_payload(&mut self) -> Option<Vec<u8>> {
         let mut behaviour = self.behaviour.lock().unwrap();
+        self.ticks += 1;
+        if matches!(*behaviour, Body::StallEvery(n) if self.ticks % n == 0) {
+            return None;
+        }
         let mut state = self.template.clone();
         self.seq += 1;
         state.header.seq = self.seq;
         state.tick = self.seq;
         let payload = match *behaviour {
             Body::Silent => return None,
-            Body::Answer => state.encode().expect("state encodes"),
+            Body::LoseEvery(n) if self.seq % n == 0 => return None,
+            Body::Answer | Body::StallEvery(_) | Body::LoseEvery(_) => {
+                state.encode().expect("state encodes")
+            }
             Body::NanOnce => {
                 *behaviour = Body::Answer;
                 state.dq[4] = f32::NAN;
@@ -153,7 +173,10 @@ impl FakeBody {
                 bytes
             }
         };
-        if *behaviour == Body::Answer {
+        if matches!(
+            *behaviour,
+            Body::Answer | Body::StallEvery(_) | Body::LoseEvery(_)
+        ) {
             *self.last_state_ns.lock().unwrap() = now_ns();
         }
         Some(payload)
@@ -170,6 +193,8 @@ impl Rig {
 
     /// As `start`, with the body timed by `pacing`.
     pub fn start_paced(prefix: &str, pacing: Pacing, adjust: impl FnOnce(&mut NodeConfig)) -> Self {
+        // A test that failed with its rig held leaves the lock poisoned, not the next rig.
+        let alone = RIGS.lock().unwrap_or_else(PoisonError::into_inner);
         let lcm = Arc::new(Lcm::open("memq://").expect("memq bus"));
         let channels = RobotChannels::with_prefix(prefix).expect("channels");
         let fmu = fmu_path();
@@ -189,6 +214,7 @@ impl Rig {
             behaviour: body.clone(),
             last_state_ns: last_state_ns.clone(),
             seq: 0,
+            ticks: 0,
             garbage_seed: 0x9e37_79b9_7f4a_7c15,
         }));
         {
@@ -300,6 +326,7 @@ impl Rig {
             node: Some(node),
             navigator: Some(navigator),
             body_clock,
+            _alone: alone,
         }
     }
 
