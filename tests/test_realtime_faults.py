@@ -5,7 +5,8 @@ test can hold, drop or garble them; commands go back the same way. The navigator
 process sending Stand every 20 ms. Each fault must take the node to damping with its reason in
 robot_status_t, no later than 25 ms after its timeout (the node's own measurement, in the
 reason: "no low_state_t for 21.3 ms (timeout 20.0 ms)"), and the node must return to torque
-control when the peer is back. Nothing may crash.
+control when the peer is back. The planner service is not in the control loop: killing it leaves
+the node in torque control, and a restarted service answers again. Nothing may crash.
 """
 
 from __future__ import annotations
@@ -29,8 +30,15 @@ import numpy as np
 import pytest
 from pfnav_harness import paths
 from pfnav_harness.lcm_channels import ROBOT, udpm_url
-from pfnav_harness.planner_client import _import_lcm, _import_types
+from pfnav_harness.planner_client import (
+    PlannerClient,
+    PlannerError,
+    StartPose,
+    _import_lcm,
+    _import_types,
+)
 from pfnav_harness.process_signals import stop_processes
+from pfnav_harness.scenario import GoalRegion, Terrain
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -293,6 +301,58 @@ def test_killed_body_and_navigator_damp_within_the_timeout_and_recover_when_they
     ok = stack.torque("recovery after the navigator restarts", status.header.seq)
     assert ok.damping_entries >= 2
     assert stack.sim.poll() is None, "the restarted body keeps running"
+
+
+def test_a_killed_planner_leaves_the_node_in_torque_control_and_a_restarted_one_answers(
+    stack: Stack,
+) -> None:
+    terrain = Terrain((0.0, 0.0), 0.25, np.zeros((24, 24)))
+    start, goal = StartPose(1.0, 1.0, 0.0), GoalRegion((4.5, 4.5), 0.3)
+    binary = paths.planner_service_path()
+
+    def planner() -> PlannerClient:
+        return PlannerClient(
+            stack.url,
+            "FPLAN_",
+            binary,
+            service_log=stack.logs / "planner.log",
+            startup_timeout=WAIT,
+        )
+
+    def plans(client: PlannerClient) -> bool:
+        seq = client.publish_map(terrain)
+        return client.request_answer(start, goal, "pf", seq, timeout=WAIT, retries=1).ok
+
+    client = planner()
+    try:
+        assert plans(client), "the planner answers before the kill"
+        ok = stack.torque("torque control with the planner up")
+        assert client.process is not None
+        client.process.kill()
+        assert client.process.wait(timeout=10) == -signal.SIGKILL
+        # A request to the dead service fails at once, naming the death.
+        asked = time.monotonic()
+        with pytest.raises(PlannerError, match=r"pf-planner-service died \(exit code -9\)"):
+            client.request_answer(
+                start, goal, "pf", client.publish_map(terrain), timeout=1.0, retries=0
+            )
+        assert time.monotonic() - asked < 5.0
+        # A second of statuses after the kill: the node stayed in torque control throughout.
+        later = stack.wait_status("statuses after the kill", ok.header.seq + 20, lambda _s: True)
+        with stack.status_lock:
+            since = [s for s in stack.statuses if ok.header.seq < s.header.seq <= later.header.seq]
+        assert all(s.safety == stack.types.robot_status_t.SAFETY_OK for s in since), [
+            (s.safety, s.reason) for s in since
+        ]
+        assert later.damping_entries == ok.damping_entries
+    finally:
+        client.close()
+    restarted = planner()
+    try:
+        assert plans(restarted), "a restarted planner answers"
+    finally:
+        restarted.close()
+    assert stack.node.poll() is None and stack.sim.poll() is None
 
 
 def test_held_dropped_and_garbled_states_damp_or_pass_as_they_should(
