@@ -31,8 +31,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 # pfnav-robot's --trigger values, as the table names them.
 TRIGGER_LABELS = {
-    "state": "state arrival (default)",
-    "deadline": "phase-locked deadline (`--trigger deadline`)",
+    "state": "state arrival (`--trigger state`)",
+    "deadline": "phase-locked deadline (default)",
     "clock": "fixed deadline (`--trigger clock`)",
 }
 

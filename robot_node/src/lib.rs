@@ -23,5 +23,6 @@ pub mod schedule;
 pub mod stats;
 
 pub use node::{
-    run, LoopTrigger, NodeConfig, RobotChannels, RunReport, MAX_CATCH_UP_PERIODS, MISS_FACTOR,
+    run, LoopTrigger, NodeConfig, RobotChannels, RunReport, DEFAULT_DEADLINE_MARGIN,
+    MAX_CATCH_UP_PERIODS, MISS_FACTOR,
 };

@@ -8,7 +8,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Parser;
 use lcm_transport::Lcm;
-use pfnav_robot::{platform, LoopTrigger, NodeConfig, RobotChannels};
+use pfnav_robot::{platform, LoopTrigger, NodeConfig, RobotChannels, DEFAULT_DEADLINE_MARGIN};
 use tracing_subscriber::EnvFilter;
 
 /// The controller FMU as a real-time LCM node: low_state_t in, low_cmd_t out every period on
@@ -65,11 +65,11 @@ struct Args {
     /// sets the period); `deadline` = a fixed point of those slots, `--deadline-margin` after
     /// the states' arrival (the node's clock sets the period); `clock` = fixed deadlines
     /// whatever the states do.
-    #[arg(long, value_enum, default_value_t = TriggerArg::State)]
+    #[arg(long, value_enum, default_value_t = TriggerArg::Deadline)]
     trigger: TriggerArg,
     /// With `--trigger deadline`: how long after the states' arrival phase a cycle starts, as a
     /// fraction of the period (0 < margin < 0.5); the room for the delivery's jitter.
-    #[arg(long, default_value_t = 0.25)]
+    #[arg(long, default_value_t = DEFAULT_DEADLINE_MARGIN)]
     deadline_margin: f64,
     /// The trunk's position X Y Z when the node starts, in the frame the controller should
     /// estimate in (e.g. the world frame of a map); default: the FMU's start values, a frame

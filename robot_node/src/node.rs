@@ -24,6 +24,10 @@ use crate::stats::LoopTiming;
 /// PeriodicTask criterion).
 pub const MISS_FACTOR: f64 = 1.3;
 
+/// The default deadline margin, a fraction of the period: room for the states' delivery
+/// jitter before the cycle that uses them.
+pub const DEFAULT_DEADLINE_MARGIN: f64 = 0.25;
+
 /// The most periods one controller step spans when states were lost in between (the FMU runs
 /// that many control ticks on the newest state): 20 ms at 1 kHz, the default state timeout.
 /// A longer gap (a seq jump) steps this many; the cycle's work stays bounded.
@@ -124,7 +128,8 @@ pub enum LoopTrigger {
 
 impl NodeConfig {
     /// The documented defaults: 1 kHz, 20 ms state timeout, 500 ms navigator timeout,
-    /// 20 good cycles to recover, damping kd 2 N m s/rad, status every 0.5 s, SCHED_FIFO 80.
+    /// 20 good cycles to recover, damping kd 2 N m s/rad, status every 0.5 s, SCHED_FIFO 80,
+    /// cycles on the phase-locked deadline a quarter period after the states' arrival.
     pub fn new(fmu: std::path::PathBuf, channels: RobotChannels) -> Self {
         Self {
             channels,
@@ -141,7 +146,9 @@ impl NodeConfig {
             estimate_every: 10,
             realtime_priority: Some(80),
             duration: None,
-            trigger: LoopTrigger::StateArrival,
+            trigger: LoopTrigger::Deadline {
+                margin: Duration::from_millis(1).mul_f64(DEFAULT_DEADLINE_MARGIN),
+            },
             initial_position: None,
         }
     }

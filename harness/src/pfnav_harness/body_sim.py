@@ -131,6 +131,8 @@ class SimTiming:
     command_age: list[int] = field(default_factory=list)
     work: list[float] = field(default_factory=list)
     period: list[float] = field(default_factory=list)
+    # Wall seconds from the first tick's deadline to the end of the run (real time only).
+    wall_time: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         def stats(values: list[float]) -> dict[str, float]:
@@ -146,6 +148,7 @@ class SimTiming:
             "command_age": self.command_age_counts(),
             "work": stats(self.work),
             "period": stats(self.period),
+            "wall_time": self.wall_time,
         }
 
     def command_age_counts(self) -> dict[str, int]:
@@ -395,6 +398,7 @@ class BodyNode:
                 # clock by them, as a stalled robot's would).
                 timing.overruns += 1
                 deadline += (done - deadline) // period_ns * period_ns
+        timing.wall_time = (clock() - start) * 1e-9
 
     def run_lockstep(self, steps: int | None, stop: Callable[[], bool], answer_timeout: float = 5.0) -> None:
         """One step per command answering the last state; stops after `steps` steps, at `stop()`, or when no answer comes for `answer_timeout` s."""
@@ -551,6 +555,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         report = {
             "mode": "lockstep" if args.lockstep else "realtime",
             "simulated_time": sim.time,
+            # Simulated over wall time: below 1 when overrun ticks held the body's time back.
+            "real_time_factor": sim.time / node.timing.wall_time if node.timing.wall_time > 0.0 else None,
             "states_sent": node.seq,
             "commands_received": node.commands_received,
             "commands_rejected": node.commands_rejected,

@@ -58,7 +58,7 @@ class RealtimeOutcome:
 
 
 # pfnav-robot's --trigger values; the first is its default.
-ROBOT_TRIGGERS = ("state", "deadline", "clock")
+ROBOT_TRIGGERS = ("deadline", "state", "clock")
 
 
 def run_scenario(
@@ -231,13 +231,19 @@ def run_scenario(
     return outcome
 
 
+def body_pace(sim_report: dict[str, Any]) -> str:
+    """pfnav-sim's overrun ticks and its simulated time over wall time (an overrun holds the body's time back)."""
+    factor = sim_report.get("real_time_factor")
+    return f"{sim_report.get('overruns', '–')}" + ("" if factor is None else f" ({factor:.2f})")
+
+
 def table(outcomes: list[RealtimeOutcome]) -> str:
     def us(report: dict[str, Any], key: str, q: str) -> str:
         return f"{report[key][q] * 1e6:.0f}" if report else "–"
 
     lines = [
         "| scenario | goal (time to it, s) | fell | walk, s | final distance to goal, m | path deviation RMS, m (co-sim) | estimate error at the end, m | "
-        "period p99, µs | misses | latency p99, µs | damping entries | body overruns |",
+        "period p99, µs | misses | latency p99, µs | damping entries | body overruns (real-time factor) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for o in outcomes:
@@ -248,7 +254,7 @@ def table(outcomes: list[RealtimeOutcome]) -> str:
         lines.append(
             f"| {o.scenario} | {f'yes ({o.time_to_goal:.1f})' if o.reached else 'no'} | {fell} | {o.walk_seconds:.1f} | {o.final_distance:.2f} | "
             f"{o.path_rms:.3f}{cosim} | {o.estimate_error:.3f} | {us(r, 'period', 'p99')} | {misses} | {us(r, 'latency', 'p99')} | "
-            f"{r.get('damping_entries', '–')} | {o.sim_report.get('overruns', '–')} |"
+            f"{r.get('damping_entries', '–')} | {body_pace(o.sim_report)} |"
         )
     return "\n".join(lines)
 
@@ -297,12 +303,16 @@ def run_realtime(args: Any) -> int:
         [
             (
                 f"Planner service, pfnav-robot (controller FMU, 1 kHz, `--trigger {args.trigger}`), pfnav-sim (DART, real time, 1 kHz, "
-                f"SCHED_FIFO priority {args.sim_priority}) and "
+                f"SCHED_FIFO priority {args.sim_priority}, `--command-wait {args.command_wait:g}`) and "
                 "the navigator (feedback field on the robot's estimate, nav_cmd_t at 50 Hz) as four processes over udpm:// in a private "
                 "network namespace; lcm-logger records each run (OUT/logs/SCENARIO.lcmlog). Goal: the true trunk enters the goal "
                 "disc, as the co-simulation judges it; fall: the co-simulation's height and tilt thresholds. Path deviation: RMS "
                 "distance of the walked (true) path "
-                f"from the P-F plan's path. Load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after (the machine is shared)."
+                f"from the P-F plan's path. Period p99, misses (periods above 1.3 T) and latency p99 (state received to command sent): "
+                "pfnav-robot's loop over the whole run. Body overruns: pfnav-sim's ticks whose work took longer than a period; the "
+                "body's time stands still for the ticks lost (real-time factor: simulated over wall time), and the controller's "
+                "with it, since it steps on the body's states. "
+                f"Load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after (the machine is shared)."
             ),
             "",
             table(outcomes),
