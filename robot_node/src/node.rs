@@ -351,6 +351,7 @@ fn control_loop(
     let mut window_cycles = 0i64;
     let mut cycles = 0u64;
     let mut controller_periods = 0u64;
+    let mut warned_slow_states = false;
     let mut command_seq = 0i64;
     // The command's bytes, reused every cycle: the loop allocates nothing once it has run.
     let mut command_bytes = Vec::new();
@@ -543,6 +544,17 @@ fn control_loop(
         }
 
         if sent >= next_status {
+            let window_total = window_cycles.unsigned_abs();
+            if !warned_slow_states && window_total >= 100 && window.held_cycles * 4 > window_total {
+                // The controller's clock counts the body's states: a body sending fewer than one
+                // per period (a slower rate than `--rate`) would slow it down.
+                warned_slow_states = true;
+                tracing::warn!(
+                    held = window.held_cycles,
+                    cycles = window_cycles,
+                    "over a quarter of the cycles found no fresh state (states lost or late, or a body slower than --rate): the controller's clock follows the states it gets"
+                );
+            }
             let status = RobotStatus {
                 header: header(status_seq),
                 uptime: seconds(sent - start_ns),
