@@ -147,3 +147,24 @@ def test_the_tick_statistics_count_the_ticks_by_the_age_of_their_command() -> No
     assert timing.command_age_counts() == {"0": 2, "1": 1, "2": 1, "3-9": 2, "10+": 2, "max": 557}
     assert SimTiming().command_age_counts()["max"] == 0
     assert timing.to_json()["command_age"]["10+"] == 2
+
+
+def test_in_real_time_without_a_controller_the_body_ticks_on_and_reports_its_slowest_tick(body: BodySimulation) -> None:
+    """No command ever answers: the body still ticks on its clock (about one tick a millisecond,
+    fewer when ticks overrun), every tick steps with a command older than its state, and the
+    slowest tick's phases add up to its work."""
+    lcm = _import_lcm().LCM("memq://")
+    node = BodyNode(body, lcm, Channels.with_prefix("UNANSWERED_"))
+    node.run_realtime(0.3, stop=lambda: False, command_wait=0.0)
+    node.close()
+    timing = node.timing
+    assert 0 < timing.ticks <= 310 and timing.ticks + timing.overruns >= 100
+    assert body.steps == timing.ticks
+    assert timing.answered_in_time == 0 and timing.command_age_counts()["0"] == 0
+    slowest = timing.slowest_tick
+    assert slowest["work"] == pytest.approx(max(timing.work))
+    phases = slowest["publish"] + slowest["wait"] + slowest["step"] + slowest["state"]
+    assert phases == pytest.approx(slowest["work"], rel=1e-6, abs=1e-9)
+    assert 0.0 <= slowest["at"] < 0.3
+    assert 0.2 < timing.wall_time < 1.0
+    assert "slowest tick" in timing.summary()

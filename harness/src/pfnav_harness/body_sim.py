@@ -133,6 +133,9 @@ class SimTiming:
     period: list[float] = field(default_factory=list)
     # Wall seconds from the first tick's deadline to the end of the run (real time only).
     wall_time: float = 0.0
+    # The longest tick's work and where it went (seconds: when, publishing the state, waiting
+    # for the answer, the physics step, the next state), to tell a stall's cause.
+    slowest_tick: dict[str, float] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         def stats(values: list[float]) -> dict[str, float]:
@@ -149,6 +152,7 @@ class SimTiming:
             "work": stats(self.work),
             "period": stats(self.period),
             "wall_time": self.wall_time,
+            "slowest_tick": self.slowest_tick,
         }
 
     def command_age_counts(self) -> dict[str, int]:
@@ -173,7 +177,14 @@ class SimTiming:
         if self.period:
             period = np.array(self.period) * 1e3
             text += f", period p50/p99/max {np.percentile(period, 50):.3f}/{np.percentile(period, 99):.3f}/{period.max():.3f} ms"
-        return text + f", {self.overruns} overruns, {self.answered_in_time} ticks stepped with their own state's answer"
+        text += f", {self.overruns} overruns, {self.answered_in_time} ticks stepped with their own state's answer"
+        slowest = self.slowest_tick
+        if slowest:
+            text += (
+                f"; slowest tick {slowest['work'] * 1e3:.3f} ms at {slowest['at']:.3f} s (publish {slowest['publish'] * 1e3:.3f}, "
+                f"wait {slowest['wait'] * 1e3:.3f}, step {slowest['step'] * 1e3:.3f}, state {slowest['state'] * 1e3:.3f} ms)"
+            )
+        return text
 
 
 class BodySimulation:
@@ -378,19 +389,32 @@ class BodyNode:
                 timing.period.append((tick_start - previous) * 1e-9)
             previous = tick_start
             self.lcm.publish(self.channels.low_state, state)
+            published = clock()
             self._drain_until_answer(self.seq, tick_start + wait_ns)
+            answered = clock()
             age = max(0, self.seq - self.last_answered_seq)
             timing.command_age.append(age)
             if age == 0:
                 timing.answered_in_time += 1
             self.sim.step()
+            stepped = clock()
             # Stamped with the body's clock, the tick grid in ms, as a robot's board stamps its
             # states.
             state = self.next_state((deadline + period_ns - start) // 1_000_000)
             if self.truth_every and self.sim.steps % self.truth_every == 0:
                 self.lcm.publish(self.channels.truth, self.sim.truth().encode())
             done = clock()
-            timing.work.append((done - tick_start) * 1e-9)
+            work = (done - tick_start) * 1e-9
+            if work > timing.slowest_tick.get("work", 0.0):
+                timing.slowest_tick = {
+                    "work": work,
+                    "at": (tick_start - start) * 1e-9,
+                    "publish": (published - tick_start) * 1e-9,
+                    "wait": (answered - published) * 1e-9,
+                    "step": (stepped - answered) * 1e-9,
+                    "state": (done - stepped) * 1e-9,
+                }
+            timing.work.append(work)
             timing.ticks += 1
             if done - deadline > period_ns:
                 # Overran by more than a period: continue on the grid after now instead of
