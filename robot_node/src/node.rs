@@ -24,6 +24,10 @@ use crate::stats::LoopTiming;
 /// PeriodicTask criterion).
 pub const MISS_FACTOR: f64 = 1.3;
 
+/// SCHED_FIFO priority of liblcm's receive thread (see `run`): the lowest, so it waits for no
+/// ordinary process and preempts no control loop.
+pub const RECEIVE_THREAD_PRIORITY: i32 = 1;
+
 /// The default deadline margin, a fraction of the period: room for the states' delivery
 /// jitter before the cycle that uses them.
 pub const DEFAULT_DEADLINE_MARGIN: f64 = 0.25;
@@ -280,6 +284,20 @@ pub fn run(
     )
     .with_context(|| format!("loading the controller FMU {}", config.fmu.display()))?;
 
+    // liblcm starts its receive thread at the first subscription, with this thread's
+    // scheduling. Under ordinary scheduling every busy ordinary process could hold the states
+    // back (a body's tick once waited 24 ms for its command); at the loop's own priority it
+    // preempted the loops for every packet on the bus (more misses). So it gets the lowest
+    // SCHED_FIFO priority: above every ordinary process, below the loops.
+    if config.realtime_priority.is_some() {
+        let rc = clock::set_thread_fifo(RECEIVE_THREAD_PRIORITY);
+        if rc != 0 {
+            tracing::warn!(
+                error = %std::io::Error::from_raw_os_error(rc),
+                "SCHED_FIFO refused for liblcm's receive thread"
+            );
+        }
+    }
     let inbox = Arc::new(Inbox::new(config.safety.state_timeout_ns));
     let state_inbox = Arc::clone(&inbox);
     let _state_sub = lcm.subscribe(&config.channels.low_state, move |_, bytes| {

@@ -33,6 +33,7 @@ dynamics beyond the torque law, and the transport's own delay.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import json
 import math
@@ -449,6 +450,10 @@ class RealtimeSettings:
     memory_locked: bool
 
 
+# SCHED_FIFO priority of liblcm's receive thread (pfnav-robot's RECEIVE_THREAD_PRIORITY).
+RECEIVE_THREAD_PRIORITY = 1
+
+
 def apply_realtime(priority: int) -> RealtimeSettings:
     """SCHED_FIFO at `priority` for this process and mlockall, as pfnav-robot does; either may be refused (then said on stderr)."""
     import ctypes
@@ -555,14 +560,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("pfnav-sim: --truth-rate must be in 0 ..= 1000 Hz", file=sys.stderr)
         return 2
     truth_every = round(1000.0 / args.truth_rate) if args.truth_rate > 0 else 0
-    node = BodyNode(sim, lcm, Channels.with_prefix(args.channel_prefix), truth_every)
-    stop_requested = stop_requested_on_signals()
     if not 0 <= args.priority <= 99:
         print("pfnav-sim: --priority must be 0 (ordinary scheduling) or 1..99", file=sys.stderr)
         return 2
-    realtime = RealtimeSettings(False, False)
-    if args.priority > 0 and not args.lockstep:
-        realtime = apply_realtime(args.priority)
+    realtime_loop = args.priority > 0 and not args.lockstep
+    if realtime_loop:
+        # liblcm starts its receive thread at the subscription, with this thread's scheduling:
+        # under ordinary scheduling busy ordinary processes held the commands back (a tick once
+        # waited 24 ms for one), at the loop's priority it preempted the loops for every packet
+        # on the bus. The lowest SCHED_FIFO priority is above the one and below the other.
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RECEIVE_THREAD_PRIORITY))
+    node = BodyNode(sim, lcm, Channels.with_prefix(args.channel_prefix), truth_every)
+    realtime = apply_realtime(args.priority) if realtime_loop else RealtimeSettings(False, False)
+    stop_requested = stop_requested_on_signals()
     mode = "lockstep" if args.lockstep else "real time"
     print(f"pfnav-sim: {mode}, {args.engine}, channels {node.channels.low_state} / {node.channels.low_cmd} on {args.lcm_url}", file=sys.stderr, flush=True)
     if args.lockstep:
