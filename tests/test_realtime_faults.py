@@ -259,6 +259,19 @@ class Stack:
         self.releaser.join(timeout=5)
 
 
+def test_the_demo_knows_the_node_s_triggers_and_its_default() -> None:
+    """`pfnav-demo realtime --trigger` offers pfnav-robot's values, its default first."""
+    from pfnav_harness.realtime_demo import ROBOT_TRIGGERS
+
+    help_text = subprocess.run([str(paths.pfnav_robot_path()), "-h"], capture_output=True, text=True, check=True).stdout
+    line = next(line for line in help_text.splitlines() if "[possible values:" in line and "[default:" in line and "`deadline`" in line)
+    default = re.search(r"\[default: (\w+)\]", line)
+    values = re.search(r"\[possible values: ([\w, ]+)\]", line)
+    assert default and values, line
+    assert ROBOT_TRIGGERS[0] == default.group(1)
+    assert list(ROBOT_TRIGGERS) == [v.strip() for v in values.group(1).split(",")]
+
+
 def detection_delay_ms(reason: str) -> tuple[float, float]:
     """(age at the damping decision, timeout), both ms, from the node's reason."""
     match = re.search(r"for ([0-9.]+) ms \(timeout ([0-9.]+) ms\)", reason)

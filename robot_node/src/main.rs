@@ -60,11 +60,11 @@ struct Args {
     /// Stop after this many seconds (default: run until SIGINT/SIGTERM).
     #[arg(long)]
     duration: Option<f64>,
-    /// What starts a control cycle: `state` = the arrival of a fresh low_state_t (one-period
-    /// slots phase-locked to the stream, the slot's end as the watchdog; the stream's delivery
-    /// sets the period); `deadline` = a fixed point of those slots, `--deadline-margin` after
-    /// the states' arrival (the node's clock sets the period); `clock` = fixed deadlines
-    /// whatever the states do.
+    /// What starts a control cycle: `deadline` = a fixed point of one-period slots
+    /// phase-locked to the low_state_t stream, `--deadline-margin` after the states' arrival
+    /// (the node's clock sets the period); `state` = the arrival of a fresh low_state_t (the
+    /// slot's end as the watchdog; the stream's delivery sets the period); `clock` = fixed
+    /// deadlines whatever the states do.
     #[arg(long, value_enum, default_value_t = TriggerArg::Deadline)]
     trigger: TriggerArg,
     /// With `--trigger deadline`: how long after the states' arrival phase a cycle starts, as a
@@ -88,8 +88,8 @@ struct Args {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum TriggerArg {
-    State,
     Deadline,
+    State,
     Clock,
 }
 
@@ -155,9 +155,7 @@ fn main() -> anyhow::Result<()> {
         "--deadline-margin must be a fraction of the period in (0, 0.5)"
     );
     config.trigger = match args.trigger {
-        TriggerArg::Deadline => LoopTrigger::Deadline {
-            margin: config.period.mul_f64(args.deadline_margin),
-        },
+        TriggerArg::Deadline => LoopTrigger::deadline(config.period, args.deadline_margin),
         TriggerArg::State => LoopTrigger::StateArrival,
         TriggerArg::Clock => LoopTrigger::Clock,
     };

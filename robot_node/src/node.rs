@@ -130,15 +130,25 @@ pub enum LoopTrigger {
     Clock,
 }
 
+impl LoopTrigger {
+    /// The phase-locked deadline `margin_fraction` of `period` after the states' arrival.
+    pub fn deadline(period: Duration, margin_fraction: f64) -> Self {
+        LoopTrigger::Deadline {
+            margin: period.mul_f64(margin_fraction),
+        }
+    }
+}
+
 impl NodeConfig {
     /// The documented defaults: 1 kHz, 20 ms state timeout, 500 ms navigator timeout,
     /// 20 good cycles to recover, damping kd 2 N m s/rad, status every 0.5 s, SCHED_FIFO 80,
     /// cycles on the phase-locked deadline a quarter period after the states' arrival.
     pub fn new(fmu: std::path::PathBuf, channels: RobotChannels) -> Self {
+        let period = Duration::from_millis(1);
         Self {
             channels,
             fmu,
-            period: Duration::from_millis(1),
+            period,
             safety: SafetyConfig {
                 state_timeout_ns: 20_000_000,
                 max_state_delay_ns: None,
@@ -150,9 +160,7 @@ impl NodeConfig {
             estimate_every: 10,
             realtime_priority: Some(80),
             duration: None,
-            trigger: LoopTrigger::Deadline {
-                margin: Duration::from_millis(1).mul_f64(DEFAULT_DEADLINE_MARGIN),
-            },
+            trigger: LoopTrigger::deadline(period, DEFAULT_DEADLINE_MARGIN),
             initial_position: None,
         }
     }
@@ -469,45 +477,41 @@ fn control_loop(
         if mode == Mode::Torque {
             // The monitor's torque mode implies both are present.
             if let (Some((state, arrived)), Some((nav, _))) = (snapshot.state, snapshot.nav) {
-                let fresh = last_used_state_seq != Some(state.seq);
-                let step = if fresh {
-                    let periods = periods_since(last_used_state_seq, state.seq);
-                    let result = controller.step(&state, &nav, periods);
-                    if result.is_ok() {
-                        controller_periods += u64::from(periods);
-                    }
-                    Some(result)
-                } else {
+                if last_used_state_seq == Some(state.seq) {
                     // No state since the last step: the body's clock has not been seen to move
                     // (a simulated body that overran its tick, a late packet), so the
                     // controller's does not either; the command it answered is sent again.
                     window.held_cycles += 1;
                     total.held_cycles += 1;
-                    None
-                };
-                match step {
-                    None => {}
-                    Some(Ok(output)) if output.torques.iter().all(|t| t.is_finite()) => {
-                        for (slot, torque) in command.tau.iter_mut().zip(output.torques) {
-                            *slot = torque as f32;
+                } else {
+                    let periods = periods_since(last_used_state_seq, state.seq);
+                    let result = controller.step(&state, &nav, periods);
+                    if result.is_ok() {
+                        controller_periods += u64::from(periods);
+                    }
+                    match result {
+                        Ok(output) if output.torques.iter().all(|t| t.is_finite()) => {
+                            for (slot, torque) in command.tau.iter_mut().zip(output.torques) {
+                                *slot = torque as f32;
+                            }
+                            command.kd = [0.0; 12];
+                            fsm_state = i8::try_from(output.fsm_state).unwrap_or(-1);
+                            command.state_seq = state.seq;
+                            latest_estimate = Some((state.seq, output.estimate));
+                            fresh_state_arrival = Some(arrived);
+                            last_used_state_seq = Some(state.seq);
                         }
-                        command.kd = [0.0; 12];
-                        fsm_state = i8::try_from(output.fsm_state).unwrap_or(-1);
-                        command.state_seq = state.seq;
-                        latest_estimate = Some((state.seq, output.estimate));
-                        fresh_state_arrival = Some(arrived);
-                        last_used_state_seq = Some(state.seq);
-                    }
-                    Some(Ok(output)) => {
-                        safety.controller_failed(
-                            format!("non-finite torque {:?}", output.torques),
-                            cycle_start,
-                        );
-                        mode = Mode::Damping;
-                    }
-                    Some(Err(error)) => {
-                        safety.controller_failed(format!("{error:#}"), cycle_start);
-                        mode = Mode::Damping;
+                        Ok(output) => {
+                            safety.controller_failed(
+                                format!("non-finite torque {:?}", output.torques),
+                                cycle_start,
+                            );
+                            mode = Mode::Damping;
+                        }
+                        Err(error) => {
+                            safety.controller_failed(format!("{error:#}"), cycle_start);
+                            mode = Mode::Damping;
+                        }
                     }
                 }
             }
