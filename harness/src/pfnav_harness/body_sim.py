@@ -119,17 +119,20 @@ class MotorModel:
         return t
 
 
+# The bins of SimTiming's command ages, in states (count_command_age sorts into them).
+COMMAND_AGE_BINS = ("0", "1", "2", "3-9", "10+")
+
+
 @dataclass
 class SimTiming:
     """Tick statistics of a real-time run (seconds)."""
 
     ticks: int = 0
     overruns: int = 0
-    # Ticks whose step ran with the command answering that tick's state.
-    answered_in_time: int = 0
-    # Per tick, how many states older than the tick's own the command it stepped with answers
-    # (0: its own state's answer; a link or node stall shows as a run of growing ages).
-    command_age: list[int] = field(default_factory=list)
+    # Ticks by how many states older than the tick's own the command they stepped with answers,
+    # in the bins of COMMAND_AGE_BINS (0: its own state's answer), and the largest age.
+    command_age_ticks: list[int] = field(default_factory=lambda: [0] * len(COMMAND_AGE_BINS))
+    command_age_max: int = 0
     work: list[float] = field(default_factory=list)
     period: list[float] = field(default_factory=list)
     # Wall seconds from the first tick's deadline to the end of the run (real time only).
@@ -149,26 +152,22 @@ class SimTiming:
             "ticks": self.ticks,
             "overruns": self.overruns,
             "answered_in_time": self.answered_in_time,
-            "command_age": self.command_age_counts(),
+            "command_age": {**dict(zip(COMMAND_AGE_BINS, self.command_age_ticks, strict=True)), "max": self.command_age_max},
             "work": stats(self.work),
             "period": stats(self.period),
             "wall_time": self.wall_time,
             "slowest_tick": self.slowest_tick,
         }
 
-    def command_age_counts(self) -> dict[str, int]:
-        """Ticks by the age of the command they stepped with, in states: 0, 1, 2, 3-9, 10+, and the largest."""
-        ages = np.array(self.command_age, dtype=np.int64)
-        if ages.size == 0:
-            return {"0": 0, "1": 0, "2": 0, "3-9": 0, "10+": 0, "max": 0}
-        return {
-            "0": int((ages == 0).sum()),
-            "1": int((ages == 1).sum()),
-            "2": int((ages == 2).sum()),
-            "3-9": int(((ages >= 3) & (ages <= 9)).sum()),
-            "10+": int((ages >= 10).sum()),
-            "max": int(ages.max()),
-        }
+    @property
+    def answered_in_time(self) -> int:
+        """Ticks whose step ran with the command answering that tick's own state."""
+        return self.command_age_ticks[0]
+
+    def count_command_age(self, age: int) -> None:
+        """One tick stepped with a command `age` states older than its own state (≥ 0)."""
+        self.command_age_ticks[age if age < 3 else 3 if age < 10 else 4] += 1
+        self.command_age_max = max(self.command_age_max, age)
 
     def summary(self) -> str:
         if not self.work:
@@ -393,10 +392,7 @@ class BodyNode:
             published = clock()
             self._drain_until_answer(self.seq, tick_start + wait_ns)
             answered = clock()
-            age = max(0, self.seq - self.last_answered_seq)
-            timing.command_age.append(age)
-            if age == 0:
-                timing.answered_in_time += 1
+            timing.count_command_age(max(0, self.seq - self.last_answered_seq))
             self.sim.step()
             stepped = clock()
             # Stamped with the body's clock, the tick grid in ms, as a robot's board stamps its
