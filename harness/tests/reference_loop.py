@@ -3,7 +3,9 @@
 `advance_reference` is `CoSimulation._advance` of commit 93568a0: it reads the state through
 DART's transform and velocity getters, samples the reference one step at a time, rebuilds and
 sends the whole height map at every communication point and clamps torques with `np.clip`. A
-run with it in place of `_advance` must log exactly what the fast loop logs.
+run with it in place of `_advance` must log exactly what the fast loop logs. One rule came later
+and is the model's, not the loop's: the map is registered at the belief offset once that has
+moved more than `MAP_REGISTRATION_TOLERANCE` from where it was last registered.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pfnav_harness import fmu_runner as fr
-from pfnav_harness.cosim import REFERENCE_COLUMNS, CoSimulation
+from pfnav_harness.cosim import MAP_REGISTRATION_TOLERANCE, REFERENCE_COLUMNS, CoSimulation
 from pfnav_harness.errors import SimulationError
 from pfnav_harness.reference import N_COLUMNS
 from pfnav_harness.reference_source import FieldSource
@@ -72,6 +74,7 @@ def advance_reference(self: CoSimulation, loop: Any, end: int, progress: Any) ->
     perf = time.perf_counter
     estimator = loop.estimator
     offset = loop.belief_offset
+    map_offset = loop.map_offset
     # The pose the robot's navigation works with: x, y, yaw (truth + offset).
     pose = np.zeros(3)
     stop_reason: str | None = None
@@ -114,13 +117,15 @@ def advance_reference(self: CoSimulation, loop: Any, end: int, progress: Any) ->
             input_values[body_height_in] = c.body_height
             # The elevation map a perception stack would give: the mesh vertices around the base,
             # in the robot's estimated frame (perception measures the ground relative to the body).
+            if np.max(np.abs(offset[0:3] - map_offset)) > MAP_REGISTRATION_TOLERANCE:
+                map_offset[:] = offset[0:3]
             grid = terrain.local_grid(float(state[0]), float(state[1]), map_size) if use_map else None
             if grid is None:
                 input_values[map_spacing] = 0.0
             else:
-                map_origin[0], map_origin[1] = grid[0] + offset[0], grid[1] + offset[1]
+                map_origin[0], map_origin[1] = grid[0] + map_offset[0], grid[1] + map_offset[1]
                 input_values[map_spacing] = terrain.resolution
-                map_heights[:] = grid[2].ravel() + offset[2]
+                map_heights[:] = grid[2].ravel() + map_offset[2]
             if estimator is not None:
                 estimator.write_inputs(t, state)
             mode = modes.Locomotion if walking else modes.Stand

@@ -18,7 +18,7 @@ from test_hs_cosim import PdStandIn, standing_plan
 from pfnav_harness import fmu_runner as fr
 from pfnav_harness import paths
 from pfnav_harness.body_sensors import BodySensorConfig
-from pfnav_harness.cosim import CoSimConfig, CoSimulation
+from pfnav_harness.cosim import MAP_REGISTRATION_TOLERANCE, CoSimConfig, CoSimulation, RunResult
 from pfnav_harness.feedback_field import FeedbackField
 from pfnav_harness.reference import N_COLUMNS, T_HEIGHT, VX, VY, X, Y, Z
 from pfnav_harness.reference_source import FieldSource, yaw_of
@@ -105,12 +105,17 @@ class OffsetEstimateStandIn(PdStandIn):
         est.est_rpy[:] = (0.0, 0.0, yaw + OFFSET[3])
 
 
-def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+def stand_on_the_estimate(scenario: Scenario, controller: OffsetEstimateStandIn, tmp_path: Path) -> RunResult:
+    """0.4 s standing on the ramp with the kalman estimator in the loop (the stand-in reports the estimate)."""
     plan = standing_plan(1.2, 1.0)
     config = CoSimConfig(stand_time=0.2, max_duration=0.4, follow="feedback", estimator="kalman", body_sensors=BodySensorConfig(seed=1))
+    with CoSimulation(scenario, plan, None, ROBOT, tmp_path, config, controller=controller, field=radial_field(scenario)) as sim:  # type: ignore[arg-type]
+        return sim.run()
+
+
+def test_with_an_estimator_reference_and_map_are_in_the_estimated_frame(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
     controller = OffsetEstimateStandIn(fmu_contract)
-    with CoSimulation(ramp_scenario, plan, None, ROBOT, tmp_path, config, controller=controller, field=radial_field(ramp_scenario)) as sim:  # type: ignore[arg-type]
-        result = sim.run()
+    result = stand_on_the_estimate(ramp_scenario, controller, tmp_path)
     truth, ref = result.log["base_pos"], result.log["ref"]
     assert len(truth) == 400
     # From the second step on the offset is known: the reference position is the believed one.
@@ -138,3 +143,38 @@ def test_without_an_estimator_nothing_is_shifted(ramp_scenario: Scenario, fmu_co
         grid = ramp_scenario.terrain.local_grid(x, y, fmu_contract.height_map_size)
         assert grid is not None
         assert origin_x == grid[0]
+
+
+class DriftingEstimateStandIn(OffsetEstimateStandIn):
+    """As `OffsetEstimateStandIn`, but its estimate drifts along x by `DRIFT_PER_STEP` each doStep."""
+
+    DRIFT_PER_STEP = 0.25e-3
+
+    def do_step(self, time: float, step: float) -> None:
+        super().do_step(time, step)
+        est = self.estimation
+        assert est is not None
+        est.est_pos[0] += self.DRIFT_PER_STEP * len(self.seen)
+
+
+def test_the_map_follows_a_drifting_estimate_within_the_registration_tolerance(ramp_scenario: Scenario, fmu_contract: fr.FmuContract, tmp_path: Path) -> None:
+    controller = DriftingEstimateStandIn(fmu_contract)
+    result = stand_on_the_estimate(ramp_scenario, controller, tmp_path)
+    assert result.stop_reason.startswith("completed")
+    seen = np.array(controller.seen[2:])
+    terrain = ramp_scenario.terrain
+    deviations = []
+    for step, (_, x, y, _, _, origin_x, origin_y, first_height) in enumerate(seen, start=2):
+        grid = terrain.local_grid(x, y, fmu_contract.height_map_size)
+        assert grid is not None
+        # The offset the loop last knew: that of the estimate after the previous doStep.
+        believed_dx = OFFSET[0] + DriftingEstimateStandIn.DRIFT_PER_STEP * step
+        deviations.append(abs(origin_x - (grid[0] + believed_dx)))
+        assert origin_y == pytest.approx(grid[1] + OFFSET[1], abs=1e-12)
+        assert first_height == pytest.approx(grid[2][0, 0] + OFFSET[2], abs=1e-12)
+    # Never further from the estimate than the tolerance, and moved with it in steps of about the
+    # tolerance (0.1 m of drift over the run), not re-registered at every step.
+    assert max(deviations) <= MAP_REGISTRATION_TOLERANCE + 1e-9
+    moves = np.count_nonzero(np.diff(seen[:, 5]))
+    drift = DriftingEstimateStandIn.DRIFT_PER_STEP * len(seen)
+    assert 0.8 * drift / MAP_REGISTRATION_TOLERANCE <= moves <= 1.2 * drift / MAP_REGISTRATION_TOLERANCE

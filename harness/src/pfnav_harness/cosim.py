@@ -61,6 +61,12 @@ REFERENCE_COLUMNS = {
 }
 # Physics steps whose trajectory reference is sampled at once (a replan resamples from its step on).
 REFERENCE_BLOCK = 500
+# How far (m, per axis) the belief offset may move before the height map is registered at it
+# again. A perception stack's map moves with the robot's estimate at its own update rate, not at
+# 1 kHz; re-sending it on every sub-millimetre move of the estimate cost about a seventh of an
+# estimator run's step (the FMU takes in a changed map, the master rebuilds it), for height and
+# position changes below what the controller's footholds resolve.
+MAP_REGISTRATION_TOLERANCE = 0.001
 # Logged state blocks: log key ← FMU state inputs.
 STATE_LOG = {
     "base_pos": fr.BASE_POS,
@@ -226,6 +232,7 @@ class ForkPoint:
     log_flags: NDArray[np.int8]
     estimator: EstimatorLogState | None
     belief_offset: NDArray[np.float64]
+    map_offset: NDArray[np.float64]
     timing: Timing
 
 
@@ -244,6 +251,8 @@ class _Loop:
     timing: Timing
     # Estimate − truth at the last communication point (dx, dy, dz, dyaw); zeros without an estimator.
     belief_offset: NDArray[np.float64] = field(default_factory=lambda: np.zeros(4))
+    # The offset (dx, dy, dz) the height map inputs were last registered at (`MAP_REGISTRATION_TOLERANCE`).
+    map_offset: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     # The next step to simulate; after a stop, the number of logged rows.
     k: int = 0
     mode: int = 0
@@ -376,6 +385,7 @@ class CoSimulation:
             log_flags=loop.log_flags[:end].copy(),
             estimator=None if est is None else est.save(end),
             belief_offset=loop.belief_offset.copy(),
+            map_offset=loop.map_offset.copy(),
             timing=dataclasses.replace(loop.timing),
         )
 
@@ -410,6 +420,7 @@ class CoSimulation:
         if loop.estimator is not None and fork.estimator is not None:
             loop.estimator.restore(fork.estimator)
         loop.belief_offset[:] = fork.belief_offset
+        loop.map_offset[:] = fork.map_offset
         loop.k = k
         loop.mode = fork.mode
         loop.timing = dataclasses.replace(fork.timing)
@@ -478,9 +489,12 @@ class CoSimulation:
         input_values = inputs.values
         terrain = self.scenario.terrain
         use_map = c.height_map
-        # The height map last written to the inputs: its block corner and the offset it was
-        # shifted by (bytes: a −0.0 offset shifts differently from 0.0); None: not written yet.
-        map_key: tuple[object, bytes] | None = None
+        # The block corner of the height map last written to the inputs (None: not written by
+        # this call yet, so the first communication point writes it) and the belief offset it was
+        # registered at (kept across calls and forks, so a continued run writes the same map).
+        map_corner: object = None
+        map_written = False
+        map_offset = loop.map_offset
         ref_row = np.zeros(N_COLUMNS)
         # The torques of the last doStep, a live view of the output buffer.
         torques = outputs.values[outputs.span(fr.TORQUE_OUTPUTS)]
@@ -593,18 +607,24 @@ class CoSimulation:
                 map_changed = False
                 if use_map:
                     corner = terrain.local_grid_corner(float(state[0]), float(state[1]), map_size)
-                    key = (corner, offset[0:3].tobytes() if offset_moves else b"")
-                    if key != map_key:
-                        map_key, map_changed = key, True
+                    if offset_moves and (
+                        abs(offset[0] - map_offset[0]) > MAP_REGISTRATION_TOLERANCE
+                        or abs(offset[1] - map_offset[1]) > MAP_REGISTRATION_TOLERANCE
+                        or abs(offset[2] - map_offset[2]) > MAP_REGISTRATION_TOLERANCE
+                    ):
+                        map_offset[:] = offset[0:3]
+                        map_written = False
+                    if not map_written or corner != map_corner:
+                        map_corner, map_written, map_changed = corner, True, True
                         grid = terrain.local_grid(float(state[0]), float(state[1]), map_size)
                         if grid is None:
                             input_values[map_spacing] = 0.0
                         else:
-                            map_origin[0], map_origin[1] = grid[0] + offset[0], grid[1] + offset[1]
+                            map_origin[0], map_origin[1] = grid[0] + map_offset[0], grid[1] + map_offset[1]
                             input_values[map_spacing] = terrain.resolution
-                            map_heights[:] = grid[2].ravel() + offset[2]
-                elif map_key is None:
-                    map_key, map_changed = (None, b""), True
+                            map_heights[:] = grid[2].ravel() + map_offset[2]
+                elif not map_written:
+                    map_written, map_changed = True, True
                     input_values[map_spacing] = 0.0
                 if estimator is not None:
                     estimator.write_inputs(t, state)
