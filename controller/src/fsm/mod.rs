@@ -125,20 +125,28 @@ fn tilt_from(estimate: &Estimate, normal: &Vector3<f64>) -> f64 {
 }
 
 impl FaultMonitor {
-    /// Tilt or joint-limit fault, with a reason for the log. The tilt is measured from the
-    /// ground's normal under the feet (`normal`, the MPC's friction normal), not from world
-    /// vertical: a body parallel to a 30° incline has not tilted, and measured from vertical it
-    /// would have only 0.9 − 0.52 rad left for transients (docs/slopes.md, 3e).
+    /// Tilt or joint-limit fault, with a reason for the log. The base has tilted over when it
+    /// is beyond `max_tilt` both from the ground's normal under the feet (`normal`, the MPC's
+    /// friction normal) and from world vertical. From the normal alone, a body parallel to a
+    /// 30° incline has not tilted, where from vertical it would have only 0.9 − 0.52 rad left
+    /// for transients (docs/slopes.md, 3e). From vertical too, because the normal is a plane
+    /// fitted under the feet and the body: a trunk pushed sideways towards a flank has it
+    /// tilted 20–30° the other way while the trunk itself is still within 30° of upright, and
+    /// damping it there made the fall (docs/push-recovery.md).
     fn check(
         &self,
         estimate: &Estimate,
         legs: &LegControl,
         normal: &Vector3<f64>,
     ) -> Option<String> {
-        let tilt = tilt_from(estimate, normal);
-        if tilt.is_nan() || tilt > self.max_tilt {
+        let from_normal = tilt_from(estimate, normal);
+        let from_vertical = tilt_from(estimate, &Vector3::z());
+        if from_normal.is_nan()
+            || from_vertical.is_nan()
+            || from_normal.min(from_vertical) > self.max_tilt
+        {
             return Some(format!(
-                "tilt check: base tilted {tilt:.3} rad from the ground's normal, more than max.tilt {:.3} rad",
+                "tilt check: base tilted {from_normal:.3} rad from the ground's normal and {from_vertical:.3} rad from vertical, more than max.tilt {:.3} rad",
                 self.max_tilt
             ));
         }
@@ -375,6 +383,28 @@ mod tests {
         // Rolled 1.0 rad on the plane: a fault.
         let over = within_limits(
             estimate_with(Rotation3::from_euler_angles(1.0, -slope, 0.0)),
+            &legs,
+        );
+        let fault = monitor.check(&over, &legs, &normal);
+        assert!(fault.is_some_and(|reason| reason.contains("tilt check")));
+    }
+
+    #[test]
+    fn a_trunk_upright_over_a_tilted_ground_plane_has_not_tilted_over() {
+        // Pushed towards a flank: the plane under the feet leans 30° one way, the trunk rolls
+        // 0.45 rad the other. 0.97 rad from the plane's normal, within max.tilt of vertical.
+        let slope = 30f64.to_radians();
+        let normal = Vector3::new(0.0, slope.tan(), 1.0).normalize();
+        let (monitor, legs) = (monitor(), legs());
+        let rolled = within_limits(
+            estimate_with(Rotation3::from_euler_angles(0.45, 0.0, 0.0)),
+            &legs,
+        );
+        assert!(tilt_from(&rolled, &normal) > monitor.max_tilt);
+        assert!(monitor.check(&rolled, &legs, &normal).is_none());
+        // Rolled on over 0.9 rad from vertical too: a fault.
+        let over = within_limits(
+            estimate_with(Rotation3::from_euler_angles(0.95, 0.0, 0.0)),
             &legs,
         );
         let fault = monitor.check(&over, &legs, &normal);
