@@ -7,7 +7,8 @@ MPC solver's own timer) and `replan_latency` (the planner's answer time).
 
 The cases cover what the fast path treats specially: a trajectory sampled in blocks (and resampled
 after online replans), the height map sent only when its block moves (or, in the estimated
-frame, when the estimate has moved its registration by more than the tolerance), pushes, the feedback law sampled every step, several communication steps.
+frame, when the estimate has moved its registration by more than the tolerance), pushes, the
+feedback law sampled every step, several communication steps.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ dynamics beyond the torque law, and the transport's own delay.
 from __future__ import annotations
 
 import argparse
-import contextlib
+import bisect
 import gc
 import json
 import math
@@ -119,8 +119,13 @@ class MotorModel:
         return t
 
 
-# The bins of SimTiming's command ages, in states (count_command_age sorts into them).
-COMMAND_AGE_BINS = ("0", "1", "2", "3-9", "10+")
+# The bins of SimTiming's command ages, in states: each starts at its age and runs to the next
+# bin's (the last has no end); their labels ("0", "3-9", "10+") are derived from these.
+COMMAND_AGE_BIN_STARTS = (0, 1, 2, 3, 10)
+COMMAND_AGE_BINS = tuple(
+    f"{start}+" if end is None else str(start) if end == start + 1 else f"{start}-{end - 1}"
+    for start, end in zip(COMMAND_AGE_BIN_STARTS, (*COMMAND_AGE_BIN_STARTS[1:], None), strict=True)
+)
 
 
 @dataclass
@@ -166,7 +171,7 @@ class SimTiming:
 
     def count_command_age(self, age: int) -> None:
         """One tick stepped with a command `age` states older than its own state (≥ 0)."""
-        self.command_age_ticks[age if age < 3 else 3 if age < 10 else 4] += 1
+        self.command_age_ticks[bisect.bisect_right(COMMAND_AGE_BIN_STARTS, age) - 1] += 1
         self.command_age_max = max(self.command_age_max, age)
 
     def summary(self) -> str:
@@ -450,16 +455,21 @@ class RealtimeSettings:
 RECEIVE_THREAD_PRIORITY = 1
 
 
+def set_fifo(priority: int, consequence: str) -> bool:
+    """SCHED_FIFO at `priority` for the calling thread (and the threads it starts); a refusal is said on stderr with `consequence`."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as err:
+        print(f"pfnav-sim: SCHED_FIFO {priority} refused ({err}): {consequence}", file=sys.stderr)
+        return False
+    return True
+
+
 def apply_realtime(priority: int) -> RealtimeSettings:
     """SCHED_FIFO at `priority` for this process and mlockall, as pfnav-robot does; either may be refused (then said on stderr)."""
     import ctypes
 
-    fifo = False
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        fifo = True
-    except (OSError, AttributeError) as err:
-        print(f"pfnav-sim: SCHED_FIFO refused ({err}): ordinary scheduling, more jitter", file=sys.stderr)
+    fifo = set_fifo(priority, "ordinary scheduling, more jitter")
     libc = ctypes.CDLL(None, use_errno=True)
     mcl_current, mcl_future = 1, 2
     locked = libc.mlockall(mcl_current | mcl_future) == 0
@@ -565,8 +575,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # under ordinary scheduling busy ordinary processes held the commands back (a tick once
         # waited 24 ms for one), at the loop's priority it preempted the loops for every packet
         # on the bus. The lowest SCHED_FIFO priority is above the one and below the other.
-        with contextlib.suppress(OSError, AttributeError):
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(RECEIVE_THREAD_PRIORITY))
+        set_fifo(RECEIVE_THREAD_PRIORITY, "liblcm's receive thread runs under ordinary scheduling")
     node = BodyNode(sim, lcm, Channels.with_prefix(args.channel_prefix), truth_every)
     realtime = apply_realtime(args.priority) if realtime_loop else RealtimeSettings(False, False)
     stop_requested = stop_requested_on_signals()

@@ -63,8 +63,8 @@ REFERENCE_COLUMNS = {
 REFERENCE_BLOCK = 500
 # How far (m, per axis) the belief offset may move before the height map is registered at it
 # again. A perception stack's map moves with the robot's estimate at its own update rate, not at
-# 1 kHz; re-sending it on every sub-millimetre move of the estimate cost about a seventh of an
-# estimator run's step (the FMU takes in a changed map, the master rebuilds it), for height and
+# 1 kHz; re-sending it on every sub-millimetre move of the estimate cost 4–13 % of an estimator
+# run's wall time (the FMU takes in a changed map, the master rebuilds it), for height and
 # position changes below what the controller's footholds resolve.
 MAP_REGISTRATION_TOLERANCE = 0.001
 # Logged state blocks: log key ← FMU state inputs.
