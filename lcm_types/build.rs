@@ -82,11 +82,18 @@ fn generate_channels(path: &Path, out: &Path) -> Result<(), String> {
             .map(str::to_owned)
             .ok_or_else(|| format!("`{key}` must be a string"))
     };
+    let receive_thread_priority = table
+        .get("receive_thread_priority")
+        .and_then(toml::Value::as_integer)
+        .filter(|priority| (1..=99).contains(priority))
+        .ok_or("`receive_thread_priority` must be a SCHED_FIFO priority, 1..=99")?;
     let mut code = format!(
         "/// The bus used when neither a flag nor `$LCM_DEFAULT_URL` names one.\n\
          pub const DEFAULT_URL: &str = {:?};\n\
          /// Prefix of every planner channel (`pf-planner-service --channel-prefix` changes it).\n\
-         pub const DEFAULT_PREFIX: &str = {:?};\n",
+         pub const DEFAULT_PREFIX: &str = {:?};\n\
+         /// SCHED_FIFO priority of liblcm's receive thread in the real-time processes.\n\
+         pub const RECEIVE_THREAD_PRIORITY: i32 = {receive_thread_priority};\n",
         string("default_url")?,
         string("default_prefix")?
     );

@@ -58,6 +58,14 @@ CONTRACTS = [
         ),
         example='self.lc.subscribe(self.prefix + "PLAN_REPLY", self._on_reply)',
     ),
+    # pfnav-robot (Rust, lcm_types::channels) and pfnav-sim (Python, lcm_channels) read it.
+    Contract(
+        "the SCHED_FIFO priority of liblcm's receive thread",
+        declared_in=("lcm_types/channels.toml",),
+        copies=(r"RECEIVE_THREAD_PRIORITY\s*(:\s*\w+\s*)?=\s*\d",),
+        example="RECEIVE_THREAD_PRIORITY = 1",
+        suffixes=(".rs", ".py"),
+    ),
     # The planner writes sidecars with `pf_planner::io::save_scenario` (one serde struct); Python
     # code, tests included, goes through `write_map`.
     Contract(

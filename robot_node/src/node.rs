@@ -24,9 +24,9 @@ use crate::stats::LoopTiming;
 /// PeriodicTask criterion).
 pub const MISS_FACTOR: f64 = 1.3;
 
-/// SCHED_FIFO priority of liblcm's receive thread (see `run`): the lowest, so it waits for no
-/// ordinary process and preempts no control loop.
-pub const RECEIVE_THREAD_PRIORITY: i32 = 1;
+/// SCHED_FIFO priority of liblcm's receive thread (see `run`), declared with the bus in
+/// `lcm_types/channels.toml`.
+pub use lcm_types::channels::RECEIVE_THREAD_PRIORITY;
 
 /// The default deadline margin, a fraction of the period: room for the states' delivery
 /// jitter before the cycle that uses them.

@@ -48,6 +48,13 @@ pub const CONTACT_OFF_PROBABILITY: f64 = 0.35;
 /// does not see. ANYmal C's knees pinned at 7.5 rad/s mid-swing read as 400 N on a foot in the
 /// air, twice its stance load; the schedule decides while it lasts.
 pub const VELOCITY_LIMIT_SHARE: f64 = 0.97;
+/// Distance from a joint's position limit within which the leg counts as against its stop, rad.
+/// The stop's reaction is a torque the leg model does not see, so the leg's effort there says
+/// nothing new: the force measured before the stop holds. A hind leg of ours, in the air and
+/// stretched to its knee stop while reaching for ground a push had moved away, read as a
+/// 30–45 N stance load and alone carried the velocity estimate off by 2.6 m/s (headline sweep
+/// run 23); a loaded leg folded to a stop under a sagging trunk still stands.
+pub const POSITION_LIMIT_BAND: f64 = 0.02;
 
 /// What the force-based detector concluded for one leg.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -57,7 +64,8 @@ pub struct LegContact {
     /// Hysteresis decision.
     pub in_contact: bool,
     /// Estimated vertical ground reaction force on the foot, world frame, N (`None` before the
-    /// detector has two ticks of torques and rates, or at a singular leg pose).
+    /// detector has two ticks of torques and rates, at a singular leg pose or at a velocity
+    /// limit). Against a position stop, the force measured before it.
     pub normal_force: Option<f64>,
 }
 
@@ -77,6 +85,10 @@ pub struct ContactDetector {
     /// Joint rate from which a leg's effort is no evidence, rad/s: [`VELOCITY_LIMIT_SHARE`] of
     /// each joint's velocity limit.
     rate_limits: [f64; NUM_JOINTS],
+    /// Each joint's (lower, upper) position limit, rad.
+    position_limits: [(f64, f64); NUM_JOINTS],
+    /// Each leg's force measured last away from its position stops (held against one).
+    force_before_stop: [Option<f64>; NUM_LEGS],
 }
 
 /// The readings the detector needs on one tick.
@@ -108,6 +120,10 @@ impl ContactDetector {
             rate_limits: model
                 .velocity_limits()
                 .map(|limit| VELOCITY_LIMIT_SHARE * limit),
+            position_limits: std::array::from_fn(|j| {
+                (model.lower_limits()[j], model.upper_limits()[j])
+            }),
+            force_before_stop: [None; NUM_LEGS],
         }
     }
 
@@ -143,16 +159,29 @@ impl ContactDetector {
         let at_velocity_limit: [bool; NUM_LEGS] = std::array::from_fn(|l| {
             (3 * l..3 * l + 3).any(|j| inputs.joint_rates[j].abs() >= self.rate_limits[j])
         });
+        let at_position_limit: [bool; NUM_LEGS] = std::array::from_fn(|l| {
+            (3 * l..3 * l + 3).any(|j| {
+                let (lower, upper) = self.position_limits[j];
+                let q = inputs.joint_positions[j];
+                q <= lower + POSITION_LIMIT_BAND || q >= upper - POSITION_LIMIT_BAND
+            })
+        });
         let spread = CONTACT_FORCE_SPREAD_FRACTION * self.weight;
         let neutral = CONTACT_FORCE_FRACTION * self.weight;
         std::array::from_fn(|l| {
             let leg = Leg::ALL[l];
             let prior = PHASE_PRIOR_FLOOR
                 + (1.0 - 2.0 * PHASE_PRIOR_FLOOR) * inputs.schedule_trust[l].clamp(0.0, 1.0);
-            let normal_force = if measurable && !at_velocity_limit[l] {
-                self.normal_force(leg, inputs)
+            let normal_force = if at_position_limit[l] {
+                self.force_before_stop[l]
             } else {
-                None
+                let measured = if measurable && !at_velocity_limit[l] {
+                    self.normal_force(leg, inputs)
+                } else {
+                    None
+                };
+                self.force_before_stop[l] = measured;
+                measured
             };
             let probability = match normal_force {
                 Some(force) => {

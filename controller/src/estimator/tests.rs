@@ -730,6 +730,22 @@ fn torques_for(
     torques
 }
 
+/// The torques of a level trunk at rest whose joints keep the rates of `state` (no joint
+/// acceleration) with `foot_forces_body` on the feet.
+fn steady_effort(
+    model: &RobotModel,
+    state: &RobotState,
+    foot_forces_body: &[Vector3<f64>; NUM_LEGS],
+) -> [f64; NUM_JOINTS] {
+    torques_for(
+        model,
+        state,
+        &state.joint_velocities,
+        Vector3::new(0.0, 0.0, -GRAVITY),
+        foot_forces_body,
+    )
+}
+
 /// A robot standing still, leg 0 waved in the air, every leg planned `plan`, the others carrying
 /// the weight, and the leg effort those motions imply recorded every tick when `with_effort`.
 /// Returns the estimator after 1.5 s and the worst position/velocity error after the first 10
@@ -816,13 +832,10 @@ fn loaded_with_leg_0_planned_in_swing(
     let weight = model.total_mass() * GRAVITY;
     let (mut state, imu) = Truth::standing(model).measure(model);
     state.joint_velocities[2] = knee_rate;
-    let forces = [Vector3::new(0.0, 0.0, weight / 4.0); NUM_LEGS];
-    let torques = torques_for(
+    let torques = steady_effort(
         model,
         &state,
-        &state.joint_velocities,
-        Vector3::new(0.0, 0.0, -GRAVITY),
-        &forces,
+        &[Vector3::new(0.0, 0.0, weight / 4.0); NUM_LEGS],
     );
     let mut plan = ALL_STANCE;
     plan[0] = None;
@@ -875,6 +888,76 @@ fn a_leg_at_its_velocity_limit_gives_no_force_evidence() {
     );
     for contact in &estimator.detected_contacts()[1..] {
         assert!(contact.in_contact, "{contact:?}");
+    }
+}
+
+/// Leg 0's readings with its knee `from_stop` rad inside its upper position limit, its hip
+/// turning at `hip_rate`, and the leg effort of `load` N on its foot (the robot standing still).
+fn leg_0_near_its_knee_stop(
+    model: &RobotModel,
+    from_stop: f64,
+    hip_rate: f64,
+    load: f64,
+) -> (RobotState, ImuReading, [f64; NUM_JOINTS]) {
+    let (mut state, imu) = Truth::standing(model).measure(model);
+    state.joint_positions[2] = model.upper_limits()[2] - from_stop;
+    state.joint_velocities[1] = hip_rate;
+    let mut forces = [Vector3::zeros(); NUM_LEGS];
+    forces[0] = Vector3::new(0.0, 0.0, load);
+    let torques = steady_effort(model, &state, &forces);
+    (state, imu, torques)
+}
+
+/// The trunk velocity estimated for a robot standing still whose leg 0, planned mid-stance,
+/// first hangs unloaded 0.1 rad from its knee stop for 100 ticks and then, for 300 ticks, has
+/// its knee `from_stop` rad inside the stop, its hip turning at 5 rad/s and the effort of a
+/// quarter of the weight on its foot; the other legs are planned in swing and carry nothing
+/// (a robot pushed off its feet, one leg reaching down).
+fn reaching_leg_velocity_error(from_stop: f64) -> f64 {
+    let model = model();
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    let weight = model.total_mass() * GRAVITY;
+    let plan = [Some(0.5), None, None, None];
+    let hanging = leg_0_near_its_knee_stop(&model, 0.1, 0.0, 0.0);
+    let reaching = leg_0_near_its_knee_stop(&model, from_stop, 5.0, weight / 4.0);
+    let mut velocity = f64::NAN;
+    for k in 0..400 {
+        let (state, imu, torques) = if k < 100 { &hanging } else { &reaching };
+        velocity = estimator
+            .update(&model, state, &sensors(*imu), &plan, DT)
+            .velocity
+            .norm();
+        estimator.record_applied_torques(torques);
+    }
+    velocity
+}
+
+#[test]
+fn a_leg_against_its_stop_keeps_the_contact_it_had() {
+    // At the stop the stop's reaction reads as a load on a foot in the air; the force from before
+    // the stop holds, so the leg stays out of contact and the trunk, standing still, is
+    // estimated still although that leg's kinematics say it moves at about 1.9 m/s.
+    let at_stop = reaching_leg_velocity_error(0.005);
+    assert!(at_stop < 0.05, "velocity error {at_stop} m/s at the stop");
+    // Away from the stop the same load is a contact, the leg is the only trusted foot and the
+    // slip gate keeps it: the estimate follows its kinematics.
+    let away = reaching_leg_velocity_error(0.1);
+    assert!(away > 0.5, "velocity error {away} m/s away from the stop");
+    // A loaded leg that reaches its stop stays in contact.
+    let model = model();
+    let weight = model.total_mass() * GRAVITY;
+    let mut estimator = StateEstimator::new(&model, &kalman_config());
+    for from_stop in [0.1, 0.005] {
+        let (state, imu, torques) = leg_0_near_its_knee_stop(&model, from_stop, 0.0, weight / 4.0);
+        for _ in 0..100 {
+            estimator.update(&model, &state, &sensors(imu), &ALL_STANCE, DT);
+            estimator.record_applied_torques(&torques);
+        }
+        let contact = estimator.detected_contacts()[0];
+        assert!(
+            contact.in_contact,
+            "{from_stop} rad from the stop: {contact:?}"
+        );
     }
 }
 

@@ -53,7 +53,7 @@ from numpy.typing import NDArray
 from .body_sensors import BodySensorConfig, BodySensors
 from .engine import DEFAULT_ENGINE, ENGINE_NAMES, PhysicsEngine, make_engine
 from .errors import HarnessError
-from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, ROBOT, SIM_ROBOT_STATE_NAME
+from .lcm_channels import DEFAULT_CHANNEL_PREFIX, DEFAULT_LCM_URL, RECEIVE_THREAD_PRIORITY, ROBOT, SIM_ROBOT_STATE_NAME
 from .process_signals import stop_requested_on_signals
 
 FloatArray = NDArray[np.float64]
@@ -449,10 +449,6 @@ class BodyNode:
 class RealtimeSettings:
     fifo_priority: bool
     memory_locked: bool
-
-
-# SCHED_FIFO priority of liblcm's receive thread (pfnav-robot's RECEIVE_THREAD_PRIORITY).
-RECEIVE_THREAD_PRIORITY = 1
 
 
 def set_fifo(priority: int, consequence: str) -> bool:

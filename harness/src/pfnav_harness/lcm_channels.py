@@ -50,6 +50,10 @@ class RobotChannels:
 
 DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
 DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
+_RECEIVE_THREAD_PRIORITY = _CONTRACT["receive_thread_priority"]
+assert isinstance(_RECEIVE_THREAD_PRIORITY, int)
+# SCHED_FIFO priority of liblcm's receive thread in the real-time processes (pfnav-robot, pfnav-sim).
+RECEIVE_THREAD_PRIORITY: int = _RECEIVE_THREAD_PRIORITY
 PLANNER = PlannerChannels()
 ROBOT = RobotChannels()
 # Without the prefix: pfnav-sim publishes the true state under its own --channel-prefix.
