@@ -50,10 +50,17 @@ class RobotChannels:
 
 DEFAULT_LCM_URL = str(_CONTRACT["default_url"])
 DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
-_RECEIVE_THREAD_PRIORITY = _CONTRACT["receive_thread_priority"]
-assert isinstance(_RECEIVE_THREAD_PRIORITY, int)
+
+
+def _receive_thread_priority() -> int:
+    value = _CONTRACT["receive_thread_priority"]
+    if not isinstance(value, int) or not 1 <= value <= 99:
+        raise ValueError(f"{CHANNELS_FILE}: receive_thread_priority must be a SCHED_FIFO priority, 1..=99")
+    return value
+
+
 # SCHED_FIFO priority of liblcm's receive thread in the real-time processes (pfnav-robot, pfnav-sim).
-RECEIVE_THREAD_PRIORITY: int = _RECEIVE_THREAD_PRIORITY
+RECEIVE_THREAD_PRIORITY = _receive_thread_priority()
 PLANNER = PlannerChannels()
 ROBOT = RobotChannels()
 # Without the prefix: pfnav-sim publishes the true state under its own --channel-prefix.
