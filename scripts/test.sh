@@ -42,7 +42,9 @@ nice -n 15 cargo clippy --release --workspace --all-targets --quiet -- -D warnin
 log "building Rust tests"
 nice -n 15 cargo test --release --workspace --no-run --quiet
 log "cargo test (private network namespace)"
-nice -n 15 bash scripts/netns.sh cargo test --release --workspace --offline --quiet
+# pfnav-robot's tests time a 1 kHz loop against a body on its own clock: they run alone, after
+# pytest, not starved beside it.
+nice -n 15 bash scripts/netns.sh cargo test --release --workspace --exclude pfnav-robot --offline --quiet
 
 log "waiting for pytest"
 set +e
@@ -56,4 +58,6 @@ if ((rc != 0 && rc != 5)); then
     log "pytest failed (exit $rc)"
     exit "$rc"
 fi
+log "cargo test -p pfnav-robot (real-time loop tests, alone on the machine)"
+bash scripts/netns.sh cargo test --release -p pfnav-robot --offline --quiet
 log "all tests passed in $((SECONDS - start)) s"

@@ -110,7 +110,8 @@ fn paced_run_of(prefix: &str, trigger: LoopTrigger, body: Body) -> (RunReport, V
     let first_ok = rig.wait_status("torque control", -1, Duration::from_secs(10), |s| {
         s.safety == RobotStatus::SAFETY_OK
     });
-    std::thread::sleep(Duration::from_secs(2));
+    // About 2 s at the body's 1 kHz; longer when the suite beside starves the body's clock.
+    rig.wait_answered_commands(2_000, Duration::from_secs(30));
     rig.wait_status(
         "a later status",
         first_ok.header.seq,

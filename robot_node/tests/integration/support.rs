@@ -363,6 +363,30 @@ impl Rig {
         }
     }
 
+    /// Waits (up to `timeout`) until `count` torque commands answering a state have come in;
+    /// panics with the number that did. A body starved by a loaded machine takes longer, not
+    /// fewer commands.
+    pub fn wait_answered_commands(&self, count: usize, timeout: Duration) {
+        let start = Instant::now();
+        loop {
+            let answered = self
+                .commands
+                .lock()
+                .unwrap()
+                .iter()
+                .filter(|c| !c.damping && c.state_seq >= 0)
+                .count();
+            if answered >= count {
+                return;
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "{answered} of {count} torque commands within {timeout:?}"
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
     /// Stops the node and returns its report.
     pub fn stop(mut self) -> RunReport {
         self.shutdown.store(true, Ordering::Relaxed);
