@@ -110,6 +110,7 @@ pub struct ContactInputs<'a> {
 impl ContactDetector {
     /// A detector for `model`, starting with every foot on the ground.
     pub fn new(model: &RobotModel) -> Self {
+        let (lower, upper) = (model.lower_limits(), model.upper_limits());
         ContactDetector {
             applied_torques: None,
             previous_rates: None,
@@ -120,9 +121,7 @@ impl ContactDetector {
             rate_limits: model
                 .velocity_limits()
                 .map(|limit| VELOCITY_LIMIT_SHARE * limit),
-            position_limits: std::array::from_fn(|j| {
-                (model.lower_limits()[j], model.upper_limits()[j])
-            }),
+            position_limits: std::array::from_fn(|j| (lower[j], upper[j])),
             force_before_stop: [None; NUM_LEGS],
         }
     }

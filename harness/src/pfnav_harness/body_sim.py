@@ -122,9 +122,16 @@ class MotorModel:
 # The bins of SimTiming's command ages, in states: each starts at its age and runs to the next
 # bin's (the last has no end); their labels ("0", "3-9", "10+") are derived from these.
 COMMAND_AGE_BIN_STARTS = (0, 1, 2, 3, 10)
+
+
+def _age_bin_label(start: int, end: int | None) -> str:
+    if end is None:
+        return f"{start}+"
+    return str(start) if end == start + 1 else f"{start}-{end - 1}"
+
+
 COMMAND_AGE_BINS = tuple(
-    f"{start}+" if end is None else str(start) if end == start + 1 else f"{start}-{end - 1}"
-    for start, end in zip(COMMAND_AGE_BIN_STARTS, (*COMMAND_AGE_BIN_STARTS[1:], None), strict=True)
+    _age_bin_label(start, end) for start, end in zip(COMMAND_AGE_BIN_STARTS, (*COMMAND_AGE_BIN_STARTS[1:], None), strict=True)
 )
 
 

@@ -124,7 +124,7 @@ fn paced_run_of(prefix: &str, trigger: LoopTrigger, body: Body) -> (RunReport, V
     let commands = commands.lock().unwrap();
     let answered: Vec<i64> = commands
         .iter()
-        .filter(|c| !c.damping && c.state_seq >= 0)
+        .filter(|c| c.answers_a_state())
         .map(|c| c.state_seq)
         .collect();
     assert!(answered.len() > 1_500, "{} torque commands", answered.len());

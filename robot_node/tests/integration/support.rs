@@ -64,6 +64,13 @@ pub struct Received {
     pub state_seq: i64,
 }
 
+impl Received {
+    /// A torque command (not damping) that answers a state.
+    pub fn answers_a_state(&self) -> bool {
+        !self.damping && self.state_seq >= 0
+    }
+}
+
 pub struct Rig {
     pub lcm: Arc<Lcm>,
     pub channels: RobotChannels,
@@ -374,7 +381,7 @@ impl Rig {
                 .lock()
                 .unwrap()
                 .iter()
-                .filter(|c| !c.damping && c.state_seq >= 0)
+                .filter(|c| c.answers_a_state())
                 .count();
             if answered >= count {
                 return;
