@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -14,6 +15,7 @@ import numpy as np
 import pyarrow as pa
 
 from ..engine import DEFAULT_ENGINE
+from .push_ground import DISTANCE_EDGES, GROUND_CHANGE, SEARCH_RANGE, SEARCH_STEP, distance_rates, ground_by_impulse_lines, push_ground_distances
 from .stats import (
     FACTOR_COLUMNS,
     IMPULSE_EDGES,
@@ -122,6 +124,54 @@ def _impulse_line(table: pa.Table) -> str:
     return f"Runs pushed with at most {NO_FALL_IMPULSE:g} N·s (no push included): {small.falls} fell of {small.runs}."
 
 
+def plot_ground_by_impulse(distances: np.ndarray, table: pa.Table, path: Path) -> None:
+    """Fall rate against the push impulse, one line per class of ground along the push."""
+    impulses, outcomes = push_impulses(table), row_outcomes(table)
+    near = DISTANCE_EDGES[1]
+    classes = {
+        f"ground change within {near:g} m": distances <= near,
+        f"within {near:g}–{SEARCH_RANGE:g} m": (distances > near) & (distances <= SEARCH_RANGE),
+        f"none within {SEARCH_RANGE:g} m": distances > SEARCH_RANGE,
+    }
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for i, (label, chosen) in enumerate(classes.items()):
+        if chosen.any():
+            # Side by side within each impulse bin, so that the intervals and counts stay readable.
+            rates = binned_fall_rates(impulses[chosen], outcomes[chosen], IMPULSE_EDGES, "N·s")
+            draw_fall_rates(ax, [dataclasses.replace(r, x=r.x + 1.2 * (i - 1)) for r in rates], label)
+    ax.set_xlabel("push impulse (N·s)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _push_ground_section(table: pa.Table, store: SweepStore, out_dir: Path) -> tuple[list[str], list[str]]:
+    """Fall rates by the ground the push drives the robot towards, and its plot (nothing when the
+    store keeps no courses)."""
+    distances = push_ground_distances(table, store)
+    if np.isnan(distances).all():
+        return [], []
+    rates = distance_rates(distances, table)
+    plot_ground_by_impulse(distances, table, out_dir / "fall_rate_push_ground.png")
+    lines = [
+        "### ground along the push (m)",
+        "",
+        f"Distance along the push, from the plan's pose at its start, to the first ground more than {GROUND_CHANGE:g} m "
+        f"higher or lower (a valley side, a wall, a pit; searched to {SEARCH_RANGE:g} m in {SEARCH_STEP:g} m steps, "
+        f"'> {SEARCH_RANGE:g} m': none within it). Runs without a push are left out.",
+        "",
+        RATE_HEADER,
+        *(_rate_row(r) for r in rates),
+        "",
+        "Falls/trials by that distance and the push's impulse:",
+        "",
+        *ground_by_impulse_lines(distances, table),
+        "",
+    ]
+    return lines, ["![fall rate against the push impulse by the ground along the push](fall_rate_push_ground.png)"]
+
+
 def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
     """Writes REPORT.md and its PNG plots into `out_dir` (default: the store folder); returns the markdown path."""
     out_dir = out_dir or store.folder
@@ -164,6 +214,9 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
     by_velocity = velocity_change_rates(table)
     if len(by_velocity) > 1:
         lines += ["### push impulse over the robot's mass (m/s)", "", RATE_HEADER, *(_rate_row(r) for r in by_velocity), ""]
+    ground_lines, ground_plots = _push_ground_section(table, store, out_dir)
+    lines += ground_lines
+    plots += ground_plots
     for column in FACTOR_COLUMNS:
         rates = factor_breakdown(table, column)
         if not rates:
