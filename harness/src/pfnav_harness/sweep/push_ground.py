@@ -1,8 +1,8 @@
 """The ground each run's push drives the robot towards: the distance along the push, from where the
 plan had the robot when it began, to the first place the terrain is `GROUND_CHANGE` higher or
-lower (a valley side, a wall, a pit). A trunk pushed sideways at 1.5-2.5 m/s travels 0.5-1.5 m
-before a trot can stop it, so how near that ground lies separates the falls more than any drawn
-factor (docs/push-recovery.md). It is a property of the draw (course, push time and direction),
+lower (a valley side, a wall, a pit). A trunk pushed sideways at 1.3-2.6 m/s travels 0.35-1.4 m
+while the controller brakes it at 2.5 m/s², so how near that ground lies separates the falls more
+than any drawn factor (docs/push-recovery.md). It is a property of the draw (course, push time and direction),
 the same for every controller and estimator that walks it.
 """
 
@@ -19,7 +19,7 @@ from ..scenario import Scenario, Terrain, load_scenario
 from .stats import IMPULSE_EDGES, FallRate, binned_fall_rates, float_column, push_impulses, row_outcomes
 from .store import SweepStore
 
-# Height change that counts as other ground, m: half a leg's length, more than a swing clears.
+# Height change that counts as other ground, m: about half a leg's length, no step of a trot's stride.
 GROUND_CHANGE = 0.15
 # How far along the push the ground is searched, and the step, m (the maps' cells are 0.125 m).
 SEARCH_RANGE = 2.0
