@@ -78,6 +78,7 @@ def test_report_section_needs_the_stores_courses(tmp_path: Path) -> None:
     text = write_report(store).read_text()
     assert "### ground along the push (m)" in text
     assert "| (0.5, 1] m | 1 | 1 | 100.0 %" in text
+    assert (store.folder / "fall_rate_push_ground.png").stat().st_size > 5000
     # Without the stored scenario the section is left out, the report still written.
     for path in (store.folder / "scenarios").rglob("*.json"):
         path.unlink()
