@@ -92,6 +92,13 @@ def test_pictures_and_the_title_leave_the_report() -> None:
     assert without_pictures(report) == "intro\n\n| t |\n|---|\n\nsee ![inline](x.png) here\n"
 
 
+def test_headings_left_empty_by_the_pictures_go_too() -> None:
+    report = "# r\n\n## A\n\n### a1\n\ntext\n\n## Plots\n\n![p](p.png)\n\n## B\n\n### b1\n\n![q](q.png)\n\n## C\n\n![r](r.png)\n"
+    # "## A" keeps its subsection; "Plots", "b1" (and with it "B") and "C" are left empty.
+    assert without_pictures(report) == "## A\n\n### a1\n\ntext\n"
+    assert without_pictures("# r\n\n## Plots\n\n![p](p.png)\n\nWall time 3 s.\n") == "## Plots\n\nWall time 3 s.\n"
+
+
 def test_a_regenerated_results_page_does_not_make_the_tree_dirty(tmp_path: Path) -> None:
     """With the real git: a page written by an earlier command does not change what the next one measures."""
     import subprocess

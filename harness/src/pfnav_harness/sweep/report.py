@@ -119,6 +119,13 @@ def _fork_note(table: pa.Table) -> str:
     )
 
 
+def _wall_time_line(table: pa.Table) -> str:
+    wall = np.asarray(table["wall_time"].to_pylist(), dtype=np.float64)
+    if not len(wall):
+        return "No runs stored."
+    return f"Wall time per run: median {np.median(wall):.1f} s, total {wall.sum() / 60:.1f} worker-minutes."
+
+
 def _impulse_line(table: pa.Table) -> str:
     small = falls_up_to(table)
     return f"Runs pushed with at most {NO_FALL_IMPULSE:g} N·s (no push included): {small.falls} fell of {small.runs}."
@@ -194,6 +201,8 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         "Outcomes: " + ", ".join(f"{name} {count}" for name, count in counts.items()) + ".",
         "A run is a trial unless it ended in an error; 'timeout' = neither fell nor reached the goal within the duration.",
         "",
+        _wall_time_line(table),
+        "",
         f"**Fall rate {_percent(overall.rate)}** ({overall.falls} of {overall.runs}), 95 % Wilson interval {_percent(overall.low)} – {_percent(overall.high)}.",
         "",
         _impulse_line(table),
@@ -236,9 +245,6 @@ def write_report(store: SweepStore, out_dir: Path | None = None) -> Path:
         if len(failures) > 20:
             lines.append(f"- … and {len(failures) - 20} more")
         lines.append("")
-    wall = np.asarray(table["wall_time"].to_pylist(), dtype=np.float64)
-    if len(wall):
-        lines += [f"Wall time per run: median {np.median(wall):.1f} s, total {wall.sum() / 60:.1f} worker-minutes.", ""]
     path = out_dir / "REPORT.md"
     path.write_text("\n".join(lines))
     return path
