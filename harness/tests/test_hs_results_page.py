@@ -97,6 +97,9 @@ def test_headings_left_empty_by_the_pictures_go_too() -> None:
     # "## A" keeps its subsection; "Plots", "b1" (and with it "B") and "C" are left empty.
     assert without_pictures(report) == "## A\n\n### a1\n\ntext\n"
     assert without_pictures("# r\n\n## Plots\n\n![p](p.png)\n\nWall time 3 s.\n") == "## Plots\n\nWall time 3 s.\n"
+    # A shell comment in a code block is no heading, and the block's blank lines stay.
+    code = "## Run\n\n```sh\n# build\n\n\ncargo build\n# done\n```\n"
+    assert without_pictures("# r\n\n" + code) == code
 
 
 def test_a_regenerated_results_page_does_not_make_the_tree_dirty(tmp_path: Path) -> None:

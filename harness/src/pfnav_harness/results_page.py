@@ -133,7 +133,13 @@ def without_pictures(markdown: str) -> str:
     if lines and lines[0].startswith("# "):
         lines = lines[1:]
     kept: list[str] = []
+    in_code = False
     for line in lines:
+        if line.lstrip().startswith("```"):
+            in_code = not in_code
+        elif in_code:
+            kept.append(line)
+            continue
         if IMAGE_LINE.match(line):
             continue
         if not line.strip():
