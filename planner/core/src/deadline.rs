@@ -79,6 +79,20 @@ impl Deadline {
     }
 }
 
+impl Deadline {
+    /// `error` from a phase that ran on what was left of this deadline (its own limit the time
+    /// remaining then), a time limit restated with this deadline's: the limit the request set.
+    pub fn restate(&self, error: PlanError) -> PlanError {
+        match error {
+            PlanError::TimeLimit { phase, .. } => PlanError::TimeLimit {
+                phase,
+                limit_s: self.limit_s,
+            },
+            other => other,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,5 +118,25 @@ mod tests {
         ));
         assert!(Deadline::NONE.check("x").is_ok());
         assert_eq!(Deadline::NONE.remaining_s(), f64::INFINITY);
+    }
+
+    /// A phase that ran on the time left over (here none of a 0.1 s request) reports the
+    /// request's limit; other errors pass unchanged.
+    #[test]
+    fn a_later_phase_reports_the_requests_limit() {
+        let request = Deadline::after(Instant::now(), 0.1);
+        let left_over = Deadline::after(Instant::now(), 0.0);
+        let error = request.restate(left_over.check("the LP solve").unwrap_err());
+        assert_eq!(
+            error.to_string(),
+            "time limit of 0.1 s reached during the LP solve"
+        );
+        let other = PlanError::Infeasible {
+            reason: "walled off".into(),
+        };
+        assert!(matches!(
+            request.restate(other),
+            PlanError::Infeasible { .. }
+        ));
     }
 }

@@ -241,7 +241,9 @@ impl PreparedMap<'_> {
                     },
                     ..PfOptions::default()
                 };
-                let solution = pf::solve(&pf_generators, self.grid, start, goal, &pf_options)?;
+                // The LP ran on the time left; a timeout there names the request's limit.
+                let solution = pf::solve(&pf_generators, self.grid, start, goal, &pf_options)
+                    .map_err(|error| deadline.restate(error))?;
                 if !solution.outcome.reached_goal() {
                     return Err(PlanError::TrajectoryFailed {
                         reason: format!("{:?}", solution.outcome),
