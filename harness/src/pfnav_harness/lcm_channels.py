@@ -54,7 +54,7 @@ DEFAULT_CHANNEL_PREFIX = str(_CONTRACT["default_prefix"])
 
 def _receive_thread_priority() -> int:
     value = _CONTRACT["receive_thread_priority"]
-    if not isinstance(value, int) or not 1 <= value <= 99:
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 99:
         raise ValueError(f"{CHANNELS_FILE}: receive_thread_priority must be a SCHED_FIFO priority, 1..=99")
     return value
 

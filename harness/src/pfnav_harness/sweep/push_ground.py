@@ -8,15 +8,15 @@ the same for every controller and estimator that walks it.
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 import pyarrow as pa
 
 from ..planner_client import Plan
+from ..pushes import horizontal_push
 from ..scenario import Scenario, Terrain, load_scenario
-from .stats import IMPULSE_EDGES, FallRate, binned_fall_rates, float_column, push_impulses, row_outcomes
+from .stats import IMPULSE_EDGES, FallRate, bin_bounds, binned_fall_rates, float_column, push_impulses, row_outcomes
 from .store import SweepStore
 
 # Height change that counts as other ground, m: about half a leg's length, no step of a trot's stride.
@@ -45,16 +45,17 @@ def ground_change_distance(terrain: Terrain, x: float, y: float, angle: float) -
     return math.inf
 
 
-def _courses(store: SweepStore, scenario: str, method: str) -> dict[int, tuple[Scenario, Plan]]:
-    """The stored courses of a store by terrain seed: its exported scenarios and their plans."""
-    courses: dict[int, tuple[Scenario, Plan]] = {}
+def _courses(store: SweepStore, scenario: str, method: str) -> dict[int, tuple[Scenario, Plan, np.ndarray]]:
+    """The stored courses of a store by terrain seed: its exported scenarios, their plans and the
+    plans' headings unwrapped (to interpolate across ±π)."""
+    courses: dict[int, tuple[Scenario, Plan, np.ndarray]] = {}
     for path in sorted((store.folder / "scenarios").glob(f"*/{scenario}.json")):
         course = load_scenario(path)
         if course.seed is None:
             continue
         plan = store.load_plan(scenario, course.seed, method)
         if plan is not None:
-            courses[int(course.seed)] = (course, plan)
+            courses[int(course.seed)] = (course, plan, np.unwrap(plan.yaw))
     return courses
 
 
@@ -74,10 +75,11 @@ def push_ground_distances(table: pa.Table, store: SweepStore) -> np.ndarray:
         course = courses.get(int(seed)) if seed is not None else None
         if course is None or not impulses[i] > 0.0 or not math.isfinite(start):
             continue
-        scenario, plan = course
-        x, y, yaw = (float(np.interp(start, plan.t, values)) for values in (plan.x, plan.y, np.unwrap(plan.yaw)))
-        angle = math.radians(direction) + (yaw if heading_relative else 0.0)
-        distances[i] = ground_change_distance(scenario.terrain, x, y, angle)
+        scenario, plan, headings = course
+        x, y, yaw = (float(np.interp(start, plan.t, values)) for values in (plan.x, plan.y, headings))
+        # The push as the run applied it, turned into the world frame at the plan's heading.
+        fx, fy, _ = horizontal_push(1.0, direction, start, 1.0, bool(heading_relative)).world_force(yaw)
+        distances[i] = ground_change_distance(scenario.terrain, x, y, math.atan2(fy, fx))
     return distances
 
 
@@ -92,8 +94,8 @@ def ground_by_impulse_lines(distances: np.ndarray, table: pa.Table) -> list[str]
     trial = ~np.isnan(distances) & (outcomes != "error")
     impulses = push_impulses(table)
     # The last impulse bin is open: pushes scaled by a robot's mass reach beyond its edge.
-    impulse_bins = [*itertools.pairwise(IMPULSE_EDGES[:-1]), (IMPULSE_EDGES[-2], math.inf)]
-    distance_bins = [*itertools.pairwise((0.0, *DISTANCE_EDGES)), (SEARCH_RANGE, math.inf)]
+    impulse_bins = bin_bounds(IMPULSE_EDGES[:-1])
+    distance_bins = bin_bounds((0.0, *DISTANCE_EDGES))
     columns = [f"({lo:g}, {hi:g}] N·s" if math.isfinite(hi) else f"> {lo:g} N·s" for lo, hi in impulse_bins]
     lines = [
         f"| ground more than {GROUND_CHANGE:g} m higher or lower at | " + " | ".join(columns) + " | all |",

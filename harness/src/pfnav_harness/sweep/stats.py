@@ -139,12 +139,16 @@ def velocity_changes(table: pa.Table) -> np.ndarray:
     return push_impulses(table) / float_column(table, "robot_mass")
 
 
+def bin_bounds(edges: tuple[float, ...] | np.ndarray) -> list[tuple[float, float]]:
+    """The (low, high] bins between consecutive `edges`, and an open last one above the last edge."""
+    return [*itertools.pairwise(edges), (edges[-1], math.inf)]
+
+
 def binned_fall_rates(values: np.ndarray, outcomes: np.ndarray, edges: tuple[float, ...] | np.ndarray, unit: str) -> list[FallRate]:
     """Fall rate per bin (low, high] of `values` (the first bin also takes `edges[0]`, the last one everything above)."""
     outcomes = np.asarray(outcomes, dtype=object)
     rates = []
-    bounds = [*itertools.pairwise(edges), (edges[-1], math.inf)]
-    for i, (low, high) in enumerate(bounds):
+    for i, (low, high) in enumerate(bin_bounds(edges)):
         inside = (values > low) & (values <= high) if i else (values >= low) & (values <= high)
         if math.isinf(high):
             if not inside.any():
