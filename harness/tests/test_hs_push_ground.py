@@ -49,7 +49,7 @@ def store_with_course(tmp_path: Path, outcomes: list[str], **factors: list[objec
     y = 0 towards −x at 1 m/s from x = 1.5 (heading π: its left is −y, the wall on its right)."""
     spec = parse_spec({"scenario": "flat", "duration": 1.0, "seed": 1, "runs": len(outcomes)})
     store = SweepStore.create(tmp_path / "store", spec)
-    write_map(walled_terrain(), store.folder / "scenarios" / "scenario_default", "flat", goal=GoalRegion((1.5, 0.0), 0.3), seed=5)
+    write_map(walled_terrain(), store.scenarios_dir / "scenario_default", "flat", goal=GoalRegion((1.5, 0.0), 0.3), seed=5)
     t = np.linspace(0.0, 3.0, 31)
     zero = 0.0 * t
     store.save_plan("flat", 5, Plan("pf", t, 1.5 - t, zero, zero, zero + math.pi, zero - 1.0, zero, zero))
@@ -80,7 +80,7 @@ def test_report_section_needs_the_stores_courses(tmp_path: Path) -> None:
     assert "| (0.5, 1] m | 1 | 1 | 100.0 %" in text
     assert (store.folder / "fall_rate_push_ground.png").stat().st_size > 5000
     # Without the stored scenario the section is left out, the report still written.
-    for path in (store.folder / "scenarios").rglob("*.json"):
+    for path in store.scenarios_dir.rglob("*.json"):
         path.unlink()
     assert "ground along the push" not in write_report(store).read_text()
     assert np.isnan(push_ground_distances(pa.Table.from_pylist(fake_rows("h", ["goal"])), store)).all()

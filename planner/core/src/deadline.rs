@@ -77,9 +77,7 @@ impl Deadline {
             Ok(())
         }
     }
-}
 
-impl Deadline {
     /// `error` from a phase that ran on what was left of this deadline (its own limit the time
     /// remaining then), a time limit restated with this deadline's: the limit the request set.
     pub fn restate(&self, error: PlanError) -> PlanError {

@@ -130,7 +130,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     robot, fmu = robot_and_fmu(_robot_config(spec), args.out / "cache")
     artifacts = Artifacts(fmu, robot, paths.pf_plan_path())
     # The exported scenarios live on while the workers run (a shared folder for remote workers).
-    work = args.out / "scenarios"
+    work = store.scenarios_dir
     courses = _courses(spec, store, args, work)
     if len(store.done_ids()) < spec.runs:
         with dask_client(args.workers, args.scheduler) as client:

@@ -49,7 +49,7 @@ def _courses(store: SweepStore, scenario: str, method: str) -> dict[int, tuple[S
     """The stored courses of a store by terrain seed: its exported scenarios, their plans and the
     plans' headings unwrapped (to interpolate across ±π)."""
     courses: dict[int, tuple[Scenario, Plan, np.ndarray]] = {}
-    for path in sorted((store.folder / "scenarios").glob(f"*/{scenario}.json")):
+    for path in sorted(store.scenarios_dir.glob(f"*/{scenario}.json")):
         course = load_scenario(path)
         if course.seed is None:
             continue

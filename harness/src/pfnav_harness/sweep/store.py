@@ -89,6 +89,9 @@ class SweepStore:
         self.folder = Path(folder)
         self.rows_dir = self.folder / "rows"
         self.plans_dir = self.folder / "plans"
+        # The courses the runs walked, exported by `pfnav-sweep run` (one folder per terrain seed);
+        # the report reads them back.
+        self.scenarios_dir = self.folder / "scenarios"
         self.spec_file = self.folder / "spec.json"
 
     @classmethod
