@@ -275,7 +275,27 @@ impl FootholdPlanner {
         start: &Vector3<f64>,
         end: &Vector3<f64>,
     ) -> f64 {
-        let nominal = self.swing_height;
+        self.apex_above(reference, start, end, self.swing_height)
+    }
+
+    /// Apex of a swing cut short by a push (`start` is where the foot is in the air): no bump of
+    /// its own, only what keeps the foot `SWING_TERRAIN_MARGIN` above the terrain.
+    pub fn landing_apex(
+        &self,
+        reference: &Reference,
+        start: &Vector3<f64>,
+        end: &Vector3<f64>,
+    ) -> f64 {
+        self.apex_above(reference, start, end, 0.0)
+    }
+
+    fn apex_above(
+        &self,
+        reference: &Reference,
+        start: &Vector3<f64>,
+        end: &Vector3<f64>,
+        nominal: f64,
+    ) -> f64 {
         if !self.height_map.is_present() {
             return nominal;
         }

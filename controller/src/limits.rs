@@ -29,6 +29,8 @@ pub const MU: RangeInclusive<f64> = 0.05..=2.0;
 /// `mu_slope_margin`.
 pub const MU_SLOPE_MARGIN: RangeInclusive<f64> = 0.0..=1.0;
 pub const RECOVERY_ACCELERATION: RangeInclusive<f64> = 0.1..=20.0;
+/// `recovery_touchdown_time`, s (0: off; a trot's swing lasts 0.15 s).
+pub const RECOVERY_TOUCHDOWN_TIME: RangeInclusive<f64> = 0.0..=0.2;
 /// `f_min`, N (also `f_min < f_max`).
 pub const F_MIN: RangeInclusive<f64> = 0.0..=1000.0;
 /// `f_max`, N (the robot weighs about 120 N).

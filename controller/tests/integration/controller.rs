@@ -228,6 +228,61 @@ fn locomoting_controller() -> (Controller, RobotState) {
     (ctrl, state)
 }
 
+/// Gait time at which the push below is measured: the trot's second cycle (a push in the first
+/// is not told from the walk's own start), FR and RL a third into their swing.
+const PUSHED_AT: f64 = 0.5;
+
+/// Contacts of the 240 ticks after a sideways push is measured at `PUSHED_AT` (FR and RL swing
+/// until 0.6 s; FL and RR stand until then and swing until 0.75 s), with the swings cut short
+/// `touchdown_time` after a push (0: on the gait's clock).
+fn contacts_after_a_push(touchdown_time: f64) -> Vec<[bool; 4]> {
+    let config = ControllerConfig {
+        recovery_touchdown_time: touchdown_time,
+        ..ControllerConfig::default()
+    };
+    let mut ctrl = Controller::new(common::model(), config).expect("valid config");
+    let state = standing_state(&ctrl, quad_controller::tuning::TUNED_STAND_HEIGHT);
+    for _ in 0..1002 {
+        step(&mut ctrl, &state, ModeRequest::Stand);
+    }
+    for _ in 0..500 {
+        step(&mut ctrl, &state, ModeRequest::Locomotion);
+    }
+    let pushed = RobotState {
+        base_linear_velocity: [0.0, 1.0, 0.0],
+        ..state
+    };
+    (0..240)
+        .map(|_| step(&mut ctrl, &pushed, ModeRequest::Locomotion).contacts)
+        .collect()
+}
+
+#[test]
+fn a_push_lands_the_swinging_pair_early_and_the_stance_pair_keeps_its_timing() {
+    let [fr, fl, rr, rl] = [0, 1, 2, 3];
+    let on_the_clock = contacts_after_a_push(0.0);
+    let cut_short = contacts_after_a_push(0.05);
+    for (k, (clock, early)) in on_the_clock.iter().zip(&cut_short).enumerate() {
+        // Ticks 50 and 100 fall on a phase boundary (0.55 s, 0.6 s) up to rounding.
+        if k == 50 || k == 100 {
+            continue;
+        }
+        let t = PUSHED_AT + 0.001 * k as f64;
+        // The stance pair lifts off at 0.6 s either way, and its swing is not cut short: the
+        // body is still being braked from the same push.
+        for leg in [fl, rr] {
+            assert_eq!(clock[leg], t < 0.6, "t = {t:.3}, leg {leg}");
+            assert_eq!(early[leg], t < 0.6, "t = {t:.3}, leg {leg}");
+        }
+        for leg in [fr, rl] {
+            // On the clock the swing ends at 0.6 s; cut short it ends 0.05 s after the push and
+            // the feet stand on into their own stance.
+            assert_eq!(clock[leg], t > 0.6, "t = {t:.3}, leg {leg}");
+            assert_eq!(early[leg], t > 0.55, "t = {t:.3}, leg {leg}");
+        }
+    }
+}
+
 #[test]
 fn falling_over_enters_damping_until_reset_to_passive() {
     let (mut ctrl, mut state) = locomoting_controller();

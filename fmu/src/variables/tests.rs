@@ -143,7 +143,7 @@ fn parameters() -> impl Iterator<Item = (&'static Variable, &'static ConfigField
 
 #[test]
 fn every_parameter_has_a_range_holding_its_start_value() {
-    assert_eq!(parameters().count(), 58);
+    assert_eq!(parameters().count(), 59);
     for (v, field, _) in parameters() {
         let (min, max) = field.range();
         assert_eq!((v.min, v.max), (Some(min), Some(max)), "{}", v.name);
