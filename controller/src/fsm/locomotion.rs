@@ -189,7 +189,7 @@ impl Locomotion {
         let mut feet = [[0.0; 3]; NUM_LEGS];
         for leg in Leg::ALL {
             let l = leg.index();
-            match leg_phase(&self.gait, &self.early, leg, t) {
+            match self.phase(leg, t) {
                 LegPhase::Stance(_) => {
                     stages
                         .legs
@@ -235,14 +235,17 @@ impl Locomotion {
         }
     }
 
+    /// The phase of `leg` at gait time `t`, swings cut short included.
+    fn phase(&self, leg: Leg, t: f64) -> LegPhase {
+        leg_phase(&self.gait, &self.early, leg, t)
+    }
+
     /// The gait's phase of every leg at the coming tick.
     pub fn stance_plan(&self) -> StancePlan {
-        Leg::ALL.map(
-            |leg| match leg_phase(&self.gait, &self.early, leg, self.gait_time) {
-                LegPhase::Stance(s) => Some(s),
-                LegPhase::Swing(_) => None,
-            },
-        )
+        Leg::ALL.map(|leg| match self.phase(leg, self.gait_time) {
+            LegPhase::Stance(s) => Some(s),
+            LegPhase::Swing(_) => None,
+        })
     }
 
     pub fn check_transition(&self, fault: Option<&str>, mode: ModeRequest) -> Option<FsmState> {
@@ -298,7 +301,7 @@ impl Locomotion {
     ) {
         let stance_time = self.gait.stance_time();
         for leg in Leg::ALL {
-            if let LegPhase::Swing(s) = leg_phase(&self.gait, &self.early, leg, self.gait_time) {
+            if let LegPhase::Swing(s) = self.phase(leg, self.gait_time) {
                 let remaining = match self.early[leg.index()] {
                     Some(e) => e.lands_at - self.gait_time,
                     None => (1.0 - s) * self.gait.swing_time(),
